@@ -1,0 +1,1 @@
+"""sparsedepth: depth completion by regularised optimisation with sparse linear algebra."""
