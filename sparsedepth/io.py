@@ -349,7 +349,7 @@ def read_image(path, *, byteorder: str = "big") -> np.ndarray:
         image = _read_netpbm(path, byteorder)
     else:
         try:
-            image = iio.imread(path)
+            image = iio.imread(path, plugin="pillow")
         except (OSError, ValueError, SyntaxError) as exc:  # PIL raises SyntaxError on some junk
             raise ValueError(f"could not decode image '{path}': {exc}") from exc
         image = np.asarray(image)
@@ -1126,7 +1126,7 @@ def read_depth(path, *, scale=None, calib=None, key: str | None = None) -> np.nd
 
 
 def _write_png_file(path: Path, stored: np.ndarray) -> None:
-    iio.imwrite(path, stored, extension=".png")
+    iio.imwrite(path, stored, plugin="pillow", extension=".png")
 
 
 def _write_npy_file(path: Path, depth: np.ndarray) -> None:
