@@ -1,0 +1,90 @@
+"""Input checks shared by the public functions (one place for every message)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["as_float_image", "as_depth_and_mask", "check_same_shape"]
+
+
+def as_float_image(image, *, name: str = "image") -> np.ndarray:
+    """Return ``image`` as float64 ``(H, W, C)`` in [0, 1] (a new array).
+
+    uint8 is divided by 255, uint16 by 65535; floats must already lie in
+    [0, 1].  Grey images ``(H, W)`` get a channel axis.
+    """
+    arr = np.asarray(image)
+    if arr.ndim not in (2, 3):
+        raise ValueError(
+            f"{name} must have shape (H, W) or (H, W, C); got {arr.ndim} dimensions with shape {arr.shape}"
+        )
+    if arr.ndim == 3 and arr.shape[2] not in (1, 3, 4):
+        raise ValueError(
+            f"{name} has shape {arr.shape}: the last axis must hold 1, 3 or 4 channels (channels last)"
+        )
+    if arr.ndim == 3 and arr.shape[2] == 4:
+        arr = arr[..., :3]  # drop alpha
+    if arr.size == 0:
+        raise ValueError(f"{name} is empty (shape {arr.shape})")
+    if arr.dtype == np.uint8:
+        out = arr.astype(np.float64) / 255.0
+    elif arr.dtype == np.uint16:
+        out = arr.astype(np.float64) / 65535.0
+    elif np.issubdtype(arr.dtype, np.floating):
+        out = arr.astype(np.float64)
+        if not np.all(np.isfinite(out)):
+            raise ValueError(f"{name} contains NaN or infinite values; fill or mask them before completing")
+        lo, hi = float(out.min()), float(out.max())
+        if lo < 0.0 or hi > 1.0:
+            raise ValueError(
+                f"float {name} must lie in [0, 1], got values in [{lo:g}, {hi:g}]; "
+                "pass uint8/uint16 or divide by the maximum"
+            )
+    else:
+        raise ValueError(f"{name} dtype must be uint8, uint16 or float, got {arr.dtype}")
+    if out.ndim == 2:
+        out = out[:, :, None]
+    return out
+
+
+def check_same_shape(shape_a, shape_b, name_a: str, name_b: str) -> None:
+    if tuple(shape_a) != tuple(shape_b):
+        raise ValueError(f"{name_a} has shape {tuple(shape_a)} but {name_b} has shape {tuple(shape_b)}; they must match")
+
+
+def as_depth_and_mask(sparse_depth, mask=None, *, name: str = "sparse_depth"):
+    """Return ``(depth, mask)``: float64 ``(H, W)`` depth with 0 where unobserved, bool mask.
+
+    Without ``mask``, observed means finite and ``> 0`` (0 and NaN mean "no
+    measurement").  With ``mask``, every masked value must be finite and ``>= 0``.
+    """
+    depth = np.asarray(sparse_depth)
+    if depth.ndim != 2:
+        raise ValueError(f"{name} must be a 2-D (H, W) array, got shape {depth.shape}")
+    if not (np.issubdtype(depth.dtype, np.floating) or np.issubdtype(depth.dtype, np.integer)):
+        raise ValueError(f"{name} dtype must be numeric, got {depth.dtype}")
+    depth = depth.astype(np.float64)  # copy: the caller's array is never modified
+    if mask is None:
+        with np.errstate(invalid="ignore"):
+            observed = np.isfinite(depth) & (depth > 0)
+    else:
+        observed = np.asarray(mask)
+        check_same_shape(observed.shape, depth.shape, "mask", name)
+        if observed.dtype != bool:
+            if not np.all(np.isin(observed, (0, 1))):
+                raise ValueError("mask must be boolean (or 0/1), with True where depth is observed")
+            observed = observed.astype(bool)
+        else:
+            observed = observed.copy()
+        values = depth[observed]
+        if not np.all(np.isfinite(values)):
+            raise ValueError(f"{name} has NaN or infinite values at {int(np.sum(~np.isfinite(values)))} observed (masked) pixels")
+    if not observed.any():
+        raise ValueError(f"{name} has no observed pixel (no finite value > 0 or nothing in mask); nothing to complete from")
+    obs_values = depth[observed]
+    if np.any(obs_values < 0):
+        raise ValueError(
+            f"{name} has {int(np.sum(obs_values < 0))} negative observed values (min {obs_values.min():g}); depth must be >= 0"
+        )
+    depth[~observed] = 0.0
+    return depth, observed

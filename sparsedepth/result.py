@@ -1,0 +1,100 @@
+"""The one result type every solver returns, with a per-iteration history."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from .weights import Weights
+
+__all__ = ["IterationRecord", "SolverState", "CompletionResult"]
+
+
+@dataclass(frozen=True)
+class IterationRecord:
+    """One entry of a solver's history.
+
+    Attributes
+    ----------
+    iteration : int
+        0 is the starting point; then one entry per solver iteration (an outer
+        iteration for IRLS/ADMM, a CG step for ``cg``/``amg``, an L-BFGS-B or
+        Adam step).
+    objective : float
+        Exact objective ``F`` at the iterate.
+    time : float
+        Wall time in seconds since the solver started (set-up included).
+    function_evals, gradient_evals : int or None
+        Cumulative evaluations of the (smoothed) objective and its gradient,
+        where the solver uses them.
+    inner_iterations : int or None
+        Cumulative inner CG iterations, where the solver has them.
+    """
+
+    iteration: int
+    objective: float
+    time: float
+    function_evals: Optional[int] = None
+    gradient_evals: Optional[int] = None
+    inner_iterations: Optional[int] = None
+
+
+@dataclass(frozen=True)
+class SolverState:
+    """What a ``callback`` receives after every iteration.
+
+    ``depth`` is a copy; a callback may raise ``StopIteration`` to stop the
+    solver, and the result's message then says so.
+    """
+
+    iteration: int
+    objective: float
+    time: float
+    depth: np.ndarray
+
+
+@dataclass(frozen=True)
+class CompletionResult:
+    """Result of :func:`sparsedepth.complete_depth`.
+
+    Attributes
+    ----------
+    depth : ndarray, (H, W)
+        Completed depth, ``>= 0`` everywhere.
+    objective : float
+        Exact objective ``F(depth)``.
+    terms : dict of str to float
+        Exact value of each named term at ``depth`` (they sum to ``objective``).
+    iterations : int
+    converged : bool
+        True when the solver's stopping rule was met (see the solver's notes).
+    message : str
+    clamped : int
+        Number of pixels held at 0 by the non-negativity constraint in the
+        returned depth (projected or at an active bound).
+    history : tuple of IterationRecord
+    solver : str
+    weights : Weights
+    runtime : float
+        Seconds from the start of the solver (set-up included) to the end.
+    """
+
+    depth: np.ndarray
+    objective: float
+    terms: dict
+    iterations: int
+    converged: bool
+    message: str
+    clamped: int
+    history: tuple = field(repr=False)
+    solver: str = ""
+    weights: Optional[Weights] = None
+    runtime: float = 0.0
+
+    def history_array(self, name: str) -> np.ndarray:
+        """One field of :attr:`history` as an array (``None`` becomes NaN)."""
+        if name not in IterationRecord.__dataclass_fields__:
+            raise ValueError(f"unknown history field {name!r}; one of {list(IterationRecord.__dataclass_fields__)}")
+        return np.array([np.nan if getattr(r, name) is None else getattr(r, name) for r in self.history], dtype=float)

@@ -1,0 +1,29 @@
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = Path(os.environ.get("SPARSEDEPTH_DATA", REPO.parent / "shared" / "data"))
+
+
+@pytest.fixture
+def shared_data():
+    """Path of ../shared/data; skips the test where it is absent."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"real-data folder {SHARED_DATA} not present (CI has it beside the clone)")
+    return SHARED_DATA
+
+
+def make_problem(shape=(40, 50), fraction=0.08, seed=0):
+    """A small synthetic problem: a tilted plane with a step, a matching image."""
+    rng = np.random.default_rng(seed)
+    H, W = shape
+    ii, jj = np.mgrid[0:H, 0:W]
+    truth = 1.0 + 0.02 * ii + 0.01 * jj + 0.5 * (jj > W // 2)
+    image = np.clip(0.2 + 0.5 * (jj > W // 2)[..., None] + 0.05 * rng.standard_normal((H, W, 3)), 0, 1)
+    mask = rng.random(shape) < fraction
+    mask[0, 0] = True
+    sparse = np.where(mask, truth, np.nan)
+    return image, sparse, mask, truth

@@ -1,0 +1,114 @@
+import numpy as np
+import pytest
+
+from sparsedepth import Weights, build_objective, edge_weights, nearest_fill
+from sparsedepth.objective import image_gradient_magnitude
+
+from conftest import make_problem
+
+ALL_TERMS = Weights(alpha=1.3, beta=0.4, gamma=0.2, delta=0.05, kappa=3.0, beta_image=0.3, beta_second=0.1)
+
+
+def _central_difference(f, z, h=1e-6):
+    g = np.empty_like(z)
+    for k in range(z.size):
+        e = np.zeros_like(z)
+        e[k] = h
+        g[k] = (f(z + e) - f(z - e)) / (2 * h)
+    return g
+
+
+@pytest.mark.parametrize(
+    "weights",
+    [
+        Weights(alpha=1, beta=0, gamma=0, delta=0.1),  # data + prior
+        Weights(alpha=0, beta=0.7, gamma=0, delta=0.1),  # smooth
+        Weights(alpha=0, beta=0, gamma=0.3, delta=0.1, kappa=2),  # edge L1 (smoothed)
+        Weights(alpha=0, beta=0, gamma=0, delta=0.2),  # prior
+        Weights(alpha=0, beta=0, gamma=0, delta=0.1, beta_image=0.5, kappa=2),
+        Weights(alpha=0, beta=0, gamma=0, delta=0.1, beta_second=0.5),
+        ALL_TERMS,
+    ],
+)
+def test_gradient_against_finite_differences(weights):
+    image, sparse, mask, _ = make_problem((6, 7))
+    obj, _, _ = build_objective(image, sparse, mask, weights=weights, l1_smoothing=0.05)
+    z = 1 + np.random.default_rng(0).random(obj.size)
+    value, grad = obj.smoothed_value_and_gradient(z)
+    fd = _central_difference(lambda x: obj.smoothed_value_and_gradient(x)[0], z)
+    np.testing.assert_allclose(grad, fd, rtol=1e-6, atol=1e-7)
+
+
+def test_exact_terms_against_hand_computation():
+    image, sparse, mask, _ = make_problem((5, 6))
+    w = ALL_TERMS
+    obj, coarse, observed = build_objective(image, sparse, mask, weights=w)
+    z = np.random.default_rng(4).random((5, 6)) + 1
+    img = image
+    grad_i = np.zeros((5, 6))
+    gx = np.zeros_like(img)
+    gy = np.zeros_like(img)
+    gx[:, :-1] = np.diff(img, axis=1)
+    gy[:-1] = np.diff(img, axis=0)
+    grad_i = np.sqrt((gx**2 + gy**2).sum(axis=2))
+    ew = np.exp(-w.kappa * grad_i)
+    zx = np.zeros_like(z)
+    zy = np.zeros_like(z)
+    zx[:, :-1] = np.diff(z, axis=1)
+    zy[:-1] = np.diff(z, axis=0)
+    zxx = np.zeros_like(z)
+    zyy = np.zeros_like(z)
+    zxy = np.zeros_like(z)
+    zxx[:, 1:-1] = z[:, :-2] - 2 * z[:, 1:-1] + z[:, 2:]
+    zyy[1:-1] = z[:-2] - 2 * z[1:-1] + z[2:]
+    zxy[:-1, :-1] = z[1:, 1:] - z[1:, :-1] - z[:-1, 1:] + z[:-1, :-1]
+    expected = {
+        "data": w.alpha * np.sum(mask * (z - np.nan_to_num(sparse)) ** 2),
+        "smooth": w.beta * np.sum(zx**2 + zy**2),
+        "edge": w.gamma * np.sum(ew * (np.abs(zx) + np.abs(zy))),
+        "prior": w.delta * np.sum((z - coarse) ** 2),
+        "smooth_image": w.beta_image * np.sum(ew * (zx**2 + zy**2)),
+        "second_order": w.beta_second * np.sum(zxx**2 + zyy**2 + 2 * zxy**2),
+    }
+    got = obj.term_values(z)
+    assert set(got) == set(expected)
+    for name in expected:
+        assert got[name] == pytest.approx(expected[name], rel=1e-12), name
+    assert obj.value(z) == pytest.approx(sum(expected.values()), rel=1e-12)
+
+
+def test_normal_equations_reproduce_quadratic_part():
+    image, sparse, mask, _ = make_problem((6, 5))
+    obj, _, _ = build_objective(image, sparse, mask, weights=ALL_TERMS.replace(gamma=0))
+    A, b, c = obj.normal_equations()
+    z = np.random.default_rng(5).random(obj.size)
+    assert z @ (A @ z) - 2 * b @ z + c == pytest.approx(obj.value(z), rel=1e-10)
+    assert abs(A - A.T).max() < 1e-12
+
+
+def test_edge_weight_definition():
+    img = np.zeros((3, 3, 3))
+    img[:, 2] = 1.0  # vertical edge between columns 1 and 2
+    g = image_gradient_magnitude(img)
+    np.testing.assert_allclose(g[:, 1], np.sqrt(3.0))
+    np.testing.assert_allclose(g[:, [0, 2]], 0.0)
+    np.testing.assert_allclose(edge_weights(img, 2.0)[:, 1], np.exp(-2 * np.sqrt(3.0)))
+    # uint8 is scaled by 1/255
+    np.testing.assert_allclose(image_gradient_magnitude((img * 255).astype(np.uint8)), g)
+
+
+def test_nearest_fill_hand_made():
+    d = np.full((3, 4), np.nan)
+    d[0, 0] = 1.0
+    d[2, 3] = 5.0
+    out = nearest_fill(d)
+    expected = np.array([[1, 1, 1, 5], [1, 1, 5, 5], [1, 5, 5, 5]], float)
+    # e.g. (0, 2): distance 2 to (0, 0) vs sqrt(5) to (2, 3); (2, 1): sqrt(5) vs 2
+    np.testing.assert_array_equal(out, expected)
+
+
+def test_nearest_fill_keeps_observations():
+    image, sparse, mask, _ = make_problem((30, 20))
+    out = nearest_fill(sparse, mask)
+    np.testing.assert_array_equal(out[mask], sparse[mask])
+    assert np.all(np.isfinite(out))

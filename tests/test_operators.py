@@ -1,0 +1,71 @@
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from sparsedepth.operators import forward_diff, gradient, hessian_operator, mixed_diff, second_diff
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 5), (6, 1), (4, 7), (9, 3)])
+def test_forward_diff_matches_numpy(shape):
+    rng = np.random.default_rng(1)
+    z = rng.standard_normal(shape)
+    dx = np.zeros(shape)
+    dx[:, :-1] = np.diff(z, axis=1)
+    dy = np.zeros(shape)
+    dy[:-1, :] = np.diff(z, axis=0)
+    np.testing.assert_allclose((forward_diff(shape, 1) @ z.ravel()).reshape(shape), dx, atol=1e-14)
+    np.testing.assert_allclose((forward_diff(shape, 0) @ z.ravel()).reshape(shape), dy, atol=1e-14)
+    g = gradient(shape) @ z.ravel()
+    np.testing.assert_allclose(g, np.concatenate([dx.ravel(), dy.ravel()]), atol=1e-14)
+
+
+def test_hand_made_3x3():
+    Dx = forward_diff((2, 2), 1).toarray()
+    expected = np.array([[-1, 1, 0, 0], [0, 0, 0, 0], [0, 0, -1, 1], [0, 0, 0, 0]], float)
+    np.testing.assert_array_equal(Dx, expected)
+    Dy = forward_diff((2, 2), 0).toarray()
+    expected = np.array([[-1, 0, 1, 0], [0, -1, 0, 1], [0, 0, 0, 0], [0, 0, 0, 0]], float)
+    np.testing.assert_array_equal(Dy, expected)
+
+
+def test_adjoint_dot_test():
+    shape = (7, 11)
+    G = gradient(shape)
+    rng = np.random.default_rng(2)
+    u = rng.standard_normal(G.shape[1])
+    v = rng.standard_normal(G.shape[0])
+    assert np.isclose(v @ (G @ u), (G.T @ v) @ u, rtol=1e-12)
+
+
+def test_laplacian_is_neumann_and_constant_in_kernel():
+    shape = (5, 6)
+    G = gradient(shape)
+    L = (G.T @ G).toarray()
+    np.testing.assert_allclose(L @ np.ones(30), 0, atol=1e-12)
+    # corner pixel has two neighbours, interior four
+    assert L[0, 0] == 2 and L[7, 7] == 4
+
+
+def test_second_order_annihilates_affine_and_matches_numpy():
+    shape = (6, 8)
+    ii, jj = np.mgrid[0:6, 0:8].astype(float)
+    ramp = 2.0 + 0.3 * ii - 0.7 * jj
+    np.testing.assert_allclose(hessian_operator(shape) @ ramp.ravel(), 0, atol=1e-12)
+    z = np.random.default_rng(3).standard_normal(shape)
+    dxx = np.zeros(shape)
+    dxx[:, 1:-1] = z[:, :-2] - 2 * z[:, 1:-1] + z[:, 2:]
+    np.testing.assert_allclose((second_diff(shape, 1) @ z.ravel()).reshape(shape), dxx, atol=1e-13)
+    dxy = np.zeros(shape)
+    dxy[:-1, :-1] = z[1:, 1:] - z[1:, :-1] - z[:-1, 1:] + z[:-1, :-1]
+    np.testing.assert_allclose((mixed_diff(shape) @ z.ravel()).reshape(shape), dxy, atol=1e-13)
+
+
+def test_operators_are_cached_and_sparse():
+    assert forward_diff((30, 40), 1) is forward_diff((30, 40), 1)
+    assert sp.issparse(gradient((30, 40))) and gradient((30, 40)).nnz <= 4 * 30 * 40
+
+
+@pytest.mark.parametrize("bad", [(0, 3), (3,), (2, 3, 4)])
+def test_bad_shape(bad):
+    with pytest.raises(ValueError, match="shape"):
+        forward_diff(bad, 1)

@@ -1,0 +1,141 @@
+import numpy as np
+import pytest
+import scipy.sparse.linalg as spla
+
+import sparsedepth as sd
+from sparsedepth import Weights, build_objective, complete_depth
+
+from conftest import make_problem
+
+QUAD = Weights(alpha=1.0, beta=0.5, gamma=0.0, delta=0.01, kappa=5.0)
+L1 = Weights(alpha=1.0, beta=0.2, gamma=0.05, delta=0.01, kappa=5.0)
+
+
+@pytest.fixture(scope="module")
+def problem():
+    return make_problem((40, 50))
+
+
+@pytest.fixture(scope="module")
+def direct_reference(problem):
+    image, sparse, mask, _ = problem
+    obj, _, _ = build_objective(image, sparse, mask, weights=QUAD)
+    A, b, _ = obj.normal_equations()
+    z = spla.spsolve(A.tocsc(), b)  # independent of the solver code path
+    return z.reshape(obj.shape), obj.value(z)
+
+
+def test_direct_solves_normal_equations(problem, direct_reference):
+    image, sparse, mask, _ = problem
+    res = complete_depth(image, sparse, mask, weights=QUAD, solver="direct")
+    z_ref, F_ref = direct_reference
+    np.testing.assert_allclose(res.depth, z_ref, atol=1e-10)
+    assert res.objective == pytest.approx(F_ref, rel=1e-12)
+    # stationarity: gradient of F vanishes
+    obj, _, _ = build_objective(image, sparse, mask, weights=QUAD)
+    assert np.abs(obj.quadratic_gradient(res.depth)).max() < 1e-9
+
+
+@pytest.mark.parametrize("solver,rel", [("cg", 1e-6), ("amg", 1e-6), ("irls", 1e-6), ("lbfgsb", 1e-3), ("adam", 1e-3)])
+def test_solvers_agree_on_quadratic_problem(problem, direct_reference, solver, rel):
+    image, sparse, mask, _ = problem
+    res = complete_depth(image, sparse, mask, weights=QUAD, solver=solver)
+    _, F_ref = direct_reference
+    assert res.objective >= F_ref * (1 - 1e-12)
+    assert (res.objective - F_ref) / F_ref <= rel, res.message
+    assert res.depth.min() >= 0
+    assert res.clamped == 0  # M-matrix with non-negative data: no clamping needed
+    assert len(res.history) >= 2 and res.history[0].iteration == 0
+    assert res.history[-1].objective == pytest.approx(res.objective, rel=1e-9)
+
+
+def test_irls_and_lbfgsb_agree_with_l1(problem):
+    image, sparse, mask, _ = problem
+    irls = complete_depth(image, sparse, mask, weights=L1, solver="irls", tol=1e-8)
+    lbfgsb = complete_depth(image, sparse, mask, weights=L1, solver="lbfgsb", l1_smoothing=1e-5)
+    assert abs(irls.objective - lbfgsb.objective) / lbfgsb.objective < 1e-4
+    F = irls.history_array("objective")
+    assert np.all(np.diff(F) <= 1e-12 * F[0]), "IRLS exact objective increased"
+    # the L1 term changes the solution: it differs from the gamma = 0 one
+    quad = complete_depth(image, sparse, mask, weights=L1.replace(gamma=0), solver="direct")
+    assert np.abs(quad.depth - irls.depth).max() > 1e-3
+    # and IRLS beats the quadratic solution on the full objective
+    obj, _, _ = build_objective(image, sparse, mask, weights=L1)
+    assert irls.objective < obj.value(quad.depth)
+
+
+def test_adam_with_l1_close_to_irls(problem):
+    image, sparse, mask, _ = problem
+    irls = complete_depth(image, sparse, mask, weights=L1, solver="irls")
+    adam = complete_depth(image, sparse, mask, weights=L1, solver="adam", max_iter=5000, l1_smoothing=1e-4)
+    assert (adam.objective - irls.objective) / irls.objective < 1e-2
+    assert adam.depth.min() >= 0
+
+
+def test_maximum_principle(problem):
+    image, sparse, mask, _ = problem
+    res = complete_depth(image, sparse, mask, weights=QUAD, solver="direct")
+    coarse = sd.nearest_fill(sparse, mask)
+    lo = min(np.nanmin(sparse), coarse.min())
+    hi = max(np.nanmax(sparse), coarse.max())
+    assert lo - 1e-12 <= res.depth.min() and res.depth.max() <= hi + 1e-12
+
+
+def test_result_terms_sum_to_objective(problem):
+    image, sparse, mask, _ = problem
+    res = complete_depth(image, sparse, mask, weights=L1, solver="irls")
+    assert sum(res.terms.values()) == pytest.approx(res.objective, rel=1e-12)
+    assert set(res.terms) == {"data", "smooth", "edge", "prior", "smooth_image", "second_order"}
+    assert res.terms["edge"] > 0 and res.terms["smooth_image"] == 0
+
+
+def test_default_weights_and_auto_solver(problem):
+    image, sparse, mask, truth = problem
+    res = complete_depth(image, sparse, mask)
+    assert res.solver == sd.choose_solver(sd.DEFAULT_WEIGHTS)
+    hidden = ~mask
+    nn = sd.depth_metrics(sd.nearest_fill(sparse, mask), truth, mask=hidden)
+    ours = sd.depth_metrics(res.depth, truth, mask=hidden)
+    assert ours.rmse < nn.rmse
+
+
+def test_callback_can_stop(problem):
+    image, sparse, mask, _ = problem
+    seen = []
+
+    def cb(state):
+        seen.append(state.iteration)
+        assert state.depth.shape == (40, 50)
+        if state.iteration == 3:
+            raise StopIteration
+
+    res = complete_depth(image, sparse, mask, weights=QUAD, solver="cg", callback=cb)
+    assert not res.converged and "callback" in res.message
+    assert seen == [0, 1, 2, 3] and res.iterations == 3
+
+
+def test_history_times_increase(problem):
+    image, sparse, mask, _ = problem
+    res = complete_depth(image, sparse, mask, weights=QUAD, solver="lbfgsb")
+    t = res.history_array("time")
+    assert np.all(np.diff(t) >= 0)
+    assert np.all(np.diff(res.history_array("function_evals")) >= 0)
+
+
+def test_quadratic_only_solver_rejects_l1(problem):
+    image, sparse, mask, _ = problem
+    for solver in ("direct", "cg", "amg"):
+        with pytest.raises(ValueError, match="gamma"):
+            complete_depth(image, sparse, mask, weights=L1, solver=solver)
+
+
+def test_unknown_solver(problem):
+    image, sparse, mask, _ = problem
+    with pytest.raises(ValueError, match="unknown solver"):
+        complete_depth(image, sparse, mask, solver="newton")
+
+
+def test_x0_changes_nothing_at_the_optimum(problem, direct_reference):
+    image, sparse, mask, _ = problem
+    res = complete_depth(image, sparse, mask, weights=QUAD, solver="amg", x0=np.ones((40, 50)))
+    np.testing.assert_allclose(res.depth, direct_reference[0], atol=1e-6)
