@@ -1,0 +1,458 @@
+"""Tests for sparsedepth.multigrid: hierarchy algebra, symmetry, PCG, update()."""
+
+import warnings
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from sparsedepth.multigrid import (
+    GridMultigrid,
+    SolveInfo,
+    grid_multigrid,
+    grid_stencil,
+    solve_spd,
+)
+
+
+# --------------------------------------------------------------------------
+# test systems, built from the plain definition with scipy products
+# --------------------------------------------------------------------------
+def forward_diff(n):
+    """1-D forward difference, zero last row (Neumann)."""
+    main = -np.ones(n)
+    main[-1] = 0.0
+    return sp.diags([main, np.ones(n - 1)], [0, 1], shape=(n, n), format="csr")
+
+
+def gradient(shape):
+    h, w = shape
+    Dx = sp.kron(sp.eye(h), forward_diff(w), format="csr")
+    Dy = sp.kron(forward_diff(h), sp.eye(w), format="csr")
+    return Dx, Dy
+
+
+def grid_system(shape, a, wx, wy):
+    """A = diag(a) + Dx^T diag(wx) Dx + Dy^T diag(wy) Dy (CSR)."""
+    Dx, Dy = gradient(shape)
+    n = shape[0] * shape[1]
+    A = sp.diags(np.broadcast_to(a, n)) + Dx.T @ sp.diags(np.broadcast_to(wx, n)) @ Dx \
+        + Dy.T @ sp.diags(np.broadcast_to(wy, n)) @ Dy
+    return sp.csr_array(A)
+
+
+def random_system(shape, rng, *, delta=1e-2, frac=0.05, jump=False):
+    """Random data mask; weights near 1, or (jump=True) constant on 4x4 blocks
+    with values 10**U(-2, 2), jumping across block edges."""
+    h, w = shape
+    n = h * w
+    mask = rng.random(n) < frac
+    a = mask * 1.0 + delta
+    if jump:
+        blocks = 10.0 ** rng.uniform(-2, 2, (2, (h + 3) // 4, (w + 3) // 4))
+        c = np.kron(blocks, np.ones((1, 4, 4)))[:, :h, :w]
+        wx, wy = c[0].ravel(), c[1].ravel()
+    else:
+        wx = rng.uniform(0.5, 2.0, n)
+        wy = rng.uniform(0.5, 2.0, n)
+    return grid_system(shape, a, wx, wy)
+
+
+def biharmonic_system(shape, rng):
+    """13-point: delta I + diag(mask) + L^T L with L the 5-point Laplacian."""
+    Dx, Dy = gradient(shape)
+    L = Dx.T @ Dx + Dy.T @ Dy
+    n = shape[0] * shape[1]
+    mask = rng.random(n) < 0.05
+    return sp.csr_array(sp.diags(1e-2 + mask * 1.0) + L.T @ L)
+
+
+def linear_1d(n):
+    """1-D linear interpolation from the even points, as a plain dense matrix."""
+    nc = (n + 1) // 2
+    P = np.zeros((n, nc))
+    for i in range(n):
+        if i % 2 == 0:
+            P[i, i // 2] = 1.0
+        elif i // 2 + 1 < nc:
+            P[i, i // 2] = P[i, i // 2 + 1] = 0.5
+        else:
+            P[i, i // 2] = 1.0
+    return P
+
+
+# --------------------------------------------------------------------------
+# structure
+# --------------------------------------------------------------------------
+@pytest.mark.parametrize("shape", [(7, 9), (8, 10), (1, 9), (9, 1), (2, 2), (33, 47)])
+def test_bilinear_prolongation_is_kron_of_1d_interpolation(shape):
+    rng = np.random.default_rng(0)
+    A = random_system(shape, rng)
+    mg = GridMultigrid(A, shape, max_coarse=1)
+    P = mg.levels[0].P.toarray()
+    expected = np.kron(linear_1d(shape[0]), linear_1d(shape[1]))
+    np.testing.assert_array_equal(P, expected)
+
+
+@pytest.mark.parametrize("interpolation", ["bilinear", "operator"])
+@pytest.mark.parametrize("shape", [(7, 9), (8, 10), (1, 12), (12, 1), (2, 2), (33, 47)])
+def test_galerkin_equals_scipy_triple_product(shape, interpolation):
+    rng = np.random.default_rng(1)
+    A = random_system(shape, rng, jump=True)
+    mg = GridMultigrid(A, shape, max_coarse=1, interpolation=interpolation)
+    assert len(mg.levels) >= 2
+    for fine, coarse in zip(mg.levels[:-1], mg.levels[1:]):
+        P = sp.csr_array(fine.P)
+        expected = (P.T @ fine.A @ P).toarray()
+        # rounding is relative to the terms summed, not to the (cancelled) result
+        scale = (abs(P).T @ abs(fine.A) @ abs(P)).toarray()
+        np.testing.assert_allclose(coarse.A.toarray(), expected, rtol=0,
+                                   atol=1e-13 * scale.max())
+
+
+@pytest.mark.parametrize("shape", [(9, 11), (10, 12)])
+def test_galerkin_of_13_point_operator(shape):
+    A = biharmonic_system(shape, np.random.default_rng(2))
+    mg = GridMultigrid(A, shape, max_coarse=1)
+    for fine, coarse in zip(mg.levels[:-1], mg.levels[1:]):
+        P = sp.csr_array(fine.P)
+        expected = (P.T @ fine.A @ P).toarray()
+        np.testing.assert_allclose(coarse.A.toarray(), expected, rtol=0,
+                                   atol=1e-13 * np.abs(expected).max())
+
+
+def test_operator_interpolation_reproduces_constants_without_reaction():
+    shape = (9, 12)
+    rng = np.random.default_rng(3)
+    n = shape[0] * shape[1]
+    A = grid_system(shape, 0.0, 10.0 ** rng.uniform(-3, 3, n),
+                    10.0 ** rng.uniform(-3, 3, n))
+    mg = GridMultigrid(A, shape, max_coarse=1, interpolation="operator")
+    P = mg.levels[0].P
+    np.testing.assert_allclose(P @ np.ones(P.shape[1]), 1.0, rtol=1e-10)
+
+
+def test_coarse_grid_shapes_halve_with_ceiling():
+    A = random_system((33, 47), np.random.default_rng(4))
+    mg = GridMultigrid(A, (33, 47), max_coarse=1)
+    shapes = [lvl.shape for lvl in mg.levels]
+    assert shapes == [(33, 47), (17, 24), (9, 12), (5, 6), (3, 3), (2, 2), (1, 1)]
+
+
+def test_grid_stencil_literal():
+    A = grid_system((2, 3), 0.5, 1.0, 2.0)
+    offsets, S = grid_stencil(A, (2, 3))
+    assert offsets == [(-1, 0), (0, -1), (0, 0), (0, 1), (1, 0)]
+    centre = np.array([[0.5 + 1 + 2, 0.5 + 2 + 2, 0.5 + 1 + 2],
+                       [0.5 + 1 + 2, 0.5 + 2 + 2, 0.5 + 1 + 2]])
+    np.testing.assert_allclose(S[2], centre)
+    np.testing.assert_allclose(S[0], [[0, 0, 0], [-2, -2, -2]])
+    np.testing.assert_allclose(S[3], [[-1, -1, 0], [-1, -1, 0]])
+
+
+# --------------------------------------------------------------------------
+# the V-cycle as a preconditioner
+# --------------------------------------------------------------------------
+@pytest.mark.parametrize("smoother,sweeps", [("gauss_seidel", 1), ("gauss_seidel", 2),
+                                             ("jacobi", 1)])
+@pytest.mark.parametrize("interpolation", ["bilinear", "operator"])
+def test_vcycle_is_symmetric_positive_definite(interpolation, smoother, sweeps):
+    shape = (33, 47)
+    rng = np.random.default_rng(5)
+    A = random_system(shape, rng, jump=True)
+    mg = GridMultigrid(A, shape, interpolation=interpolation, smoother=smoother,
+                       sweeps=sweeps, max_coarse=16)
+    M = mg.aspreconditioner()
+    for _ in range(3):
+        u, v = rng.standard_normal((2, A.shape[0]))
+        Mu, Mv = M @ u, M @ v
+        assert abs(u @ Mv - Mu @ v) <= 1e-11 * np.linalg.norm(u) * np.linalg.norm(Mv)
+        assert u @ Mu > 0
+
+
+def test_vcycle_symmetric_for_13_point_operator():
+    shape = (21, 26)
+    rng = np.random.default_rng(6)
+    A = biharmonic_system(shape, rng)
+    mg = GridMultigrid(A, shape, max_coarse=16)
+    u, v = rng.standard_normal((2, A.shape[0]))
+    Mu, Mv = mg.vcycle(u), mg.vcycle(v)
+    assert abs(u @ Mv - Mu @ v) <= 1e-11 * np.linalg.norm(u) * np.linalg.norm(Mv)
+    assert u @ Mu > 0
+
+
+@pytest.mark.parametrize("interpolation", ["bilinear", "operator"])
+@pytest.mark.parametrize("shape", [(33, 47), (1, 50), (50, 1), (2, 2), (1, 1), (16, 17)])
+def test_pcg_matches_spsolve(shape, interpolation):
+    rng = np.random.default_rng(7)
+    A = random_system(shape, rng, jump=True)
+    b = rng.standard_normal(A.shape[0])
+    x, info = solve_spd(A, b, shape, rtol=1e-12, preconditioner="grid",
+                        interpolation=interpolation, max_coarse=1)
+    assert info.converged
+    assert info.relative_residual < 1e-10
+    x_ref = spla.spsolve(sp.csc_matrix(A), b)
+    np.testing.assert_allclose(x, x_ref, rtol=0, atol=1e-8 * np.abs(x_ref).max())
+
+
+def test_pcg_13_point_matches_spsolve():
+    shape = (24, 31)
+    rng = np.random.default_rng(8)
+    A = biharmonic_system(shape, rng)
+    b = rng.standard_normal(A.shape[0])
+    x, info = solve_spd(A, b, shape, rtol=1e-12, max_coarse=16)
+    assert info.converged
+    x_ref = spla.spsolve(sp.csc_matrix(A), b)
+    np.testing.assert_allclose(x, x_ref, rtol=0, atol=1e-8 * np.abs(x_ref).max())
+
+
+def test_iterations_bounded_as_grid_grows():
+    """h-independence: CG iterations barely grow from 65x65 to 257x257."""
+    counts = []
+    for n in (65, 257):
+        rng = np.random.default_rng(9)
+        shape = (n, n)
+        A = grid_system(shape, (rng.random(n * n) < 0.05) * 1.0 + 1e-2, 1.0, 1.0)
+        b = rng.standard_normal(n * n)
+        _, info = solve_spd(A, b, shape, rtol=1e-8, max_coarse=64)
+        assert info.converged
+        counts.append(info.iterations)
+    assert counts[1] <= counts[0] + 3, counts
+    assert counts[1] <= 15, counts
+
+
+def test_stationary_vcycle_iteration_converges():
+    shape = (40, 50)
+    rng = np.random.default_rng(10)
+    A = random_system(shape, rng)
+    b = rng.standard_normal(A.shape[0])
+    mg = GridMultigrid(A, shape)
+    x, info = mg.solve(b, accel=None, rtol=1e-8, maxiter=60)
+    assert info.converged
+    assert info.residuals.shape == (info.iterations + 1,)
+    assert np.linalg.norm(b - A @ x) <= 1e-8 * np.linalg.norm(b)
+    # each cycle reduces the residual substantially
+    assert info.residuals[-1] / info.residuals[0] < 0.5 ** info.iterations
+
+
+# --------------------------------------------------------------------------
+# update()
+# --------------------------------------------------------------------------
+@pytest.mark.parametrize("interpolation", ["bilinear", "operator"])
+def test_update_equals_fresh_build(interpolation):
+    shape = (37, 42)
+    rng = np.random.default_rng(11)
+    A1 = random_system(shape, rng, jump=True)
+    A2 = random_system(shape, rng, jump=True)
+    mg = GridMultigrid(A1, shape, interpolation=interpolation, max_coarse=8)
+    before = [lvl.A.data.copy() for lvl in mg.levels[1:]]
+    assert mg.update(A2) is mg
+    fresh = GridMultigrid(A2, shape, interpolation=interpolation, max_coarse=8)
+    assert len(mg.levels) == len(fresh.levels)
+    for old, new, data in zip(mg.levels, fresh.levels, [None] + before):
+        assert old.shape == new.shape
+        np.testing.assert_array_equal(old.A.indptr, new.A.indptr)
+        np.testing.assert_array_equal(old.A.indices, new.A.indices)
+        np.testing.assert_allclose(old.A.data, new.A.data, rtol=1e-13,
+                                   atol=1e-13 * np.abs(new.A.data).max())
+        if data is not None:
+            assert not np.allclose(old.A.data, data)
+        if new.P is not None:
+            np.testing.assert_allclose(old.P.toarray(), new.P.toarray(), rtol=1e-13,
+                                       atol=1e-15)
+    u = rng.standard_normal(A2.shape[0])
+    np.testing.assert_allclose(mg.vcycle(u), fresh.vcycle(u), rtol=1e-10, atol=1e-12)
+
+
+def test_update_with_wider_stencil_rebuilds():
+    shape = (20, 22)
+    rng = np.random.default_rng(12)
+    A1 = random_system(shape, rng)
+    mg = GridMultigrid(A1, shape)
+    A2 = biharmonic_system(shape, rng)
+    mg.update(A2)
+    fresh = GridMultigrid(A2, shape)
+    u = rng.standard_normal(A2.shape[0])
+    np.testing.assert_allclose(mg.vcycle(u), fresh.vcycle(u), rtol=1e-10, atol=1e-12)
+
+
+def test_update_rejects_other_grid():
+    mg = GridMultigrid(random_system((10, 12), np.random.default_rng(13)), (10, 12))
+    with pytest.raises(ValueError, match="shape"):
+        mg.update(random_system((12, 10), np.random.default_rng(13)).tocsr()[:100, :100])
+
+
+# --------------------------------------------------------------------------
+# solve_spd
+# --------------------------------------------------------------------------
+@pytest.mark.parametrize("preconditioner", ["grid", "amg", "sa", "jacobi", "none"])
+def test_solve_spd_preconditioners(preconditioner):
+    shape = (24, 30)
+    rng = np.random.default_rng(14)
+    A = random_system(shape, rng)
+    b = rng.standard_normal(shape)
+    x, info = solve_spd(A, b, shape, rtol=1e-10, preconditioner=preconditioner)
+    assert isinstance(info, SolveInfo)
+    assert info.converged and info.status == 0 and info.message == "converged"
+    assert x.shape == shape
+    assert info.residuals.shape == (info.iterations + 1,)
+    assert info.residuals[0] == pytest.approx(np.linalg.norm(b))
+    assert info.relative_residual < 1e-9
+    assert info.preconditioner == preconditioner
+
+
+def test_solve_spd_reuses_hierarchy_and_linear_operator():
+    shape = (24, 30)
+    rng = np.random.default_rng(15)
+    A = random_system(shape, rng)
+    b = rng.standard_normal(A.shape[0])
+    mg = grid_multigrid(A, shape)
+    _, info1 = solve_spd(A, b, shape, preconditioner=mg)
+    _, info2 = solve_spd(A, b, shape, preconditioner=mg.aspreconditioner())
+    assert info1.converged and info2.converged
+    assert info1.iterations == info2.iterations
+    assert info1.preconditioner == "GridMultigrid"
+
+
+def test_solve_spd_initial_residual_and_inputs_untouched():
+    shape = (20, 25)
+    rng = np.random.default_rng(16)
+    A = random_system(shape, rng)
+    A_copy = A.copy()
+    b = rng.standard_normal(A.shape[0])
+    x0 = rng.standard_normal(A.shape[0])
+    x0_copy = x0.copy()
+    x, info = solve_spd(A, b, shape, x0=x0)
+    assert info.residuals[0] == pytest.approx(np.linalg.norm(b - A @ x0))
+    np.testing.assert_array_equal(x0, x0_copy)
+    np.testing.assert_array_equal(A.data, A_copy.data)
+    assert info.converged
+
+
+def test_solve_spd_zero_rhs():
+    shape = (10, 10)
+    A = random_system(shape, np.random.default_rng(17))
+    x, info = solve_spd(A, np.zeros(100), shape)
+    assert info.converged and info.iterations == 0
+    np.testing.assert_array_equal(x, 0.0)
+
+
+def test_solve_spd_callback_can_stop():
+    shape = (30, 30)
+    rng = np.random.default_rng(18)
+    A = random_system(shape, rng)
+    b = rng.standard_normal(A.shape[0])
+    seen = []
+
+    def stop_after_two(xk):
+        seen.append(xk)
+        if len(seen) == 2:
+            raise StopIteration
+
+    x, info = solve_spd(A, b, shape, preconditioner="jacobi", callback=stop_after_two)
+    assert not info.converged
+    assert info.status == -1 and info.message == "stopped by callback"
+    assert info.iterations == 2
+    np.testing.assert_array_equal(x, seen[-1])
+
+
+def test_solve_spd_reports_non_convergence():
+    shape = (30, 30)
+    rng = np.random.default_rng(19)
+    A = random_system(shape, rng, delta=1e-4)
+    b = rng.standard_normal(A.shape[0])
+    _, info = solve_spd(A, b, shape, preconditioner="none", maxiter=3)
+    assert not info.converged and info.status > 0
+    assert info.iterations == 3
+
+
+def test_singular_neumann_problem_uses_pseudo_inverse():
+    shape = (8, 8)
+    A = grid_system(shape, 0.0, 1.0, 1.0)  # constants in the null space
+    mg = GridMultigrid(A, shape, max_coarse=4)
+    assert "pinv" in repr(mg)
+    rng = np.random.default_rng(20)
+    b = rng.standard_normal(64)
+    b -= b.mean()  # consistent right-hand side
+    x, info = solve_spd(A, b, shape, preconditioner=mg, rtol=1e-10)
+    assert info.converged
+    assert np.linalg.norm(b - A @ x) <= 1e-9 * np.linalg.norm(b)
+
+
+def test_to_pyamg_multilevel_solver():
+    shape = (33, 40)
+    rng = np.random.default_rng(21)
+    A = random_system(shape, rng)
+    b = rng.standard_normal(A.shape[0])
+    mg = GridMultigrid(A, shape, max_coarse=32)
+    ml = mg.to_pyamg()
+    assert len(ml.levels) == len(mg.levels)
+    assert ml.operator_complexity() == pytest.approx(mg.operator_complexity())
+    residuals = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        x = ml.solve(b, tol=1e-10, accel="cg", residuals=residuals)
+    assert np.linalg.norm(b - A @ x) <= 1e-9 * np.linalg.norm(b)
+    np.testing.assert_allclose(ml.aspreconditioner() @ b, mg.vcycle(b), rtol=1e-12)
+
+
+def test_repr_lists_levels_and_nonzeros():
+    A = random_system((33, 47), np.random.default_rng(22))
+    mg = GridMultigrid(A, (33, 47), max_coarse=100)
+    text = repr(mg)
+    assert len(mg.levels) == 4
+    assert "Number of Levels:     4" in text
+    assert "Operator Complexity" in text
+    for lvl in mg.levels:
+        assert str(lvl.A.nnz) in text
+
+
+# --------------------------------------------------------------------------
+# input checks: one pytest.raises per raise
+# --------------------------------------------------------------------------
+def test_wrong_shape_is_rejected():
+    A = random_system((10, 12), np.random.default_rng(23))
+    with pytest.raises(ValueError, match=r"needs \(100, 100\)"):
+        GridMultigrid(A, (10, 10))
+
+
+def test_transposed_shape_is_not_a_grid_operator():
+    A = random_system((10, 12), np.random.default_rng(24))
+    with pytest.raises(ValueError, match="stencil of radius"):
+        GridMultigrid(A, (12, 10))
+
+
+def test_bad_shape_argument():
+    A = random_system((4, 4), np.random.default_rng(25))
+    with pytest.raises(ValueError, match="pair"):
+        GridMultigrid(A, 16)
+
+
+def test_dense_input_rejected():
+    with pytest.raises(TypeError, match="scipy.sparse"):
+        GridMultigrid(np.eye(4), (2, 2))
+
+
+def test_unknown_options_rejected():
+    A = random_system((4, 4), np.random.default_rng(26))
+    with pytest.raises(ValueError, match="interpolation"):
+        GridMultigrid(A, (4, 4), interpolation="cubic")
+    with pytest.raises(ValueError, match="smoother"):
+        GridMultigrid(A, (4, 4), smoother="sor")
+    with pytest.raises(ValueError, match="preconditioner"):
+        solve_spd(A, np.ones(16), (4, 4), preconditioner="ilu")
+    with pytest.raises(TypeError, match="no options"):
+        solve_spd(A, np.ones(16), (4, 4), preconditioner="jacobi", sweeps=2)
+
+
+def test_operator_interpolation_needs_radius_one():
+    A = biharmonic_system((10, 10), np.random.default_rng(27))
+    with pytest.raises(ValueError, match="radius 1"):
+        GridMultigrid(A, (10, 10), interpolation="operator")
+
+
+def test_rhs_size_checked():
+    A = random_system((4, 4), np.random.default_rng(28))
+    with pytest.raises(ValueError, match="`b` has 15 entries"):
+        solve_spd(A, np.ones(15), (4, 4))
