@@ -13,8 +13,8 @@ __all__ = ["complete_depth", "choose_solver"]
 
 
 def choose_solver(weights: Weights) -> str:
-    """The solver ``solver="auto"`` picks: ``"amg"`` for γ = 0, else ``"irls"``."""
-    return "amg" if weights.gamma == 0 else "irls"
+    """The solver ``solver="auto"`` picks: ``"amg"`` for γ = 0, else ``"admm"``."""
+    return "amg" if weights.gamma == 0 else "admm"
 
 
 def complete_depth(
@@ -52,8 +52,8 @@ def complete_depth(
         mean "no measurement").
     weights : Weights
         Term weights; default :data:`~sparsedepth.weights.DEFAULT_WEIGHTS`.
-    solver : {"auto", "direct", "cg", "amg", "irls", "lbfgsb", "adam"}
-        ``"auto"`` is ``"amg"`` for γ = 0 and ``"irls"`` otherwise.  The stopping
+    solver : {"auto", "direct", "cg", "amg", "irls", "admm", "lbfgsb", "adam"}
+        ``"auto"`` is ``"amg"`` for γ = 0 and ``"admm"`` otherwise.  The stopping
         rule of each is in :mod:`sparsedepth.solvers`.
     tol : float, optional
         Solver tolerance (meaning per solver; default per solver).

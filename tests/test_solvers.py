@@ -36,7 +36,9 @@ def test_direct_solves_normal_equations(problem, direct_reference):
     assert np.abs(obj.quadratic_gradient(res.depth)).max() < 1e-9
 
 
-@pytest.mark.parametrize("solver,rel", [("cg", 1e-6), ("amg", 1e-6), ("irls", 1e-6), ("lbfgsb", 1e-3), ("adam", 1e-3)])
+@pytest.mark.parametrize(
+    "solver,rel", [("cg", 1e-6), ("amg", 1e-6), ("irls", 1e-6), ("admm", 1e-6), ("lbfgsb", 1e-3), ("adam", 1e-3)]
+)
 def test_solvers_agree_on_quadratic_problem(problem, direct_reference, solver, rel):
     image, sparse, mask, _ = problem
     res = complete_depth(image, sparse, mask, weights=QUAD, solver=solver)
@@ -54,6 +56,10 @@ def test_irls_and_lbfgsb_agree_with_l1(problem):
     irls = complete_depth(image, sparse, mask, weights=L1, solver="irls", tol=1e-8)
     lbfgsb = complete_depth(image, sparse, mask, weights=L1, solver="lbfgsb", l1_smoothing=1e-5)
     assert abs(irls.objective - lbfgsb.objective) / lbfgsb.objective < 1e-4
+    admm = complete_depth(image, sparse, mask, weights=L1, solver="admm")
+    assert abs(admm.objective - lbfgsb.objective) / lbfgsb.objective < 1e-4
+    # ADMM (exact shrinkage + polish) is at least as good as IRLS's smoothed fixed point
+    assert admm.objective <= irls.objective * (1 + 1e-7)
     F = irls.history_array("objective")
     assert np.all(np.diff(F) <= 1e-12 * F[0]), "IRLS exact objective increased"
     # the L1 term changes the solution: it differs from the gamma = 0 one
