@@ -1,0 +1,94 @@
+"""colorization_fill: against the naive per-pixel port of the NYU toolbox, and its analytic properties."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sparsedepth.colorization import colorization_fill
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def naive():
+    """bench/naive_colorization.py, imported by path (bench/ is not a package)."""
+    spec = importlib.util.spec_from_file_location("naive_colorization", REPO / "bench" / "naive_colorization.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _random_frame(shape=(23, 31), hole_fraction=0.4, seed=0):
+    rng = np.random.default_rng(seed)
+    image = rng.random(shape + (3,))
+    depth = 1.0 + 3.0 * rng.random(shape)
+    depth[rng.random(shape) < hole_fraction] = 0.0
+    return image, depth
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("alpha", [1.0, 5.0])
+def test_matches_naive_port(naive, seed, alpha):
+    image, depth = _random_frame(seed=seed)
+    expected = naive.fill_depth_colorization(image, depth, alpha)
+    got = colorization_fill(image, depth, alpha=alpha)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-6)
+
+
+def test_matches_naive_port_uint8_and_large_hole(naive):
+    rng = np.random.default_rng(3)
+    image8 = rng.integers(0, 256, size=(20, 26, 3), dtype=np.uint8)
+    depth = 2.0 + rng.random((20, 26))
+    depth[4:16, 5:20] = 0.0  # one big hole, no known pixel inside
+    expected = naive.fill_depth_colorization(image8 / 255.0, depth)
+    np.testing.assert_allclose(colorization_fill(image8, depth), expected, rtol=0, atol=1e-6)
+
+
+def test_maximum_principle():
+    image, depth = _random_frame(seed=5, hole_fraction=0.7)
+    known = depth > 0
+    out = colorization_fill(image, depth)
+    lo, hi = depth[known].min(), depth[known].max()
+    assert out.min() >= lo - 1e-9 and out.max() <= hi + 1e-9
+    # the bound is attained nowhere strictly outside and is not trivially satisfied by a constant
+    assert out.max() - out.min() > 0.5 * (hi - lo)
+
+
+def test_constant_depth_is_reproduced_everywhere():
+    # every row of the system is "x_p = convex combination of neighbours (and d_p)": a constant solves it
+    rng = np.random.default_rng(2)
+    image = rng.random((30, 40, 3))
+    depth = np.full((30, 40), 2.5)
+    depth[rng.random(depth.shape) < 0.5] = 0.0
+    depth[5:20, 10:30] = 0.0
+    np.testing.assert_allclose(colorization_fill(image, depth), 2.5, rtol=0, atol=1e-7)
+
+
+def test_known_pixels_kept_where_neighbours_agree():
+    # a depth step that coincides with an image edge: the window weights across the edge are
+    # exp(-0.36 / (0.6 var)) ~ 5e-4, so each side keeps its own known value to ~1e-3 of the step,
+    # holes included, and exactly far from the edge
+    rng = np.random.default_rng(2)
+    cols = np.arange(40)[None, :] * np.ones((30, 1))
+    image = np.where(cols < 20, 0.2, 0.8)
+    truth = np.where(cols < 20, 1.5, 3.0)
+    depth = truth.copy()
+    holes = rng.random(truth.shape) < 0.3
+    depth[holes] = 0.0
+    out = colorization_fill(image, depth)
+    np.testing.assert_allclose(out, truth, rtol=0, atol=2e-3)
+    far = np.abs(cols - 19.5) > 8
+    np.testing.assert_allclose(out[far], truth[far], rtol=0, atol=1e-6)
+    # without the image edge the step is smoothed out: the test above is not vacuous
+    blurred = colorization_fill(np.full((30, 40), 0.5), depth)
+    assert np.abs(blurred - truth).max() > 0.1
+
+
+def test_input_not_modified():
+    image, depth = _random_frame(seed=4)
+    image0, depth0 = image.copy(), depth.copy()
+    colorization_fill(image, depth)
+    np.testing.assert_array_equal(image, image0)
+    np.testing.assert_array_equal(depth, depth0)
