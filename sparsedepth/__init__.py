@@ -61,7 +61,7 @@ __all__ = [
     "io",
     "datasets",
 ]
-from . import holes  # noqa: E402
+from . import batch, holes  # noqa: E402
 from .holes import FILL_METHODS, fill_holes  # noqa: E402
 
-__all__ += ["fill_holes", "FILL_METHODS", "holes"]
+__all__ += ["fill_holes", "FILL_METHODS", "holes", "batch"]

@@ -1,0 +1,229 @@
+"""Batch: per-frame pipeline, folder pairing, NYU .mat ranges, CSV rows, failing frames, executors."""
+
+import csv
+from concurrent.futures import ThreadPoolExecutor
+
+import h5py
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+import sparsedepth as sd
+from sparsedepth.batch import (
+    CSV_COLUMNS,
+    BatchOptions,
+    FileFrame,
+    evaluate_frame,
+    find_frames,
+    nyu_frames,
+    run_batch,
+)
+
+FAST = sd.Weights(gamma=0.0)  # quadratic objective: the direct solver is exact and fast
+
+
+def _scene(shape=(40, 60), seed=0):
+    rng = np.random.default_rng(seed)
+    ii, jj = np.mgrid[0 : shape[0], 0 : shape[1]]
+    depth = 1.0 + 0.02 * ii + 0.01 * jj + 0.5 * (jj > shape[1] // 2)
+    image = np.clip(60 + 120 * (jj > shape[1] // 2)[..., None] + rng.integers(0, 30, shape + (3,)), 0, 255)
+    return image.astype(np.uint8), depth
+
+
+def _read_csv(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+# ----------------------------------------------------------------------------- evaluate_frame
+def test_evaluate_frame_matches_independent_computation():
+    image, depth = _scene()
+    out = evaluate_frame(image, depth, keep_fraction=0.1, seed=3, weights=FAST, solver="direct")
+    sparse, mask = sd.sample_depth(depth, fraction=0.1, seed=3)
+    np.testing.assert_array_equal(out.observed, mask)
+    expected = sd.complete_depth(image, sparse, mask, weights=FAST, solver="direct")
+    np.testing.assert_allclose(out.depth, expected.depth, rtol=0, atol=1e-12)
+    assert out.metrics == sd.depth_metrics(expected.depth, depth, mask=~mask)
+    assert out.nearest_metrics == sd.depth_metrics(sd.nearest_fill(sparse, mask), depth, mask=~mask)
+    assert out.metrics.count == depth.size - mask.sum()
+    assert out.method == "complete (direct)"
+
+
+def test_evaluate_frame_fill_scores_holes_against_truth():
+    image, truth = _scene(seed=1)
+    raw = truth.copy()
+    raw[10:20, 5:25] = 0.0
+    out = evaluate_frame(image, raw, truth=truth, task="fill")
+    np.testing.assert_array_equal(out.depth, sd.fill_holes(image, raw))
+    holes = raw == 0
+    np.testing.assert_array_equal(out.scored, holes)
+    assert out.metrics == sd.depth_metrics(out.depth, truth, mask=holes)
+    assert out.result is None and out.method == "fill colorization"
+
+
+def test_evaluate_frame_without_truth_has_no_metrics():
+    image, depth = _scene()
+    sparse, _ = sd.sample_depth(depth, fraction=0.05, seed=0)
+    out = evaluate_frame(image, sparse, weights=FAST, solver="direct")
+    assert out.metrics is None and out.nearest_metrics is None
+    assert np.all(np.isfinite(out.depth))
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"task": "guess"}, "unknown task"),
+        ({"task": "fill", "keep_fraction": 0.1}, "do not apply"),
+        ({"task": "fill", "fill_method": "magic"}, "unknown fill method"),
+    ],
+)
+def test_evaluate_frame_bad_options(kwargs, match):
+    image, depth = _scene()
+    with pytest.raises(ValueError, match=match):
+        evaluate_frame(image, depth, **kwargs)
+
+
+def test_evaluate_frame_bad_inputs():
+    image, depth = _scene()
+    with pytest.raises(ValueError, match="image has shape"):
+        evaluate_frame(image[:-2], depth)
+    with pytest.raises(ValueError, match="no valid pixel"):
+        evaluate_frame(image, np.full(depth.shape, np.nan))
+
+
+# ----------------------------------------------------------------------------- folders
+def _write_frame(folder, key, image, depth, scale=1000.0):
+    iio.imwrite(folder / f"rgb_{key}.png", image)
+    sd.write_depth(folder / f"depth_{key}.png", depth, scale=scale)
+
+
+def test_find_frames_pairs_by_name(tmp_path):
+    image, depth = _scene()
+    _write_frame(tmp_path, "002", image, depth)
+    _write_frame(tmp_path, "001", image, depth)
+    iio.imwrite(tmp_path / "rgb_003.png", image)  # no depth partner
+    (tmp_path / "notes.txt").write_text("ignored")
+    frames = find_frames(tmp_path)
+    assert [f.name for f in frames] == ["001", "002", "003"]
+    assert frames[0].depth == str(tmp_path / "depth_001.png")
+    assert frames[2].depth is None
+
+
+def test_find_frames_errors(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        find_frames(tmp_path / "absent")
+    with pytest.raises(ValueError, match="no image"):
+        find_frames(tmp_path)
+    with pytest.raises(ValueError, match="prefixes"):
+        find_frames(tmp_path, image_prefix="x_", depth_prefix="x_")
+
+
+def test_folder_batch_with_a_corrupt_frame(tmp_path):
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    scenes = {key: _scene(seed=i) for i, key in enumerate(["a", "b", "c"])}
+    for key, (image, depth) in scenes.items():
+        _write_frame(folder, key, image, depth)
+    (folder / "depth_b.png").write_bytes(b"\x89PNG\r\n\x1a\n this is not a PNG")  # corrupt
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    options = BatchOptions(keep_fraction=0.1, seed=7, weights=FAST, solver="direct", depth_scale="mm",
+                           out_dir=str(out_dir))
+    calls = []
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        summary = run_batch(find_frames(folder), tmp_path / "m.csv", options=options, executor=pool,
+                            progress=lambda done, total, row: calls.append((done, total, row["name"])))
+    assert (summary.total, summary.succeeded, summary.failed) == (3, 2, 1)
+    assert sorted(c[0] for c in calls) == [1, 2, 3] and all(c[1] == 3 for c in calls)
+    rows = {row["name"]: row for row in _read_csv(tmp_path / "m.csv")}
+    assert list(_read_csv(tmp_path / "m.csv")[0]) == list(CSV_COLUMNS)
+    assert rows["b"]["status"] == "error" and "depth_b.png" in rows["b"]["error"]
+    assert not (out_dir / "b.npy").exists()
+    for position, key in ((0, "a"), (2, "c")):
+        row = rows[key]
+        assert row["status"] == "ok" and row["error"] == ""
+        # independent recomputation from the files, with the documented per-frame seed
+        image = sd.read_image(folder / f"rgb_{key}.png")
+        depth = sd.read_depth(folder / f"depth_{key}.png", scale=1000)
+        mask = sd.sample_mask(depth, fraction=0.1, seed=np.random.default_rng([7, position]))
+        sparse = np.where(mask, depth, np.nan)
+        completed = sd.complete_depth(image, sparse, mask, weights=FAST, solver="direct").depth
+        metrics = sd.depth_metrics(completed, depth, mask=~mask)
+        assert float(row["rmse"]) == pytest.approx(metrics.rmse, rel=1e-5)
+        assert int(row["observed"]) == mask.sum() and int(row["scored"]) == metrics.count
+        np.testing.assert_allclose(np.load(out_dir / f"{key}.npy"), completed, atol=1e-12)
+
+
+def test_rows_are_flushed_as_frames_finish(tmp_path):
+    # the caller stops the batch after the second frame: the first two rows are already on disk
+    image, depth = _scene()
+    for key in "abcd":
+        _write_frame(tmp_path, key, image, depth)
+
+    def progress(done, total, row):
+        if done == 2:
+            raise KeyboardInterrupt
+
+    options = BatchOptions(keep_fraction=0.1, weights=FAST, solver="direct", depth_scale="mm")
+    with ThreadPoolExecutor(max_workers=1) as pool, pytest.raises(KeyboardInterrupt):
+        run_batch(find_frames(tmp_path), tmp_path / "m.csv", options=options, executor=pool,
+                  max_workers=1, progress=progress)
+    rows = _read_csv(tmp_path / "m.csv")
+    assert [r["name"] for r in rows] == ["a", "b"]
+
+
+def test_run_batch_errors(tmp_path):
+    with pytest.raises(ValueError, match="no frame"):
+        run_batch([], tmp_path / "m.csv")
+    with pytest.raises(FileNotFoundError):
+        run_batch([FileFrame("x", "a.png", "b.png")], tmp_path / "absent" / "m.csv")
+
+
+# ----------------------------------------------------------------------------- NYU .mat
+def _write_nyu_mat(path, frames):
+    """HDF5 in the MATLAB v7.3 layout of nyu_depth_v2_labeled.mat (axes reversed)."""
+    images = np.stack([img.transpose(2, 1, 0) for img, _, _ in frames])  # (N, 3, W, H)
+    depths = np.stack([d.T for _, d, _ in frames]).astype(np.float32)  # (N, W, H)
+    raws = np.stack([r.T for _, _, r in frames]).astype(np.float32)
+    with h5py.File(path, "w") as fh:
+        fh.create_dataset("images", data=images)
+        fh.create_dataset("depths", data=depths)
+        fh.create_dataset("rawDepths", data=raws)
+
+
+def test_nyu_mat_range_on_a_process_pool(tmp_path):
+    frames = []
+    for seed in range(3):
+        image, depth = _scene(seed=seed)
+        raw = depth.copy()
+        raw[np.random.default_rng(seed).random(depth.shape) < 0.3] = 0.0
+        frames.append((image, depth, raw))
+    mat = tmp_path / "nyu.mat"
+    _write_nyu_mat(mat, frames)
+    selected = nyu_frames(mat, slice(1, 3))
+    assert [(f.name, f.index) for f in selected] == [("nyu_0001", 1), ("nyu_0002", 2)]
+    summary = run_batch(selected, tmp_path / "nyu.csv", options=BatchOptions(task="fill"), max_workers=2)
+    assert summary.failed == 0 and summary.succeeded == 2
+    rows = {row["name"]: row for row in _read_csv(tmp_path / "nyu.csv")}
+    for i in (1, 2):
+        image, depth, raw = frames[i]
+        depth32, raw32 = depth.astype(np.float32).astype(float), raw.astype(np.float32).astype(float)
+        holes = raw32 == 0
+        filled = sd.fill_holes(image, np.where(holes, np.nan, raw32))
+        expected = sd.depth_metrics(filled, depth32, mask=holes)
+        row = rows[f"nyu_{i:04d}"]
+        assert row["method"] == "fill colorization"
+        assert int(row["scored"]) == holes.sum()
+        assert float(row["mae"]) == pytest.approx(expected.mae, rel=1e-5)
+
+
+def test_nyu_frames_errors(tmp_path):
+    image, depth = _scene()
+    mat = tmp_path / "nyu.mat"
+    _write_nyu_mat(mat, [(image, depth, depth)])
+    with pytest.raises(IndexError):
+        nyu_frames(mat, [5])
+    with pytest.raises(ValueError, match="no frame selected"):
+        nyu_frames(mat, slice(3, 5))
+    with pytest.raises(FileNotFoundError):
+        nyu_frames(tmp_path / "absent.mat")
