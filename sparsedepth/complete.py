@@ -59,14 +59,14 @@ _WEIGHT_HELP = {
 EPILOG = f"""\
 examples:
   {PROG}
-      demo: Middlebury 2014 Motorcycle (every 2nd pixel), keep 5 %% of the depth,
+      demo: Middlebury 2014 Motorcycle (every 2nd pixel), keep 5 % of the depth,
       complete it, print nearest-neighbour vs completed, write ./{DEMO_DIR}/
   {PROG} --image rgb.png --depth sparse.png --depth-scale kitti --out dense.png
       complete a sparse KITTI depth PNG (metres = value / 256); the PNG output
       uses the input's scale
   {PROG} --image rgb.png --depth dense.png --depth-scale nyu --keep-fraction 0.02 \\
       --solver irls --gamma 0.02 --json run.json --figure run.png
-      simulate 2 %% sparse input from a dense NYU map (mm) and score the result
+      simulate 2 % sparse input from a dense NYU map (mm) and score the result
   {PROG} --fill-holes --image images.png --depth rawdepth.png --depth-scale mm \\
       --truth depth.png --out filled.png
       fill the holes of raw Kinect depth the NYU-toolbox way (colorization)
@@ -214,7 +214,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "metres (.png, .pdf, .svg, .jpg; needs matplotlib: pip install 'sparsedepth[plot]').")
     out.add_argument("--outdir", metavar="DIR",
                      help=f"write depth.npy, depth.png, metrics.json and figure.png (if matplotlib is installed) "
-                          f"here; batch: one depth file per frame.  Demo default ./{DEMO_DIR}/.")
+                          f"here (an existing folder; the demo creates its default ./{DEMO_DIR}/); batch: one depth file "
+                          "per frame.")
     out.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr.")
 
     bat = parser.add_argument_group("batch")
@@ -480,7 +481,7 @@ def _render_figure(image, outcome, extension) -> bytes:
         error = np.abs(outcome.depth - truth)
         err_im = axes[4].imshow(np.ma.masked_invalid(error), cmap="magma", vmin=0,
                                 vmax=max(float(np.nanpercentile(error, 99)), 1e-6), interpolation="nearest")
-        axes[4].set_title("|completed - truth|")
+        axes[4].set_title("|output - truth|")
         fig.colorbar(err_im, ax=axes[4], label="absolute error [m]", shrink=0.9)
     for ax in axes:
         ax.set_axis_off()
