@@ -18,7 +18,6 @@ import datetime
 import io as _io
 import json
 import math
-import os
 import platform
 import sys
 import time
