@@ -6,7 +6,7 @@ linear algebra (scipy.sparse, pyamg).  The main entry point is
 """
 
 from . import datasets, io
-from .baselines import nearest_fill
+from .baselines import biharmonic_fill, colorization_baseline, linear_fill, nearest_fill
 from .completion import choose_solver, complete_depth
 from .metrics import DepthMetrics, depth_metrics
 from .objective import AbsTerm, Objective, QuadraticTerm, build_objective, edge_weights
@@ -41,6 +41,9 @@ __all__ = [
     "build_objective",
     "edge_weights",
     "nearest_fill",
+    "linear_fill",
+    "biharmonic_fill",
+    "colorization_baseline",
     "depth_metrics",
     "DepthMetrics",
     "sample_depth",
