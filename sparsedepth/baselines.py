@@ -5,17 +5,13 @@ a dense map of the same shape; none of them uses the objective of
 :func:`sparsedepth.complete_depth`.  They are what :mod:`bench` compares the
 completion against.
 
-==========================  ==========================================  =====================
-function                    method                                      uses the image
-==========================  ==========================================  =====================
-:func:`nearest_fill`        value of the nearest observed pixel          no
-:func:`linear_fill`         piecewise-linear on the Delaunay             no
-                            triangulation (``scipy.interpolate``),
-                            nearest outside the convex hull
-:func:`biharmonic_fill`     biharmonic inpainting (``skimage``)          no
-:func:`colorization_baseline`  Levin colorization fill (NYU toolbox),    yes (grey image)
-                            :func:`sparsedepth.colorization.colorization_fill`
-==========================  ==========================================  =====================
+- :func:`nearest_fill`: the value of the nearest observed pixel;
+- :func:`linear_fill`: piecewise-linear on the Delaunay triangulation of the
+  observed pixels (``scipy.interpolate.griddata``), nearest outside their hull;
+- :func:`biharmonic_fill`: biharmonic inpainting
+  (``skimage.restoration.inpaint_biharmonic``);
+- :func:`colorization_baseline`: the Levin / NYU-toolbox colorization fill,
+  the only one that uses the image.
 """
 
 from __future__ import annotations
@@ -140,11 +136,10 @@ def biharmonic_fill(sparse_depth, mask=None) -> np.ndarray:
     discretisation: its stencil is truncated at the image border, so an
     affine plane is reproduced exactly where the two outermost rows and
     columns are observed, and is bent (by a few % of its range) otherwise.
-    One sparse system over all the biharmonic functions are reproduced.  One sparse system over all the
-    unobserved pixels is assembled and solved; scikit-image builds it with a
-    Python loop over the pixels, so this is slow on large frames (tens of
-    seconds at 640x480; time grows faster than the pixel count).  Subsample
-    the frame where that matters.
+    One sparse system over all the unobserved pixels is assembled and solved
+    directly, which is slow on large frames (seconds to tens of seconds at
+    640x480, growing faster than the pixel count); subsample the frame where
+    that matters.
 
     References
     ----------
