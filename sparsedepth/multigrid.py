@@ -177,9 +177,11 @@ def grid_stencil(A, shape, *, radius=None):
     Notes
     -----
     The coefficients are read diagonal by diagonal (``A.diagonal(dy*W + dx)``)
-    and masked at the grid boundary.  Every entry of `A` belongs to exactly one
-    in-grid offset, so the extraction is complete iff
-    :math:`\sum_k \|S_k\|_F^2 = \|A\|_F^2`, which is what is checked.
+    and masked at the grid boundary.  A pixel and a diagonal determine at
+    most one in-grid offset, so every non-zero entry of `A` lands in `S` at
+    most once, and the extraction is complete iff the numbers of non-zeros
+    agree -- an exact integer check (an earlier floating-point comparison of
+    Frobenius norms failed on 640x480 grids through rounding alone).
 
     Examples
     --------
@@ -193,8 +195,17 @@ def grid_stencil(A, shape, *, radius=None):
     return _stencil_of(A, shape, radius)
 
 
+def _captures_all(A, S):
+    """True when the stencil images ``S`` hold every non-zero entry of ``A``.
+
+    Exact: a pixel and a diagonal ``dy*W + dx`` determine at most one in-grid
+    offset, so each stored non-zero of ``A`` appears at most once in ``S``, and
+    the extraction is complete iff the two non-zero counts agree.
+    """
+    return int(np.count_nonzero(S)) == int(np.count_nonzero(A.data))
+
+
 def _stencil_of(A, shape, radius=None):
-    total = float(np.dot(A.data, A.data))
     if radius is None:
         candidates = [[(-1, 0), (0, -1), (0, 0), (0, 1), (1, 0)],
                       _square_offsets(1), _square_offsets(2)]
@@ -204,10 +215,9 @@ def _stencil_of(A, shape, radius=None):
         largest = int(radius)
     for offsets in candidates:
         S = _extract_stencil(A, shape, offsets)
-        flat = S.reshape(-1)
-        captured = float(np.dot(flat, flat))
-        if abs(total - captured) <= 1e-12 * max(total, np.finfo(float).tiny):
+        if _captures_all(A, S):
             return _trim_offsets(offsets, S)
+        del S
     raise ValueError(
         f"`A` couples pixels farther apart than a stencil of radius {largest} "
         f"on a grid of shape {shape}: check that `shape` is the (H, W) the pixels "
@@ -783,12 +793,9 @@ class GridMultigrid:
         A, _ = _check_matrix(A, self.shape)
         offsets = self.levels[0].offsets
         S = _extract_stencil(A, self.shape, offsets)
-        total = float(np.dot(A.data, A.data))
-        flat = S.reshape(-1)
-        if abs(total - float(np.dot(flat, flat))) > 1e-12 * max(
-                total, np.finfo(float).tiny):
+        if not _captures_all(A, S):
             # the stencil grew: rebuild the structure as well
-            del S, flat
+            del S
             self._build(A)
             return self
         self.levels[0].A = A

@@ -11,9 +11,12 @@ name        objective    stopping rule (``tol``)
 ==========  ===========  ====================================================
 direct      γ = 0        exact sparse LU solve of the normal equations
 cg          γ = 0        Jacobi-PCG, ``‖b − A z‖ ≤ tol ‖b‖``
-amg         γ = 0        PCG with an algebraic-multigrid V-cycle, same rule
+amg         γ = 0        PCG with a multigrid V-cycle (geometric GridMultigrid;
+                         ``options={"preconditioner": "amg"}`` for pyamg
+                         Ruge–Stüben), same rule
 irls        any          ``F_{k-1} − F_k ≤ tol · F_k`` at the final ε
-admm        any          primal and dual residuals ``<= tol`` (relative)
+admm        any          primal and dual residuals ``<= tol`` (relative),
+                         then an exact active-set polish
 lbfgsb      any          SciPy L-BFGS-B on the smoothed objective scaled by
                          ``1/F(x0)``; ``ftol = tol``
 adam        any          projected Adam on the smoothed objective; relative
@@ -32,6 +35,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
 from .linear import make_preconditioner, pcg
+from .multigrid import GridMultigrid
 from .result import IterationRecord, SolverState
 
 __all__ = ["SolverOutput", "SOLVERS", "DEFAULT_TOL", "solve"]
@@ -104,16 +108,29 @@ def solve_direct(objective, x0, *, tol=None, max_iter=None, recorder, options):
 
 
 def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner):
-    A, b, _ = objective.normal_equations()
+    r"""PCG on ``A z = b`` to ``‖b − A z‖ ≤ tol ‖b‖`` (true residual), history per CG step.
+
+    The objective recorded after each CG step is ``F(z) = c − bᵀz − rᵀz``
+    (``= zᵀAz − 2bᵀz + c`` with the CG residual ``r = b − A z``), two dot
+    products instead of a full evaluation of every term; the last entry is
+    re-evaluated exactly term by term.
+    """
+    from .linear import _dot
+
+    A, b, c = objective.normal_equations()
     recorder(0, x0)
     M = make_preconditioner(A, preconditioner, shape=objective.shape)
     it = [0]
 
-    def cb(xk):
+    def cb(xk, rk):
         it[0] += 1
-        recorder(it[0], xk, inner=it[0])
+        recorder(it[0], xk, inner=it[0], value=c - _dot(b, xk) - _dot(rk, xk))
 
-    z, n, converged, rel = pcg(A, b, x0=x0, M=M, rtol=tol, maxiter=max_iter, callback=cb)
+    z, n, converged, rel = pcg(A, b, x0=x0, M=M, rtol=tol, maxiter=max_iter, callback=cb, callback_residual=True)
+    if recorder.history and recorder.history[-1].iteration == n and n > 0:
+        last = recorder.history[-1]
+        recorder.history[-1] = IterationRecord(last.iteration, objective.value(z), last.time, last.function_evals,
+                                               last.gradient_evals, last.inner_iterations)
     msg = f"relative residual {rel:.2e} {'<=' if converged else '>'} tol {tol:.1e} after {n} CG iterations"
     return _output(z, n, converged, msg, recorder)
 
@@ -125,10 +142,18 @@ def solve_cg(objective, x0, *, tol, max_iter, recorder, options):
 
 
 def solve_amg(objective, x0, *, tol, max_iter, recorder, options):
-    """Conjugate gradients preconditioned by one algebraic-multigrid V-cycle."""
+    """Conjugate gradients preconditioned by one multigrid V-cycle.
+
+    Options
+    -------
+    preconditioner : {"grid", "amg"}, default "grid"
+        ``"grid"``: geometric :class:`~sparsedepth.multigrid.GridMultigrid`
+        built once for ``A`` (the quadratic part of any objective is a grid
+        operator of stencil radius <= 2); ``"amg"``: pyamg Ruge–Stüben.
+    """
     _require_quadratic(objective, "amg")
     return _solve_pcg(
-        objective, x0, tol=tol, max_iter=max_iter, recorder=recorder, preconditioner=options.get("preconditioner", "amg")
+        objective, x0, tol=tol, max_iter=max_iter, recorder=recorder, preconditioner=options.get("preconditioner", "grid")
     )
 
 
@@ -146,8 +171,11 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
 
         (A + ½ Kᵀ diag(γ w / m_k) K) z = b
 
-    solved by PCG (multigrid V-cycle preconditioner), warm-started from the
-    current iterate, to relative residual ``inner_rtol``.  ε starts at
+    solved by PCG, warm-started from the current iterate, to relative residual
+    ``inner_rtol``.  The preconditioner (option ``preconditioner``, default
+    ``"grid"``) is one geometric multigrid hierarchy built in the first
+    iteration and re-computed numerically (:meth:`GridMultigrid.update`, same
+    stencil) in the others; ``"amg"`` rebuilds a pyamg hierarchy each time.  ε starts at
     ``eps_start`` and is divided by ``eps_factor`` whenever the relative
     decrease of the exact ``F`` falls below ``tol``, down to ``eps_min``; the
     solver has converged when that happens at ``eps_min``.  A step that would
@@ -166,7 +194,8 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
     eps_min = float(options.get("eps_min", 1e-7 * scale))
     eps_factor = float(options.get("eps_factor", 10.0))
     inner_rtol = float(options.get("inner_rtol", 1e-6))
-    preconditioner = options.get("preconditioner", "amg")
+    preconditioner = options.get("preconditioner", "grid")
+    hierarchy = None
     z = np.maximum(np.asarray(x0, dtype=float).copy(), 0.0)
     F = recorder(0, z, inner=0)
     inner_total = 0
@@ -184,7 +213,15 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
                 omega = term.scaled_row_weights() / np.maximum(np.abs(t), eps)
                 parts.append(0.5 * (term.operator.T @ sp.diags(omega) @ term.operator))
             system = sum(parts[1:], parts[0]).tocsr()
-        M = make_preconditioner(system, preconditioner, shape=objective.shape)
+        if preconditioner == "grid":
+            # one hierarchy for the whole run: numeric update for new weights
+            if hierarchy is None:
+                hierarchy = GridMultigrid(system, objective.shape)
+            else:
+                hierarchy.update(system)
+            M = hierarchy.aspreconditioner()
+        else:
+            M = make_preconditioner(system, preconditioner, shape=objective.shape)
         z_new, n_inner, _, _ = pcg(system, b, x0=z, M=M, rtol=inner_rtol, maxiter=options.get("inner_max_iter", 500))
         inner_total += n_inner
         z_new = np.maximum(z_new, 0.0)
@@ -222,11 +259,17 @@ def _stack_l1(objective):
 
 
 def _default_rho(objective):
-    """ADMM penalty: the data weight α (weight of the ``data`` term), else 1."""
+    """ADMM penalty: twice the data weight α (weight of the ``data`` term), else 2.
+
+    ρ has the units of the quadratic weights.  With tol = 1e-3 plus the
+    active-set polish, ρ = 2α reached the exact objective within ~1e-7 of a
+    long reference run on two real 640x480 NYU frames (γ = 0.01), where
+    ρ = α stopped ~1e-6 short at the same tolerance (bench/perf.py).
+    """
     for term in objective.quadratic_terms:
         if term.name == "data":
-            return float(term.weight)
-    return 1.0
+            return 2.0 * float(term.weight)
+    return 2.0
 
 
 def _shrink(v, threshold):
@@ -241,19 +284,30 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     With ``u = K z`` (``K`` the stacked L1 operators, ``c`` their weights), the
     scaled-form iteration is::
 
-        z ← (2A + ρ KᵀK)⁻¹ (2b + ρ Kᵀ(u − λ))      # PCG, warm-started
+        z ← (2A + ρ KᵀK)⁻¹ (2b + ρ Kᵀ(u − λ))      # PCG, warm-started, inexact
         v ← a K z + (1 − a) u                       # over-relaxation, a = 1.6
         u ← shrink(v + λ, c/ρ)
         λ ← λ + v − u
 
-    The system matrix ``2A + ρKᵀK`` does not depend on the iterate, so one
-    preconditioner (multigrid hierarchy) serves every iteration; ρ is adapted
-    by residual balancing only during the first ``adapt_iters`` iterations
-    (each change rebuilds the preconditioner once).  Stops when the primal and
-    dual residuals ``‖Kz − u‖ / max(‖Kz‖, ‖u‖)`` and ``ρ‖Kᵀ(u − u_prev)‖ /
-    ‖ρKᵀλ‖`` are both ``<= tol``.  Finally an *active-set polish* solves the
-    quadratic problem with the edges where ``u = 0`` tied (pixels merged) and
-    the signs of the others fixed, and keeps it only if it lowers the exact F.
+    The system matrix ``2A + ρKᵀK`` does not depend on the iterate and is a
+    grid operator of stencil radius <= 2, so ONE geometric multigrid hierarchy
+    (:class:`~sparsedepth.multigrid.GridMultigrid`, option ``preconditioner``,
+    default ``"grid"``; ``"amg"`` for pyamg) preconditions every inner PCG
+    solve, warm-started from the previous ``z``, stops when its residual is
+    ``<= max(inner_rtol ‖rhs‖, inner_factor ‖rhs − S z_prev‖)`` (defaults
+    ``inner_rtol = 1e-10``, ``inner_factor = 0.1``): a fixed reduction of the
+    residual the new right-hand side creates, i.e. one or two V-cycles, with
+    an error that shrinks as the iterates (and so the right-hand sides)
+    settle.  ρ (option ``rho``; default
+    :func:`_default_rho`) is adapted by residual balancing (factor 2 when one
+    residual exceeds 10× the other, checked every 5 iterations) during the
+    first ``adapt_iters`` iterations (default 0); the hierarchy is then
+    re-computed numerically with :meth:`GridMultigrid.update`.  Stops when
+    the primal and dual residuals ``r_k = ‖Kz − u‖ / max(‖Kz‖, ‖u‖)`` and
+    ``s_k = ρ‖Kᵀ(u − u_prev)‖ / ‖ρKᵀλ‖`` are both ``<= tol``.  Finally an
+    *active-set polish* (:func:`_active_set_polish`) solves the quadratic
+    problem with the edges where ``u = 0`` tied (pixels merged) and the signs
+    of the others fixed, and keeps it only if it lowers the exact F.
 
     References
     ----------
@@ -262,50 +316,59 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     Found. Trends Mach. Learn. 3 (2011), §3.4.  Goldstein, Osher, "The split
     Bregman method for L1-regularized problems", SIAM J. Imaging Sci. 2 (2009).
     """
+    from .linear import _dot
+
     A0, b, _ = objective.normal_equations()
     z = np.maximum(np.asarray(x0, dtype=float).copy(), 0.0)
     F = recorder(0, z, inner=0)
+    kind = options.get("preconditioner", "grid")
     if not objective.has_l1:
         # nothing to split: one PCG solve
-        M = make_preconditioner(A0, options.get("preconditioner", "amg"), shape=objective.shape)
+        M = make_preconditioner(A0, kind, shape=objective.shape)
         z, n, ok, rel = pcg(A0, b, x0=z, M=M, rtol=options.get("inner_rtol", 1e-10))
         recorder(1, z, inner=n)
         return _output(z, 1, ok, f"quadratic problem: relative residual {rel:.1e}", recorder)
     K, c = _stack_l1(objective)
+    KT = K.T.tocsr()
     relax = float(options.get("relaxation", 1.6))
-    inner_rtol = float(options.get("inner_rtol", 1e-8))
+    inner_rtol = float(options.get("inner_rtol", 1e-10))
+    inner_factor = float(options.get("inner_factor", 0.1))
     adapt_iters = int(options.get("adapt_iters", 0))
     polish = bool(options.get("polish", True))
-    kind = options.get("preconditioner", "amg")
     Kz = K @ z
-    # ρ has the units of the quadratic weights; the data weight α was the best
-    # fixed choice within a factor of ~3 on real frames (bench/perf.py)
     rho = float(options["rho"]) if "rho" in options else _default_rho(objective)
-    KtK = (K.T @ K).tocsr()
+    KtK = (KT @ K).tocsr()
     u = Kz.copy()
     lam = np.zeros_like(u)
-
-    def system(rho):
-        S = (2.0 * A0 + rho * KtK).tocsr()
-        return S, make_preconditioner(S, kind, shape=objective.shape)
-
-    S, M = system(rho)
+    S = (2.0 * A0 + rho * KtK).tocsr()
+    if kind == "grid":
+        hierarchy = GridMultigrid(S, objective.shape)
+        M = hierarchy.aspreconditioner()
+    else:
+        hierarchy = None
+        M = make_preconditioner(S, kind, shape=objective.shape)
     inner_total = 0
     converged = False
     message = f"reached max_iter = {max_iter}"
     k = 0
     while k < max_iter:
         k += 1
-        rhs = 2.0 * b + rho * (K.T @ (u - lam))
-        z, n_inner, _, _ = pcg(S, rhs, x0=z, M=M, rtol=inner_rtol, maxiter=options.get("inner_max_iter", 200))
+        rhs = 2.0 * b + rho * (KT @ (u - lam))
+        res0 = rhs - S @ z
+        atol_k = inner_factor * np.sqrt(_dot(res0, res0))
+        z, n_inner, _, _ = pcg(S, rhs, x0=z, M=M, rtol=inner_rtol, atol=atol_k,
+                               maxiter=options.get("inner_max_iter", 200))
         inner_total += n_inner
         Kz = K @ z
         v = relax * Kz + (1.0 - relax) * u
         u_prev = u
         u = _shrink(v + lam, c / rho)
         lam += v - u
-        r_norm = np.linalg.norm(Kz - u) / max(np.linalg.norm(Kz), np.linalg.norm(u), 1e-300)
-        s_norm = np.linalg.norm(K.T @ (u - u_prev)) / max(np.linalg.norm(K.T @ lam), 1e-300)
+        d = Kz - u
+        r_norm = np.sqrt(_dot(d, d)) / max(np.sqrt(_dot(Kz, Kz)), np.sqrt(_dot(u, u)), 1e-300)
+        du = KT @ (u - u_prev)
+        KTl = KT @ lam
+        s_norm = np.sqrt(_dot(du, du)) / max(np.sqrt(_dot(KTl, KTl)), 1e-300)
         recorder(k, np.maximum(z, 0.0), inner=inner_total)
         if r_norm <= tol and s_norm <= tol:
             converged = True
@@ -315,10 +378,14 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
             factor = 2.0 if r_norm > s_norm else 0.5
             rho *= factor
             lam /= factor
-            S, M = system(rho)
+            S = (2.0 * A0 + rho * KtK).tocsr()
+            if hierarchy is not None:
+                hierarchy.update(S)
+            else:
+                M = make_preconditioner(S, kind, shape=objective.shape)
     z = np.maximum(z, 0.0)
     if polish:
-        z_pol = _active_set_polish(objective, A0, b, K, c, u, kind)
+        z_pol = _active_set_polish(objective, A0, b, K, c, u, kind, z0=z)
         if z_pol is not None:
             z_pol = np.maximum(z_pol, 0.0)
             F_pol, F_cur = objective.value(z_pol), objective.value(z)
@@ -329,12 +396,18 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     return _output(z, k, converged, message, recorder)
 
 
-def _active_set_polish(objective, A, b, K, c, u, kind):
-    """Minimise the quadratic model with edges where ``u == 0`` tied and other signs fixed.
+def _active_set_polish(objective, A, b, K, c, u, kind, z0=None, rtol=1e-11):
+    r"""Minimise the quadratic model with edges where ``u == 0`` tied and other signs fixed.
 
-    Pixels joined by a tied edge are merged (connected components); ``z = C y``
-    with ``C`` the pixel-to-component indicator, and ``Cᵀ A C y = Cᵀ(b − ½Kᵀ(c·sign u))``.
-    Returns None where ``K`` has rows that are not pixel differences.
+    Pixels joined by a tied edge are merged (connected components); with
+    ``C`` the pixel-to-component indicator, ``z = C y`` and::
+
+        Cᵀ A C y = Cᵀ(b − ½ Kᵀ(c ⊙ sign u))
+
+    is solved by PCG with a pyamg Ruge–Stüben preconditioner (the reduced
+    system is no longer a grid operator) to relative residual ``rtol``,
+    warm-started from the component means of ``z0``.  Returns None where
+    ``K`` has rows that are not pixel differences.
     """
     from scipy.sparse.csgraph import connected_components
 
@@ -349,10 +422,15 @@ def _active_set_polish(objective, A, b, K, c, u, kind):
     graph = sp.coo_matrix((np.ones(int(tied.sum())), (first[tied], second[tied])), shape=(n, n))
     n_comp, labels = connected_components(graph, directed=False)
     C = sp.csr_matrix((np.ones(n), (np.arange(n), labels)), shape=(n, n_comp))
-    reduced = (C.T @ A @ C).tocsr()
-    rhs = C.T @ (b - 0.5 * (K.T @ (c * np.sign(u))))
+    CT = C.T.tocsr()
+    reduced = (CT @ A @ C).tocsr()
+    rhs = CT @ (b - 0.5 * (K.T @ (c * np.sign(u))))
+    y0 = None
+    if z0 is not None:
+        y0 = (CT @ z0) / np.bincount(labels, minlength=n_comp)
+    pkind = "amg" if kind == "grid" else kind
     try:
-        y, _, ok, _ = pcg(reduced, rhs, M=make_preconditioner(reduced, "amg" if kind == "grid" else kind), rtol=1e-12, maxiter=2000)
+        y, _, ok, _ = pcg(reduced, rhs, x0=y0, M=make_preconditioner(reduced, pkind), rtol=rtol, maxiter=2000)
     except ValueError:
         return None
     return C @ y
@@ -456,7 +534,7 @@ SOLVERS = {
     "adam": solve_adam,
 }
 
-DEFAULT_TOL = {"direct": 0.0, "cg": 1e-8, "amg": 1e-8, "irls": 1e-7, "admm": 1e-4, "lbfgsb": 1e-12, "adam": 1e-7}
+DEFAULT_TOL = {"direct": 0.0, "cg": 1e-8, "amg": 1e-8, "irls": 1e-7, "admm": 1e-3, "lbfgsb": 1e-12, "adam": 1e-7}
 DEFAULT_MAX_ITER = {"direct": 1, "cg": 5000, "amg": 500, "irls": 200, "admm": 1000, "lbfgsb": 15000, "adam": 20000}
 
 
