@@ -74,6 +74,11 @@ def run(argv=None):
                           H.fmt(*r["delta3"]), H.fmt(*r["runtime"], digits=3), H.fmt(r["time_ratio"], digits=1)])
     body = H.markdown_table(["samples", "method", "RMSE (m)", "REL", "δ<1.25", "δ<1.25²", "δ<1.25³", "time (s)",
                              "time × nearest"], table)
+    top = max(counts)
+    ranked = sorted((r for r in rows if r["sampling"] == top), key=lambda r: r["rmse"][0])
+    body = (f"Headline: {top} samples, RMSE (m) lowest first: "
+            + "; ".join(f"{r['method']} {H.fmt(*r['rmse'])} (REL {H.fmt(r['rel'][0])}, δ1 {H.fmt(r['delta1'][0])})"
+                        for r in ranked) + ".\n\n") + body
     notes = ("Quick mode: tiny frames resized and cropped at 1/4 of the protocol size (smoke test only). "
              if args.quick else "") + (
         "Ground truth of the raw NYU frames has holes; they are neither sampled nor scored. The frames are "

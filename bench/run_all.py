@@ -78,6 +78,14 @@ def main(argv=None) -> int:
         "the numbers to compare.",
         "",
     ]
+    headlines = [line[len("Headline: "):] for text in sections for line in text.splitlines()
+                 if line.startswith("Headline: ")]
+    titles = [text.splitlines()[0][3:] for text in sections]
+    head += ["## Headline numbers", "", "Copied by `run_all.py` from the sections below (defaults at run time: "
+             f"{H.weights_markdown(H.sd.DEFAULT_WEIGHTS)}):", ""]
+    head += ([f"- {t}: {h}" for t, h in zip(titles, headlines)] if len(titles) == len(headlines)
+             else [f"- {h}" for h in headlines])
+    head += [""]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(head) + "\n" + "\n".join(sections))
     print(f"[run_all] wrote {args.out} in {elapsed / 60:.1f} min", file=sys.stderr)

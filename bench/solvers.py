@@ -121,6 +121,13 @@ def run(argv=None, *, plot_dir=None):
     header = ["objective", "solver", "RMSE", "MAE", "time (s)", "time × L-BFGS-B", "final F", "gap to best",
               "max gap", "iterations", "converged"]
     body = H.markdown_table(header, table)
+    first = [r for r in rows if r["group"] == groups()[0][0]]
+    best = min(first, key=lambda r: (r["gap"][0] > 1e-6, r["runtime"][0]))
+    body = (f"Headline: on the default objective, {best['solver']} is the fastest solver within a relative gap of "
+            f"1e-6 of the best objective (mean gap {best['gap'][0]:.1e}, {H.fmt(best['time_ratio'], digits=2)} × "
+            "the time of L-BFGS-B); " + ", ".join(f"{r['solver']} gap {r['gap'][0]:.1e} at "
+                                                  f"{H.fmt(r['time_ratio'], digits=2)} ×" for r in first
+                                                  if r is not best) + ".\n\n") + body
     figs = ""
     if not args.no_plot:
         plot(curves, plot_dir / "solver_objective_vs_iter.png", plot_dir / "solver_objective_vs_time.png")

@@ -122,5 +122,5 @@ def test_run_all_quick_writes_every_section(tmp_path):
     out = tmp_path / "results.md"
     assert run_all.main(["--quick", "--out", str(out)]) == 0
     text = out.read_text()
-    assert text.count("\n## ") == 5 and "Command: `python bench/sparsity.py --quick`" in text
+    assert text.count("\n## ") == 6 and text.count("\nHeadline") == 5 and "Command: `python bench/sparsity.py --quick`" in text
     assert (tmp_path / "solver_objective_vs_iter.png").exists()
