@@ -13,11 +13,11 @@ at run time) with some weights set to 0 by ``Weights.replace``, solved with
   fill there);
 * edge only: α, γ;  L2 only: α, β;  L2 + edge: α, β, γ;
 * full objective of the paper: α, β, γ, δ;
-* extension terms (issue item 7): the paper's objective plus the
-  image-weighted L2 ``beta_image`` (weight = default ``beta_image`` if > 0,
-  else the default β), the image-weighted L2 *instead of* the plain L2, and
-  the paper's objective plus the second-order term ``beta_second`` (weight =
-  default if > 0, else the default β).
+* extension terms (issue item 7): the paper's objective plus each weight of
+  ``Weights`` beyond α, β, γ, δ, κ (``beta_image`` image-weighted L2,
+  ``beta_second`` second-order, ...), one at a time, at its default weight if
+  > 0, else at the default β; and the image-weighted L2 *instead of* the
+  plain L2.
 
 Variants equal to an earlier one (e.g. when a default weight is 0) are
 listed once.  Frames are subsampled by ``--step`` (default 4).
@@ -36,27 +36,33 @@ import sparsedepth as sd  # noqa: E402
 
 DEFAULT_STEP = 4
 FRACTION = 0.05
+PAPER_FIELDS = ("alpha", "beta", "gamma", "delta", "kappa")
+EXT_LABELS = {"beta_image": "image-weighted L2", "beta_second": "second-order",
+              "beta_second_image": "image-weighted second-order"}
 
 
 def variants(D=None):
     """``[(label, Weights)]`` derived from ``D`` (default ``sd.DEFAULT_WEIGHTS``), duplicates dropped."""
     D = sd.DEFAULT_WEIGHTS if D is None else D
-    no_ext = dict(beta_image=0.0, beta_second=0.0)
+    # every weight beyond the paper's alpha, beta, gamma, delta, kappa is an extension term
+    ext = [k for k in D.as_dict() if k not in PAPER_FIELDS]
+    no_ext = {k: 0.0 for k in ext}
     prior = D.delta if D.delta > 0 else 1e-6 * max(D.alpha, 1.0)
     w_img = D.beta_image if D.beta_image > 0 else D.beta
-    w_sec = D.beta_second if D.beta_second > 0 else D.beta
     out = [
         ("data only (α, δ)", D.replace(beta=0.0, gamma=0.0, delta=prior, **no_ext)),
         ("edge only (α, γ)", D.replace(beta=0.0, delta=0.0, **no_ext)),
         ("L2 only (α, β)", D.replace(gamma=0.0, delta=0.0, **no_ext)),
         ("L2 + edge (α, β, γ)", D.replace(delta=0.0, **no_ext)),
         ("full objective of the paper (α, β, γ, δ)", D.replace(**no_ext)),
-        (f"paper + image-weighted L2 (β_image = {w_img:g})", D.replace(beta_second=0.0, beta_image=w_img)),
-        (f"image-weighted L2 instead of L2 (β = 0, β_image = {w_img:g})",
-         D.replace(beta=0.0, beta_second=0.0, beta_image=w_img)),
-        (f"paper + second-order (β_second = {w_sec:g})", D.replace(beta_image=0.0, beta_second=w_sec)),
-        ("defaults (sd.DEFAULT_WEIGHTS)", D),
     ]
+    for k in ext:
+        value = getattr(D, k) if getattr(D, k) > 0 else D.beta
+        out.append((f"paper + {EXT_LABELS.get(k, k)} ({k} = {value:g})", D.replace(**{**no_ext, k: value})))
+        if k == "beta_image":
+            out.append((f"image-weighted L2 instead of L2 (beta = 0, beta_image = {w_img:g})",
+                        D.replace(**{**no_ext, "beta": 0.0, "beta_image": w_img})))
+    out.append(("defaults (sd.DEFAULT_WEIGHTS)", D))
     seen, kept = {}, []
     for label, w in out:
         if w in seen:
@@ -95,7 +101,7 @@ def run(argv=None):
     body = H.markdown_table(header, table)
     body += "\n\nRMSE per frame (mean ± std over seeds), in the frame's depth units:\n\n"
     body += H.per_frame_table(records, [m.name for m in methods])
-    ext = [r for r in rows if "β_image" in r["method"] or "β_second" in r["method"]]
+    ext = [r for r in rows if r["method"].startswith(("paper +", "image-weighted"))]
     paper = {(r.frame, r.seed): r.metrics.rmse for r in records if r.method == ref}
 
     def wins(name):

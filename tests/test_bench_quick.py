@@ -73,7 +73,7 @@ def test_ablation_quick_variants_and_data_only_equals_nearest():
     header, body = first_table(text)
     labels = [r[0] for r in body]
     assert labels[0] == "data only (α, δ)" and any(lbl.startswith("full objective") for lbl in labels)
-    assert any("β_second" in lbl for lbl in labels) and any("β_image" in lbl for lbl in labels)
+    assert any("beta_second =" in lbl for lbl in labels) and any("beta_image =" in lbl for lbl in labels)
     assert all(finite(r["rmse"]) for r in rows)
     # data + nearest prior and no smoothness: the minimiser at hidden pixels is the nearest fill
     H = ablation.H
