@@ -172,6 +172,8 @@ class Record:
 
 
 _CACHE: dict = {}
+#: Print one line per evaluation to stderr (set by the scripts' ``main``; off in tests).
+PROGRESS = False
 
 
 def sample(frame: FrameData, *, fraction=None, count=None, seed=0):
@@ -206,6 +208,9 @@ def evaluate(method: Method, frame: FrameData, *, fraction=None, count=None, see
                  objective, out if keep_result else None)
     if method.key:
         _CACHE[key] = rec
+    if PROGRESS:
+        print(f"  {method.name:>40s} {frame.name:>40s} {rec.sampling!s:>5s} seed {seed}: RMSE {metrics.rmse:.4g} "
+              f"{runtime:.2f} s", file=sys.stderr, flush=True)
     return rec
 
 
@@ -357,7 +362,7 @@ def parser(description: str, *, default_step: int) -> argparse.ArgumentParser:
     return p
 
 
-def finish(args, text: str) -> None:
+def finish(args, text: str) -> None:  # noqa: D401
     """Print the section and write it to ``--out`` if given."""
     print(text)
     if args.out is not None:

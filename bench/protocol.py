@@ -91,6 +91,7 @@ def run(argv=None):
 
 def main(argv=None) -> int:
     args = H.parser(__doc__.splitlines()[0], default_step=1).parse_args(argv)
+    H.PROGRESS = True
     text, _ = run(argv)
     H.finish(args, text)
     return 0

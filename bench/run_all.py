@@ -42,6 +42,7 @@ def main(argv=None) -> int:
                         "with --only ... --out part.md); the text before each file's first '## ' is dropped")
     args = p.parse_args(argv)
     t0 = time.perf_counter()
+    H.PROGRESS = True
     sections = []
     if args.assemble:
         args.only = []
