@@ -19,7 +19,7 @@ def make_preconditioner(A, kind: str = "amg", *, shape=None):
     A : scipy.sparse matrix, (N, N), symmetric positive definite
     kind : {"grid", "amg", "jacobi", "none"} or GridMultigrid
         ``"grid"``: one symmetric V-cycle of a geometric
-        :class:`~sparsedepth.multigrid.GridMultigrid` built here (needs
+        :class:`~sparsedepth.multigrid.GridMultigrid` (``interpolation="auto"``) built here (needs
         ``shape``; ``A`` must be a grid operator of stencil radius <= 2, which
         the quadratic part of every completion objective is);
         ``"amg"``: one V-cycle of a pyamg Ruge–Stüben hierarchy (set up here);
@@ -56,7 +56,7 @@ def make_preconditioner(A, kind: str = "amg", *, shape=None):
     if kind == "grid":
         if shape is None:
             raise ValueError("preconditioner 'grid' needs the grid shape: pass shape=(H, W)")
-        return GridMultigrid(A, shape).aspreconditioner()
+        return GridMultigrid(A, shape, interpolation="auto").aspreconditioner()
     if kind == "amg":
         import pyamg
 

@@ -216,7 +216,7 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
         if preconditioner == "grid":
             # one hierarchy for the whole run: numeric update for new weights
             if hierarchy is None:
-                hierarchy = GridMultigrid(system, objective.shape)
+                hierarchy = GridMultigrid(system, objective.shape, interpolation="auto")
             else:
                 hierarchy.update(system)
             M = hierarchy.aspreconditioner()
@@ -342,7 +342,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     lam = np.zeros_like(u)
     S = (2.0 * A0 + rho * KtK).tocsr()
     if kind == "grid":
-        hierarchy = GridMultigrid(S, objective.shape)
+        hierarchy = GridMultigrid(S, objective.shape, interpolation="auto")
         M = hierarchy.aspreconditioner()
     else:
         hierarchy = None
