@@ -18,11 +18,16 @@ class Weights:
              + beta        Σ (∂x z)² + (∂y z)²              smooth
              + gamma       Σ w (|∂x z| + |∂y z|)            edge (L1)
              + delta       Σ (z - z_c)²                     prior (nearest-neighbour fill)
-             + beta_image  Σ w ((∂x z)² + (∂y z)²)          smooth_image (image-weighted L2)
+             + beta_image  Σ wx (∂x z)² + wy (∂y z)²        smooth_image (image-weighted L2)
              + beta_second Σ (∂xx z)² + (∂yy z)² + 2 (∂xy z)²   second_order
+             + beta_second_image  Σ w2 ⊙ (same rows)        second_order_image
 
-    with the per-pixel edge weight ``w = exp(-kappa ‖∇I‖)``.  A weight of 0
-    removes its term, so "L2 only" or "data only" is a choice of weights.
+    with the per-pixel edge weight ``w = exp(-kappa ‖∇I‖)`` of the reference
+    paper, the per-pair weights ``wx = exp(-kappa ‖I[i, j+1] - I[i, j]‖)``,
+    ``wy = exp(-kappa ‖I[i+1, j] - I[i, j]‖)``, and ``w2`` the smallest pair
+    weight a second-difference row spans (see
+    :func:`sparsedepth.objective.second_order_edge_weights`).
+    A weight of 0 removes its term, so "L2 only" or "data only" is a choice of weights.
 
     Parameters
     ----------
@@ -37,6 +42,10 @@ class Weights:
     beta_second : float
         Second-order (thin-plate) smoothness (>= 0); an extension beyond the
         reference paper.
+    beta_second_image : float
+        Image-weighted second-order smoothness (>= 0): a second difference
+        that straddles an image edge costs less, so the surface may bend or
+        jump there.  An extension beyond the reference paper.
 
     Raises
     ------
@@ -51,6 +60,7 @@ class Weights:
     kappa: float = 10.0
     beta_image: float = 0.0
     beta_second: float = 0.0
+    beta_second_image: float = 0.0
 
     def __post_init__(self):
         for f in fields(self):

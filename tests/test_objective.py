@@ -6,7 +6,9 @@ from sparsedepth.objective import image_gradient_magnitude
 
 from conftest import make_problem
 
-ALL_TERMS = Weights(alpha=1.3, beta=0.4, gamma=0.2, delta=0.05, kappa=3.0, beta_image=0.3, beta_second=0.1)
+ALL_TERMS = Weights(
+    alpha=1.3, beta=0.4, gamma=0.2, delta=0.05, kappa=3.0, beta_image=0.3, beta_second=0.1, beta_second_image=0.2
+)
 
 
 def _central_difference(f, z, h=1e-6):
@@ -27,6 +29,7 @@ def _central_difference(f, z, h=1e-6):
         Weights(alpha=0, beta=0, gamma=0, delta=0.2),  # prior
         Weights(alpha=0, beta=0, gamma=0, delta=0.1, beta_image=0.5, kappa=2),
         Weights(alpha=0, beta=0, gamma=0, delta=0.1, beta_second=0.5),
+        Weights(alpha=0, beta=0, gamma=0, delta=0.1, beta_second_image=0.5, kappa=4),
         ALL_TERMS,
     ],
 )
@@ -52,6 +55,11 @@ def test_exact_terms_against_hand_computation():
     gy[:-1] = np.diff(img, axis=0)
     grad_i = np.sqrt((gx**2 + gy**2).sum(axis=2))
     ew = np.exp(-w.kappa * grad_i)
+    # per-pair weights: colour distance between the two pixels of each difference
+    wx = np.ones((5, 6))
+    wy = np.ones((5, 6))
+    wx[:, :-1] = np.exp(-w.kappa * np.linalg.norm(np.diff(img, axis=1), axis=2))
+    wy[:-1] = np.exp(-w.kappa * np.linalg.norm(np.diff(img, axis=0), axis=2))
     zx = np.zeros_like(z)
     zy = np.zeros_like(z)
     zx[:, :-1] = np.diff(z, axis=1)
@@ -62,13 +70,24 @@ def test_exact_terms_against_hand_computation():
     zxx[:, 1:-1] = z[:, :-2] - 2 * z[:, 1:-1] + z[:, 2:]
     zyy[1:-1] = z[:-2] - 2 * z[1:-1] + z[2:]
     zxy[:-1, :-1] = z[1:, 1:] - z[1:, :-1] - z[:-1, 1:] + z[:-1, :-1]
+    # second differences weighted by the smallest pair weight they span (loops: independent of the library)
+    second_image = 0.0
+    for i in range(5):
+        for j in range(6):
+            if 0 < j < 5:
+                second_image += min(wx[i, j - 1], wx[i, j]) * zxx[i, j] ** 2
+            if 0 < i < 4:
+                second_image += min(wy[i - 1, j], wy[i, j]) * zyy[i, j] ** 2
+            if i < 4 and j < 5:
+                second_image += 2 * min(wx[i, j], wx[i + 1, j], wy[i, j], wy[i, j + 1]) * zxy[i, j] ** 2
     expected = {
         "data": w.alpha * np.sum(mask * (z - np.nan_to_num(sparse)) ** 2),
         "smooth": w.beta * np.sum(zx**2 + zy**2),
         "edge": w.gamma * np.sum(ew * (np.abs(zx) + np.abs(zy))),
         "prior": w.delta * np.sum((z - coarse) ** 2),
-        "smooth_image": w.beta_image * np.sum(ew * (zx**2 + zy**2)),
+        "smooth_image": w.beta_image * np.sum(wx * zx**2 + wy * zy**2),
         "second_order": w.beta_second * np.sum(zxx**2 + zyy**2 + 2 * zxy**2),
+        "second_order_image": w.beta_second_image * second_image,
     }
     got = obj.term_values(z)
     assert set(got) == set(expected)

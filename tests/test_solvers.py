@@ -91,7 +91,7 @@ def test_result_terms_sum_to_objective(problem):
     image, sparse, mask, _ = problem
     res = complete_depth(image, sparse, mask, weights=L1, solver="irls")
     assert sum(res.terms.values()) == pytest.approx(res.objective, rel=1e-12)
-    assert set(res.terms) == {"data", "smooth", "edge", "prior", "smooth_image", "second_order"}
+    assert set(res.terms) == {"data", "smooth", "edge", "prior", "smooth_image", "second_order", "second_order_image"}
     assert res.terms["edge"] > 0 and res.terms["smooth_image"] == 0
 
 

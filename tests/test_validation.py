@@ -81,7 +81,7 @@ def test_bad_channels(inputs):
         complete_depth(np.zeros((12, 15, 2)), sparse, mask)
 
 
-@pytest.mark.parametrize("field", ["alpha", "beta", "gamma", "delta", "kappa", "beta_image", "beta_second"])
+@pytest.mark.parametrize("field", ["alpha", "beta", "gamma", "delta", "kappa", "beta_image", "beta_second", "beta_second_image"])
 def test_negative_weight(field):
     with pytest.raises(ValueError, match=f"weight {field} must be finite and >= 0"):
         Weights(**{field: -0.1})
