@@ -63,12 +63,13 @@ def plot(curves, path_iter, path_time):
         for ax, (group, lines) in zip(axes[0], curves.items()):
             for line in lines:
                 x, gap = np.asarray(line[xi], float), np.asarray(line[3], float)
+                if xi == 2:  # log time axis: solvers differ by orders of magnitude
+                    x = np.maximum(x, 1e-4)
                 ax.semilogy(x, np.maximum(gap, 1e-16), label=line[0], marker="." if len(x) < 30 else None)
             ax.set_xlabel(xlabel)
             ax.set_ylabel("F(z_k) − F_best  (relative)")
             ax.set_title(group)
-            if xi == 1:
-                ax.set_xscale("symlog", linthresh=10)
+            ax.set_xscale("symlog", linthresh=10) if xi == 1 else ax.set_xscale("log")
             ax.grid(True, which="both", alpha=0.3)
             ax.legend()
         fig.tight_layout()
