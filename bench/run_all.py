@@ -5,8 +5,10 @@ Run::
     python bench/run_all.py                 # full run, writes docs/results.md
     python bench/run_all.py --quick --out /tmp/results.md   # seconds-long smoke test
 
-One process, so identical runs are shared between tables (e.g. ours and the
-nearest fill at 1/5/10 % in the sparsity and baseline tables).  Each section
+Scripts that share runs (ours and the nearest fill at 1/5/10 % in the
+sparsity and baseline tables) run in one process and share an in-process
+cache; the three groups (sparsity + baselines, ablation, solvers + protocol)
+run in ``--jobs`` parallel processes (default 2).  Each section
 records the standalone command that reproduces it, the machine, the frames and
 seeds.  Every number in ``docs/results.md`` comes from here; nothing is typed in
 by hand.
@@ -30,13 +32,34 @@ import sparsity  # noqa: E402
 
 SCRIPTS = {"sparsity": sparsity, "baselines": baselines, "ablation": ablation, "solvers": solvers,
            "protocol": protocol}
+#: Scripts that share cached runs stay in one process; the groups run in parallel with --jobs > 1.
+GROUPS = (("sparsity", "baselines"), ("ablation",), ("solvers", "protocol"))
+
+
+def run_group(names, sub, plot_dir):
+    """Run the scripts ``names`` in order in this process; ``[(name, markdown, seconds)]``."""
+    H.PROGRESS = True
+    out = []
+    for name in names:
+        t = time.perf_counter()
+        if name == "solvers":
+            text, _ = solvers.run(sub, plot_dir=plot_dir)
+        else:
+            text, _ = SCRIPTS[name].run(sub)
+        out.append((name, text, time.perf_counter() - t))
+        print(f"[run_all] {name}: {out[-1][2]:.0f} s", file=sys.stderr, flush=True)
+    return out
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="every script in --quick mode")
     p.add_argument("--out", type=Path, default=H.DOCS / "results.md")
+    p.add_argument("--seeds", type=int, nargs="+", default=None,
+                   help="sampling seeds for every script (default: each script's own, 0 1 2; solvers 0)")
     p.add_argument("--only", nargs="+", choices=list(SCRIPTS), default=list(SCRIPTS))
+    p.add_argument("--jobs", type=int, default=2,
+                   help="processes running the script groups in parallel (default 2, one per core here)")
     p.add_argument("--assemble", nargs="+", type=Path, default=None,
                    help="run nothing: write --out from section files made by earlier runs (e.g. run in parallel "
                         "with --only ... --out part.md); the text before each file's first '## ' is dropped")
@@ -49,26 +72,30 @@ def main(argv=None) -> int:
         for path in args.assemble:
             text = path.read_text()
             sections.append(text[text.index("## "):] if "## " in text else text)
-    for name in args.only:
-        sub = ["--quick"] if args.quick else []
-        t = time.perf_counter()
-        if name == "solvers":
-            text, _ = solvers.run(sub, plot_dir=args.out.parent)
-        else:
-            text, _ = SCRIPTS[name].run(sub)
-        print(f"[run_all] {name}: {time.perf_counter() - t:.0f} s", file=sys.stderr, flush=True)
-        sections.append(text)
+    sub = (["--quick"] if args.quick else []) + (["--seeds", *map(str, args.seeds)] if args.seeds else [])
+    groups = [[n for n in g if n in args.only] for g in GROUPS]
+    groups = [g for g in groups if g]
+    if args.jobs > 1 and len(groups) > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            done = list(pool.map(run_group, groups, [sub] * len(groups), [args.out.parent] * len(groups)))
+    else:
+        done = [run_group(g, sub, args.out.parent) for g in groups]
+    texts = {name: text for group in done for name, text, _ in group}
+    sections += [texts[n] for n in SCRIPTS if n in texts]
     elapsed = time.perf_counter() - t0
     head = [
         "# Benchmark results",
         "",
         "Written by `python bench/run_all.py" + (" --quick" if args.quick else "")
+        + (" --seeds " + " ".join(map(str, args.seeds)) if args.seeds else "")
         + (" --assemble ...`" if args.assemble else "`") + "; do not edit by hand. "
         "Each section names the standalone command that reproduces it.",
         "",
         f"Machine: {H.machine_markdown()}. "
         + ("Sections assembled from parallel runs; each gives its own wall time." if args.assemble
-           else f"Total wall time: {elapsed / 60:.1f} min."),
+           else f"Total wall time: {elapsed / 60:.1f} min ({args.jobs} parallel processes)."),
         "",
         "Frames: reported tables use `bench/frames.py` REPORT_FRAMES only "
         f"({', '.join(f'`{n}`' for n in frame_list.REPORT_FRAMES)}); the default weights are tuned on the "

@@ -120,7 +120,7 @@ def test_run_all_quick_writes_every_section(tmp_path):
     pytest.importorskip("matplotlib")
     run_all = load("run_all")
     out = tmp_path / "results.md"
-    assert run_all.main(["--quick", "--out", str(out)]) == 0
+    assert run_all.main(["--quick", "--jobs", "1", "--out", str(out)]) == 0
     text = out.read_text()
     assert text.count("\n## ") == 6 and text.count("\nHeadline") == 5 and "Command: `python bench/sparsity.py --quick`" in text
     assert (tmp_path / "solver_objective_vs_iter.png").exists()
