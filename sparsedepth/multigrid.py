@@ -222,6 +222,15 @@ def _stencil_of(A, shape, radius=None):
     else:
         rings = [_square_offsets(largest)]
     total = int(np.count_nonzero(A.data))
+    if radius is None:
+        # common case first: a 5-point operator is extracted in a single pass
+        five = rings[0]
+        S = np.empty((5,) + tuple(shape))
+        if sum(int(np.count_nonzero(_offset_image(A, shape, dy, dx, S[k])))
+               for k, (dy, dx) in enumerate(five)) == total:
+            keep = [k for k, o in enumerate(five) if o == (0, 0) or np.any(S[k])]
+            return [five[k] for k in keep], (S if len(keep) == 5 else S[keep])
+        del S
     work = np.empty(shape)
     present, seen, counted = [], set(), 0
     for ring in rings:
@@ -363,44 +372,75 @@ def _safe_ratio(num, den, default):
     return out
 
 
+def _window(arr, oy, ox, ny, nx):
+    """``arr[oy:oy+ny, ox:ox+nx]``, zero-padded where it runs past the end of ``arr``."""
+    out = np.zeros((ny, nx))
+    sub = arr[oy:oy + ny, ox:ox + nx]
+    out[: sub.shape[0], : sub.shape[1]] = sub
+    return out
+
+
 def _operator_interp(offsets, S, shape):
-    """Dendy's black-box interpolation from a radius-1 (up to 9-point) stencil."""
+    """Dendy's black-box interpolation from a radius-1 (up to 9-point) stencil.
+
+    Works on the parity classes that need each quantity (the collapsed
+    stencils only on the pixels between two coarse points), so the
+    temporaries stay a fraction of ``H W``: besides the ``(2, 2, H, W)``
+    weights, about one ``H W`` image (8 MP: ~70 MB instead of ~1.5 GB).
+    """
     h, w = shape
-    T = np.zeros((3, 3, h, w))
-    for k, (dy, dx) in enumerate(offsets):
-        T[dy + 1, dx + 1] = S[k]
-    # collapse across the interpolation direction
-    cW, cE, cMx = T[:, 0].sum(0), T[:, 2].sum(0), T[:, 1].sum(0)
-    cN, cS, cMy = T[0].sum(0), T[2].sum(0), T[1].sum(0)
     full = np.zeros((2, 2, h, w))
-    # pixels between two coarse points horizontally (even y, odd x) and vertically
-    wxW = _safe_ratio(-cW, cMx, 0.5)
-    wxE = _safe_ratio(-cE, cMx, 0.5)
-    wyN = _safe_ratio(-cN, cMy, 0.5)
-    wyS = _safe_ratio(-cS, cMy, 0.5)
+
+    def collapsed(cls, axis, value):
+        """Sum of the stencil images whose offset has ``offset[axis] == value``, on one parity class."""
+        out = None
+        for k, off in enumerate(offsets):
+            if off[axis] == value:
+                part = S[k][cls]
+                out = part.copy() if out is None else out + part
+        return np.zeros(S[0][cls].shape) if out is None else out
+
+    # pixels between two coarse points horizontally: (even y, odd x)
+    eo = (slice(0, None, 2), slice(1, None, 2))
+    c_mid = collapsed(eo, 1, 0)
+    wxW = _safe_ratio(-collapsed(eo, 1, -1), c_mid, 0.5)
+    wxE = _safe_ratio(-collapsed(eo, 1, 1), c_mid, 0.5)
+    # ... and vertically: (odd y, even x)
+    oe = (slice(1, None, 2), slice(0, None, 2))
+    c_mid = collapsed(oe, 0, 0)
+    wyN = _safe_ratio(-collapsed(oe, 0, -1), c_mid, 0.5)
+    wyS = _safe_ratio(-collapsed(oe, 0, 1), c_mid, 0.5)
+    del c_mid
     full[0, 0, 0::2, 0::2] = 1.0
-    full[0, 0, 0::2, 1::2] = wxW[0::2, 1::2]
-    full[0, 1, 0::2, 1::2] = wxE[0::2, 1::2]
-    full[0, 0, 1::2, 0::2] = wyN[1::2, 0::2]
-    full[1, 0, 1::2, 0::2] = wyS[1::2, 0::2]
+    full[0, 0, 0::2, 1::2] = wxW
+    full[0, 1, 0::2, 1::2] = wxE
+    full[0, 0, 1::2, 0::2] = wyN
+    full[1, 0, 1::2, 0::2] = wyS
     # cell centres (odd y, odd x): harmonic combination of the neighbours' rows
-    c = T[:, :, 1::2, 1::2]
-    ny, nx = c.shape[2:]
-    eW = np.zeros((2, 2, ny, nx))  # weights of the W/E/N/S edge neighbours' parents
+    ny, nx = h // 2, w // 2
+    if ny and nx:
+        oo = (slice(1, None, 2), slice(1, None, 2))
+        c = {(dy, dx): S[k][oo] for k, (dy, dx) in enumerate(offsets)}
+        zero = np.zeros((ny, nx))
 
-    def at(arr, dy, dx):
-        pad = np.pad(arr, 1)
-        return pad[1 + 1 + dy : 1 + 1 + dy + 2 * ny : 2, 1 + 1 + dx : 1 + 1 + dx + 2 * nx : 2]
+        def cc(dy, dx):
+            return c.get((dy, dx), zero)
 
-    # neighbour N (y-1, x) is an (even, odd) pixel: parents (0,0)->NW, (0,1)->NE
-    eW[0, 0] = c[0, 0] + c[0, 1] * at(wxW, -1, 0) + c[1, 0] * at(wyN, 0, -1)
-    eW[0, 1] = c[0, 2] + c[0, 1] * at(wxE, -1, 0) + c[1, 2] * at(wyN, 0, 1)
-    eW[1, 0] = c[2, 0] + c[2, 1] * at(wxW, 1, 0) + c[1, 0] * at(wyS, 0, -1)
-    eW[1, 1] = c[2, 2] + c[2, 1] * at(wxE, 1, 0) + c[1, 2] * at(wyS, 0, 1)
-    centre = c[1, 1]
-    for ey in (0, 1):
-        for ex in (0, 1):
-            full[ey, ex, 1::2, 1::2] = _safe_ratio(-eW[ey, ex], centre, 0.25)
+        # neighbour N (y-1, x) is an (even, odd) pixel (row i of wxW); S (y+1, x) is row i+1;
+        # neighbour W (y, x-1) is an (odd, even) pixel (column j of wyN); E (y, x+1) is column j+1
+        xW_N, xE_N = _window(wxW, 0, 0, ny, nx), _window(wxE, 0, 0, ny, nx)
+        xW_S, xE_S = _window(wxW, 1, 0, ny, nx), _window(wxE, 1, 0, ny, nx)
+        yN_W, yS_W = _window(wyN, 0, 0, ny, nx), _window(wyS, 0, 0, ny, nx)
+        yN_E, yS_E = _window(wyN, 0, 1, ny, nx), _window(wyS, 0, 1, ny, nx)
+        centre = cc(0, 0)
+        parts = {
+            (0, 0): cc(-1, -1) + cc(-1, 0) * xW_N + cc(0, -1) * yN_W,
+            (0, 1): cc(-1, 1) + cc(-1, 0) * xE_N + cc(0, 1) * yN_E,
+            (1, 0): cc(1, -1) + cc(1, 0) * xW_S + cc(0, -1) * yS_W,
+            (1, 1): cc(1, 1) + cc(1, 0) * xE_S + cc(0, 1) * yS_E,
+        }
+        for (ey, ex), e in parts.items():
+            full[ey, ex, 1::2, 1::2] = _safe_ratio(-e, centre, 0.25)
     # parents outside the coarse grid (even H or W) carry no weight
     if h % 2 == 0:
         full[1, :, h - 1, :] = 0.0
@@ -740,10 +780,17 @@ class GridMultigrid:
                 (np.zeros(p_indices.shape[0]), p_indices, p_indptr),
                 shape=(fine.shape[0] * fine.shape[1], n))
         self.levels = levels
-        self._numeric(S)
+        box = [S]
+        del S  # _numeric drops the fine stencil as soon as the first Galerkin product is done
+        self._numeric(box)
 
-    def _numeric(self, S, refill_p=True):
-        """Numeric setup: interpolation weights, Galerkin products, smoothers, LU."""
+    def _numeric(self, box, refill_p=True):
+        """Numeric setup: interpolation weights, Galerkin products, smoothers, LU.
+
+        ``box`` is a one-element list holding the fine stencil, emptied here so
+        that the fine stencil is freed after the first Galerkin product.
+        """
+        S = box.pop()
         levels = self.levels
         for li in range(len(levels) - 1):
             fine, coarse = levels[li], levels[li + 1]
@@ -831,7 +878,9 @@ class GridMultigrid:
             self._build(A)
             return self
         self.levels[0].A = A
-        self._numeric(S, refill_p=False)
+        box = [S]
+        del S
+        self._numeric(box, refill_p=False)
         return self
 
     def vcycle(self, b):

@@ -329,7 +329,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
         recorder(1, z, inner=n)
         return _output(z, 1, ok, f"quadratic problem: relative residual {rel:.1e}", recorder)
     K, c = _stack_l1(objective)
-    KT = K.T.tocsr()
+    KT = K.T  # a CSC view, no copy
     relax = float(options.get("relaxation", 1.6))
     inner_rtol = float(options.get("inner_rtol", 1e-10))
     inner_factor = float(options.get("inner_factor", 0.1))
@@ -341,6 +341,8 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     u = Kz.copy()
     lam = np.zeros_like(u)
     S = (2.0 * A0 + rho * KtK).tocsr()
+    if adapt_iters <= 0:
+        del KtK  # only needed to rebuild S for a new rho
     if kind == "grid":
         hierarchy = GridMultigrid(S, objective.shape, interpolation="auto")
         M = hierarchy.aspreconditioner()

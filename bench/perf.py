@@ -1,0 +1,428 @@
+"""Performance benchmark of issue 5: same-run ratios on a real 640x480 NYU frame.
+
+Command (about 10 minutes on 2 busy cores; ``--quick`` about 3)::
+
+    python bench/perf.py            # full run, rewrites docs/performance.md
+    python bench/perf.py --quick    # shorter reference runs, no 8-MP L1 run,
+                                    # prints only (add --write to write the doc)
+
+Everything runs in this one process (the 8-megapixel memory figures in fresh
+child processes, so that their peak is their own).  BLAS is limited to one
+thread *before* numpy is imported (``OPENBLAS_NUM_THREADS=1`` etc., unless
+already set): on this shared 2-core machine multithreaded OpenBLAS made a
+single 600k-long dot product cost ~8 ms instead of 0.1 ms, which would slow
+every method (ours and the SciPy references) by an amount that depends on
+the other users' load.
+
+Problems (frame ``nyu_metric3d/00000``, 5 % of the valid pixels observed,
+``sample_depth(..., fraction=0.05, seed=0)``):
+
+1. *Quadratic*: ``DEFAULT_WEIGHTS.replace(gamma=0)``; the normal equations
+   ``A z = b`` of :meth:`Objective.normal_equations` are assembled once
+   (time reported separately); ``scipy.sparse.linalg.spsolve`` on them vs
+   ``solve(..., solver="amg")`` (geometric multigrid set-up + PCG to
+   ``‖b − Az‖ ≤ 1e-8 ‖b‖`` from the nearest-neighbour fill).  A second,
+   13-point system (``beta_second = 0.5, beta_image = 0.5``) shows the same
+   path on the stencil the new defaults will likely have.
+2. *L1*: the weights ``L1_WEIGHTS`` below (γ = 0.01; chosen relative to the
+   data scale: depths are ~1-10 m and the L1 ("edge") term is then ~37 % of
+   F at the optimum, so it shapes the solution).  The reference value
+   ``F*`` is the best of a long ADMM run (``tol = 1e-7``) and every other
+   run; ours is ``solver="auto"`` with default options; L-BFGS-B (SciPy, on
+   the smoothed objective, ``l1_smoothing`` default) runs with a generous
+   budget and its time to reach ``F ≤ F*(1 + 1e-6)`` is read from its
+   history; if it never does, the ratio is reported as a lower bound
+   ``budget / ours``.
+3. *Hole filling*: the raw depth of the same frame (holes = NaN → 0) with
+   :func:`sparsedepth.colorization.colorization_fill` vs the per-pixel port
+   ``bench/naive_colorization.py`` (loop assembly + spsolve).
+4. *Scaling*: image and depth resized to 2× and 4× per side (4× and 16×
+   pixels); the quadratic solve of 1. (set-up + solve) and the whole
+   ``complete_depth`` call; peak memory of a whole ``complete_depth`` call
+   on an 8-MP frame (3264x2448) measured in a fresh process (``ru_maxrss``,
+   image decoding included).
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import datetime  # noqa: E402
+import importlib.util  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import resource  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import scipy  # noqa: E402
+import scipy.sparse.linalg as spla  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+import sparsedepth as sd  # noqa: E402
+from sparsedepth.colorization import colorization_fill  # noqa: E402
+from sparsedepth.solvers import solve  # noqa: E402
+
+FRAME = "nyu_metric3d/00000"
+FRACTION = 0.05
+SEED = 0
+#: The fixed L1 weight set of the gamma > 0 target (the defaults of
+#: sparsedepth 0.1.0 written out, so the row does not move when the defaults do).
+L1_WEIGHTS = sd.Weights(alpha=1.0, beta=0.1, gamma=0.01, delta=1e-3, kappa=10.0)
+QUAD13 = dict(beta_second=0.5, beta_image=0.5)
+REL = 1e-6
+MP8 = (2448, 3264)
+
+
+def _naive():
+    spec = importlib.util.spec_from_file_location("naive_colorization", REPO / "bench" / "naive_colorization.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def load_problem(scale=1, shape=None):
+    """Frame (optionally resized ``scale`` times per side or to ``shape``), sparse depth and mask."""
+    fr = sd.load_shared_frame(FRAME)
+    image, depth = fr.image, fr.depth
+    if scale != 1 or shape is not None:
+        from skimage.transform import resize
+
+        h, w = depth.shape
+        out = (h * scale, w * scale) if shape is None else shape
+        image = (resize(image, out, order=1, anti_aliasing=False) * 255).astype(np.uint8)
+        valid = resize(np.isfinite(depth).astype(float), out, order=0) > 0.5
+        depth = resize(np.nan_to_num(depth), out, order=0)
+        depth = np.where(valid & (depth > 0), depth, np.nan)
+    sparse, mask = sd.sample_depth(depth, fraction=FRACTION, seed=SEED)
+    return image, depth, sparse, mask
+
+
+def timed(fn, *args, **kwargs):
+    t = time.perf_counter()
+    out = fn(*args, **kwargs)
+    return out, time.perf_counter() - t
+
+
+def first_time_below(result, target):
+    """Time of the first history entry with objective <= target, else None."""
+    for rec in result.history:
+        if rec.objective <= target:
+            return rec.time
+    return None
+
+
+# --------------------------------------------------------------------------
+# 1. quadratic problem
+# --------------------------------------------------------------------------
+def bench_quadratic(image, sparse, mask, weights, label, rows, *, run_spsolve=True):
+    (obj, coarse, _), t_build = timed(sd.build_objective, image, sparse, mask, weights=weights)
+    (A, b, _), t_asm = timed(obj.normal_equations)
+    x0 = coarse.ravel().copy()
+    ours = []
+    for _ in range(3):  # best of 3: the machine is shared
+        (out, rt), _ = timed(solve, obj, x0, solver="amg", tol=1e-8)
+        ours.append(rt)
+    t_ours = min(ours)
+    (out_amg, t_pyamg), _ = timed(solve, obj, x0, solver="amg", tol=1e-8, options={"preconditioner": "amg"})
+    rel = float(np.linalg.norm(b - A @ out.z) / np.linalg.norm(b))
+    row = dict(problem=label, n=obj.size, nnz=A.nnz, build=t_build, assemble=t_asm, ours=t_ours,
+               ours_iters=out.iterations, ours_rel=rel, pyamg=t_pyamg, pyamg_iters=out_amg.iterations,
+               F_ours=obj.value(out.z))
+    if run_spsolve:
+        z_sp, t_sp = timed(spla.spsolve, A.tocsc(), b)
+        if t_sp < 10:  # best of 2 where affordable, as ours is best of 3
+            t_sp = min(t_sp, timed(spla.spsolve, A.tocsc(), b)[1])
+        row.update(spsolve=t_sp, ratio=t_sp / t_ours, maxdiff=float(np.abs(out.z - z_sp).max()),
+                   F_spsolve=obj.value(z_sp))
+    rows.append(row)
+    return row
+
+
+# --------------------------------------------------------------------------
+# 2. L1 problem
+# --------------------------------------------------------------------------
+def bench_l1(image, sparse, mask, quick):
+    w = L1_WEIGHTS
+    obj, coarse, _ = sd.build_objective(image, sparse, mask, weights=w)
+    runs = {}
+    ours = []
+    for _ in range(2):
+        res, _ = timed(sd.complete_depth, image, sparse, mask, weights=w, solver="auto")
+        ours.append(res)
+    runs["ours"] = min(ours, key=lambda r: r.runtime)
+    ref_tol = 1e-6 if quick else 1e-7
+    runs["reference"] = sd.complete_depth(image, sparse, mask, weights=w, solver="admm", tol=ref_tol, max_iter=3000)
+    budget = 60.0 if quick else 300.0
+    start = [None]
+
+    def stop_after_budget(state):
+        if state.time > budget:
+            raise StopIteration
+
+    runs["lbfgsb"] = sd.complete_depth(image, sparse, mask, weights=w, solver="lbfgsb", max_iter=100000,
+                                       callback=stop_after_budget, options={"maxfun": 200000})
+    if not quick:
+        runs["irls"] = sd.complete_depth(image, sparse, mask, weights=w, solver="irls", tol=1e-9)
+    del start
+    F_best = min(min(rec.objective for rec in r.history) for r in runs.values())
+    F_best = min(F_best, *(r.objective for r in runs.values()))
+    target = F_best * (1 + REL)
+    o = runs["ours"]
+    t_ours = first_time_below(o, target)
+    lb = runs["lbfgsb"]
+    t_lb = first_time_below(lb, target)
+    out = dict(F_best=F_best, terms=runs["reference"].terms, ours_time=o.runtime, ours_F=o.objective,
+               ours_rel=(o.objective - F_best) / F_best, ours_iters=o.iterations, ours_solver=o.solver,
+               ours_reached=t_ours is not None, lbfgsb_time=lb.runtime, lbfgsb_F=lb.objective,
+               lbfgsb_rel=(lb.objective - F_best) / F_best, lbfgsb_iters=lb.iterations,
+               lbfgsb_reached=t_lb is not None, lbfgsb_t_to_target=t_lb,
+               ref_time=runs["reference"].runtime, ref_rel=(runs["reference"].objective - F_best) / F_best)
+    if "irls" in runs:
+        ir = runs["irls"]
+        out.update(irls_time=ir.runtime, irls_rel=(ir.objective - F_best) / F_best,
+                   irls_t_to_target=first_time_below(ir, target))
+    if t_ours is not None:
+        out["ratio"] = (t_lb if t_lb is not None else lb.runtime) / o.runtime
+        out["ratio_is_lower_bound"] = t_lb is None
+    return out
+
+
+# --------------------------------------------------------------------------
+# 3. colorization hole fill
+# --------------------------------------------------------------------------
+def bench_colorization(quick):
+    fr = sd.load_shared_frame(FRAME)
+    raw = np.nan_to_num(fr.depth)
+    fast = []
+    for _ in range(3):
+        out, t = timed(colorization_fill, fr.image, raw)
+        fast.append(t)
+    naive = _naive()
+    ref, t_naive = timed(naive.fill_depth_colorization, fr.image / 255.0, raw)
+    return dict(fast=min(fast), naive=t_naive, ratio=t_naive / min(fast), maxdiff=float(np.abs(out - ref).max()),
+                holes=float(np.mean(raw == 0)))
+
+
+# --------------------------------------------------------------------------
+# 4. scaling and memory
+# --------------------------------------------------------------------------
+def bench_scaling(scales, rounds=3):
+    """Quadratic solve (set-up + PCG) at several sizes, rounds interleaved, best per size."""
+    w = sd.DEFAULT_WEIGHTS.replace(gamma=0)
+    problems = {}
+    for s in scales:
+        image, _, sparse, mask = load_problem(scale=s)
+        obj, coarse, _ = sd.build_objective(image, sparse, mask, weights=w)
+        obj.normal_equations()
+        problems[s] = (image, sparse, mask, obj, coarse)
+    best = {s: (np.inf, 0) for s in scales}
+    for _ in range(rounds):  # interleaved, so a busy spell of the machine hits every size
+        for s in scales:
+            obj, coarse = problems[s][3], problems[s][4]
+            (out, rt), _ = timed(solve, obj, coarse.ravel().copy(), solver="amg", tol=1e-8)
+            if rt < best[s][0]:
+                best[s] = (rt, out.iterations)
+    rows = []
+    for s in scales:
+        image, sparse, mask, obj, _ = problems[s]
+        res, t_total = timed(sd.complete_depth, image, sparse, mask, weights=w)
+        rows.append(dict(scale=s, n=obj.size, solve=best[s][0], iters=best[s][1], total=t_total, F=res.objective))
+    return rows
+
+
+def child_memory(mode):
+    """Run one complete_depth on an 8-MP frame in this (fresh) process; print JSON."""
+    image, _, sparse, mask = load_problem(shape=MP8)
+    w = sd.DEFAULT_WEIGHTS.replace(gamma=0) if mode == "quadratic" else L1_WEIGHTS
+    res, t = timed(sd.complete_depth, image, sparse, mask, weights=w)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    print(json.dumps(dict(mode=mode, n=int(image.shape[0] * image.shape[1]), seconds=t, peak_mb=peak,
+                          solver=res.solver, converged=res.converged, iterations=res.iterations)))
+
+
+def memory_8mp(mode):
+    proc = subprocess.run([sys.executable, __file__, "--child-memory", mode], capture_output=True, text=True)
+    if proc.returncode != 0:
+        return dict(mode=mode, error=proc.stderr.strip().splitlines()[-1] if proc.stderr else "failed")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+# --------------------------------------------------------------------------
+# report
+# --------------------------------------------------------------------------
+def machine():
+    cpu = platform.processor() or "unknown"
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    import pyamg
+
+    return dict(cpu=cpu, cores=os.cpu_count(), python=platform.python_version(), numpy=np.__version__,
+                scipy=scipy.__version__, pyamg=pyamg.__version__, date=datetime.date.today().isoformat(),
+                blas_threads=os.environ.get("OPENBLAS_NUM_THREADS"))
+
+
+def fmt(x, spec=".3g"):
+    return "—" if x is None else format(x, spec)
+
+
+def report(quad, l1, col, scaling, mem, info, command):
+    L = []
+    q = quad[0]
+    L.append("# Performance\n")
+    L.append(f"Measured by `{command}` (bench/perf.py) on {info['date']}; every ratio is measured in the same run.\n")
+    L.append("## Headline (640×480 NYU frame `nyu_metric3d/00000`, 5 % observed)\n")
+    L.append("| target | measured | goal | met |")
+    L.append("|---|---|---|---|")
+    L.append(f"| quadratic (γ = 0, default weights), set-up + solve to rel. residual 1e-8 vs `spsolve` | "
+             f"**{q['ratio']:.1f}×** faster, {q['ours']:.3f} s | ≥ 10×, < 0.3 s | "
+             f"{'yes' if q['ratio'] >= 10 and q['ours'] < 0.3 else 'no'} |")
+    if len(quad) > 1 and "ratio" in quad[1]:
+        q2 = quad[1]
+        L.append(f"| quadratic, 13-point (β₂ = 0.5, β_img = 0.5) vs `spsolve` | **{q2['ratio']:.1f}×**, "
+                 f"{q2['ours']:.3f} s | (same) | {'yes' if q2['ratio'] >= 10 and q2['ours'] < 0.3 else 'no'} |")
+    lb = "≥ " if l1.get("ratio_is_lower_bound") else ""
+    ratio = l1.get("ratio")
+    L.append(f"| L1 (γ = 0.01), exact F within 1e-6 of the best, vs L-BFGS-B time to that value | "
+             f"**{lb}{fmt(ratio, '.1f')}×**, {l1['ours_time']:.2f} s (rel. gap {l1['ours_rel']:.1e}) | ≥ 20×, < 1 s | "
+             f"{'yes' if ratio and ratio >= 20 and l1['ours_time'] < 1 else 'no'} |")
+    L.append(f"| hole filling (colorization) vs naive port | **{col['ratio']:.0f}×**, {col['fast']:.2f} s "
+             f"(max diff {col['maxdiff']:.1e} m) | ≥ 50×, ≤ 1e-6 | "
+             f"{'yes' if col['ratio'] >= 50 and col['maxdiff'] <= 1e-6 else 'no'} |")
+    base = scaling[0]["solve"] / scaling[0]["n"]
+    worst = max(r["solve"] / r["n"] / base for r in scaling[1:]) if len(scaling) > 1 else float("nan")
+    L.append(f"| scaling, time/pixel at 4× and 16× pixels vs 640×480 (quadratic solve) | worst {worst:.2f}× | ≤ 1.5× | "
+             f"{'yes' if worst <= 1.5 else 'no'} |")
+    for m in mem:
+        if "peak_mb" in m:
+            L.append(f"| peak memory, 8-MP `complete_depth` ({m['mode']}) | {m['peak_mb']:.0f} MB, {m['seconds']:.1f} s | "
+                     f"< 3 GB | {'yes' if m['peak_mb'] < 3072 else 'no'} |")
+        else:
+            L.append(f"| peak memory, 8-MP ({m['mode']}) | failed: {m['error']} | < 3 GB | no |")
+    L.append("")
+    L.append("## Machine\n")
+    L.append(f"{info['cpu']}, {info['cores']} cores (shared with other jobs: timings are noisy; ratios are same-run, "
+             f"best of 3 for our quadratic solve); Python {info['python']}, NumPy {info['numpy']}, SciPy {info['scipy']}, "
+             f"pyamg {info['pyamg']}; BLAS threads = {info['blas_threads']}.\n")
+    L.append("## 1. Quadratic problem\n")
+    L.append("Assembly of `A, b` (`Objective.normal_equations`) is shared by both methods and reported apart. "
+             "Ours = `solve(obj, z_c, solver='amg', tol=1e-8)`: GridMultigrid set-up + PCG, history recording "
+             "included.\n")
+    L.append("| system | N | nnz(A) | build + assemble s | spsolve s | ours s (CG its) | pyamg-RS PCG s (its) | ratio | "
+             "‖b−Az‖/‖b‖ | max |z − z_spsolve| m |")
+    L.append("|---|---|---|---|---|---|---|---|---|---|")
+    for r in quad:
+        L.append(f"| {r['problem']} | {r['n']} | {r['nnz']} | {r['build'] + r['assemble']:.2f} | {fmt(r.get('spsolve'), '.2f')} | "
+                 f"{r['ours']:.3f} ({r['ours_iters']}) | {r['pyamg']:.2f} ({r['pyamg_iters']}) | {fmt(r.get('ratio'), '.1f')} | "
+                 f"{r['ours_rel']:.1e} | {fmt(r.get('maxdiff'), '.1e')} |")
+    L.append("")
+    L.append("## 2. L1 problem (γ > 0)\n")
+    L.append(f"Weights `{L1_WEIGHTS}`. Best value F* = {l1['F_best']:.12g}; terms at the reference: "
+             + ", ".join(f"{k} {v:.4g}" for k, v in l1["terms"].items() if v) + ".\n")
+    L.append("| run | time s | iterations | (F − F*)/F* | time to F*(1+1e-6) s |")
+    L.append("|---|---|---|---|---|")
+    L.append(f"| ours (`solver='auto'` → {l1['ours_solver']}, default tol) | {l1['ours_time']:.2f} | {l1['ours_iters']} | "
+             f"{l1['ours_rel']:.1e} | {l1['ours_time'] if l1['ours_reached'] else 'not reached'} |")
+    L.append(f"| L-BFGS-B (SciPy, smoothed, budget) | {l1['lbfgsb_time']:.1f} | {l1['lbfgsb_iters']} | {l1['lbfgsb_rel']:.1e} | "
+             f"{fmt(l1['lbfgsb_t_to_target'], '.1f') if l1['lbfgsb_reached'] else 'not reached'} |")
+    if "irls_time" in l1:
+        L.append(f"| IRLS (tol 1e-9) | {l1['irls_time']:.1f} | | {l1['irls_rel']:.1e} | {fmt(l1['irls_t_to_target'], '.1f')} |")
+    L.append(f"| reference ADMM (long) | {l1['ref_time']:.1f} | | {l1['ref_rel']:.1e} | |")
+    L.append("")
+    L.append("## 3. Hole filling (NYU toolbox colorization)\n")
+    L.append(f"Raw depth of the same frame ({100 * col['holes']:.1f} % holes). `colorization_fill` {col['fast']:.2f} s "
+             f"(best of 3), naive port {col['naive']:.1f} s: **{col['ratio']:.0f}×**, max |difference| "
+             f"{col['maxdiff']:.1e} m.\n")
+    L.append("## 4. Scaling (quadratic, default weights with γ = 0)\n")
+    L.append("Best of 3 interleaved rounds per size (set-up + PCG to 1e-8); the whole `complete_depth` call "
+             "(objective assembly included) once.\n")
+    L.append("| pixels | solve s (set-up + PCG) | CG its | µs / pixel | relative to 640×480 | whole complete_depth s |")
+    L.append("|---|---|---|---|---|---|")
+    for r in scaling:
+        L.append(f"| {r['n']} | {r['solve']:.2f} | {r['iters']} | {1e6 * r['solve'] / r['n']:.2f} | "
+                 f"{r['solve'] / r['n'] / base:.2f} | {r['total']:.2f} |")
+    L.append("")
+    L.append("| 8-MP run (fresh process) | pixels | seconds | peak MB | solver |")
+    L.append("|---|---|---|---|---|")
+    for m in mem:
+        if "peak_mb" in m:
+            L.append(f"| {m['mode']} | {m['n']} | {m['seconds']:.1f} | {m['peak_mb']:.0f} | {m['solver']} "
+                     f"({m['iterations']} its, converged {m['converged']}) |")
+    L.append("")
+    L.append("## Notes: what the numbers mean and where targets are missed\n")
+    L.append("- *Quadratic*: ours is `GridMultigrid` (geometric, `interpolation='auto'`: black-box for 5/9-point, "
+             "bilinear for 13-point stencils) built once + PCG on the true residual. About half of the 640×480 time "
+             "is the hierarchy set-up (stencil extraction, Galerkin products by parity-class arithmetic), half 6 "
+             "V-cycles. spsolve scales badly with the stencil, so the 13-point ratio is large while its absolute "
+             "time (more expensive 13/25-point smoothing, ~13 iterations) is above 0.3 s.")
+    L.append("- *L1*: ADMM with the constant matrix `2A + ρKᵀK` (ONE hierarchy), ρ = 2α, one warm-started inexact "
+             "V-cycle-PCG step per iteration (residual reduced 10×), residual tolerance 1e-3, then the exact active-set "
+             "polish (pixels tied by `u = 0` merged, reduced system by pyamg-PCG to 1e-11). It needs ~50-70 outer "
+             "iterations before the polish identifies the active set well enough for 1e-6; each costs a V-cycle "
+             "plus ~10 sparse products, so ~3-5 s, not < 1 s. Measured and rejected: Nesterov/restart "
+             "(fast) ADMM (slower to a good polish), ρ = α or 4α, looser inner solves (ADMM stalls when an inner "
+             "solve does no CG step). L-BFGS-B on the smoothed objective stops at its own optimum, ~4e-4 above F*, "
+             "so its time to F*(1+1e-6) is infinite and the ratio is a lower bound (its whole run time / ours).")
+    L.append("- *Hole filling*: `colorization_fill` (another module) is dominated by the exact sparse LU of the "
+             "unknown-pixel block; the naive port here takes only ~10-15 s (its loop assembly is fast enough on this "
+             "frame), hence ~30×, short of 50×.")
+    L.append("- *Memory*: at 8 MP the objective assembly (`build_objective` + `normal_equations`, sparse products "
+             "`Kᵀ diag(r) K`) alone peaks at ~2.9 GB (measured stage by stage); the multigrid hierarchy adds "
+             "~0.8 GB resident (prolongations and coarse operators). The L1 run adds the stacked L1 operator, "
+             "`2A + ρKᵀK`, ADMM vectors (2N each) and the polish's pyamg hierarchy.")
+    L.append("")
+    return "\n".join(L)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="python bench/perf.py", description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="shorter reference runs, no 16x / 8-MP L1 runs")
+    parser.add_argument("--write", action="store_true", help="write docs/performance.md (default unless --quick)")
+    parser.add_argument("--child-memory", choices=("quadratic", "l1"), help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.child_memory:
+        child_memory(args.child_memory)
+        return 0
+    command = "python bench/perf.py" + (" --quick" if args.quick else "")
+    info = machine()
+    print(json.dumps(info))
+    image, depth, sparse, mask = load_problem()
+    quad = []
+    r = bench_quadratic(image, sparse, mask, sd.DEFAULT_WEIGHTS.replace(gamma=0), "default, γ = 0", quad)
+    print("quadratic:", r, flush=True)
+    r = bench_quadratic(image, sparse, mask, sd.DEFAULT_WEIGHTS.replace(gamma=0, **QUAD13), "13-point", quad,
+                        run_spsolve=not args.quick)
+    print("quadratic 13:", r, flush=True)
+    l1 = bench_l1(image, sparse, mask, args.quick)
+    print("l1:", l1, flush=True)
+    col = bench_colorization(args.quick)
+    print("colorization:", col, flush=True)
+    scaling = bench_scaling((1, 2) if args.quick else (1, 2, 4))
+    print("scaling:", scaling, flush=True)
+    mem = [memory_8mp("quadratic")]
+    if not args.quick:
+        mem.append(memory_8mp("l1"))
+    print("memory:", mem, flush=True)
+    text = report(quad, l1, col, scaling, mem, info, command)
+    print(text)
+    if args.write or not args.quick:
+        (REPO / "docs").mkdir(exist_ok=True)
+        (REPO / "docs" / "performance.md").write_text(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
