@@ -38,7 +38,7 @@ import sparsedepth as sd  # noqa: E402
 
 DEFAULT_STEP = 4
 FRACTION = 0.05
-MAX_ITER = {"adam": 3000, "lbfgsb": 2000}
+MAX_ITER = {"adam": 2000, "lbfgsb": 500}
 QUICK_MAX_ITER = {"adam": 60, "lbfgsb": 60}
 
 
