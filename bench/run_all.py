@@ -61,17 +61,21 @@ def main(argv=None) -> int:
     p.add_argument("--jobs", type=int, default=2,
                    help="processes running the script groups in parallel (default 2, one per core here)")
     p.add_argument("--assemble", nargs="+", type=Path, default=None,
-                   help="run nothing: write --out from section files made by earlier runs (e.g. run in parallel "
-                        "with --only ... --out part.md); the text before each file's first '## ' is dropped")
+                   help="run nothing: write --out from the sections of files made by earlier runs (--only ... "
+                        "--out part.md); a later file's section replaces an earlier one with the same title")
     args = p.parse_args(argv)
     t0 = time.perf_counter()
     H.PROGRESS = True
     sections = []
     if args.assemble:
         args.only = []
-        for path in args.assemble:
-            text = path.read_text()
-            sections.append(text[text.index("## "):] if "## " in text else text)
+        by_title = {}
+        for path in args.assemble:  # a later file's section replaces an earlier one of the same title
+            for part in ("\n" + path.read_text()).split("\n## ")[1:]:
+                title = part.splitlines()[0]
+                if title != "Headline numbers":
+                    by_title[title] = "## " + part.rstrip() + "\n"
+        sections = list(by_title.values())
     sub = (["--quick"] if args.quick else []) + (["--seeds", *map(str, args.seeds)] if args.seeds else [])
     groups = [[n for n in g if n in args.only] for g in GROUPS]
     groups = [g for g in groups if g]
