@@ -135,7 +135,8 @@ def run(argv=None, *, plot_dir=None):
     if not args.no_plot:
         plot(curves, plot_dir / "solver_objective_vs_iter.png", plot_dir / "solver_objective_vs_time.png")
         figs = (f"\n\nFig. 3 (frame `{frames[0].name}`, seed {seeds[0]}): objective minus the best objective of the "
-                "group, relative, against iteration and wall time.\n\n"
+                "group, relative, against iteration and wall time (values below 1e-16, i.e. the best itself, drawn at "
+                "1e-16).\n\n"
                 "![objective vs iteration](solver_objective_vs_iter.png)\n\n"
                 "![objective vs time](solver_objective_vs_time.png)")
     notes = (H.step_note(args) + f" {FRACTION:.0%} observed. Caps: "
