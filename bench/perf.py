@@ -335,7 +335,7 @@ def report(quad, l1, col, scaling, mem, info, command):
     L.append("| run | time s | iterations | (F − F*)/F* | time to F*(1+1e-6) s |")
     L.append("|---|---|---|---|---|")
     L.append(f"| ours (`solver='auto'` → {l1['ours_solver']}, default tol) | {l1['ours_time']:.2f} | {l1['ours_iters']} | "
-             f"{l1['ours_rel']:.1e} | {l1['ours_time'] if l1['ours_reached'] else 'not reached'} |")
+             f"{l1['ours_rel']:.1e} | {format(l1['ours_time'], '.2f') if l1['ours_reached'] else 'not reached'} |")
     L.append(f"| L-BFGS-B (SciPy, smoothed, budget) | {l1['lbfgsb_time']:.1f} | {l1['lbfgsb_iters']} | {l1['lbfgsb_rel']:.1e} | "
              f"{fmt(l1['lbfgsb_t_to_target'], '.1f') if l1['lbfgsb_reached'] else 'not reached'} |")
     if "irls_time" in l1:
