@@ -376,8 +376,8 @@ def step_note(args) -> str:
         return "Quick mode: tiny frames (smoke test only; not a result)."
     if args.step == 1:
         return "Frames at full resolution."
-    return (f"Frames subsampled by keeping every {args.step}th row and column (ground truth and image alike, no "
-            "interpolation) to keep the run short.")
+    return (f"Frames subsampled by keeping one pixel in {args.step}x{args.step} (`[::{args.step}, ::{args.step}]` of "
+            "the ground truth and the image alike, no interpolation) to keep the run short.")
 
 
 def seeds_of(args):
