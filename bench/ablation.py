@@ -4,9 +4,12 @@ Run (full)::
 
     python bench/ablation.py --out docs/results_ablation.md
 
-or ``--quick`` for a smoke test.  Every variant is ``sd.DEFAULT_WEIGHTS`` (read
-at run time) with some weights set to 0 by ``Weights.replace``, solved with
-``solver="auto"``:
+or ``--quick`` for a smoke test.  The paper's rows use the reference paper's
+objective with its own weights (:meth:`sparsedepth.Weights.paper`: α = 1,
+β = 0.1, γ = 0.01, δ = 1e-3, κ = 10) with some weights set to 0 by
+``Weights.replace``; the tuned defaults (``sd.DEFAULT_WEIGHTS``, read at run
+time) may have β = γ = 0, so they could not show the paper's terms.  All are
+solved with ``solver="auto"``:
 
 * data only: α and δ (the nearest-neighbour prior; with α alone the hidden
   pixels are undetermined, and with β = γ = 0 every δ > 0 gives the nearest
@@ -15,9 +18,10 @@ at run time) with some weights set to 0 by ``Weights.replace``, solved with
 * full objective of the paper: α, β, γ, δ;
 * extension terms (issue item 7): the paper's objective plus each weight of
   ``Weights`` beyond α, β, γ, δ, κ (``beta_image`` image-weighted L2,
-  ``beta_second`` second-order, ...), one at a time, at its default weight if
-  > 0, else at the default β; and the image-weighted L2 *instead of* the
-  plain L2.
+  ``beta_second`` second-order, ``beta_second_image`` image-weighted
+  second-order), one at a time, at its default weight if > 0, else at the
+  paper's β; the image-weighted L2 *instead of* the plain L2; and the tuned
+  defaults.
 
 Variants equal to an earlier one (e.g. when a default weight is 0) are
 listed once.  Frames are subsampled by ``--step`` (default 4).
@@ -41,27 +45,34 @@ EXT_LABELS = {"beta_image": "image-weighted L2", "beta_second": "second-order",
               "beta_second_image": "image-weighted second-order"}
 
 
-def variants(D=None):
-    """``[(label, Weights)]`` derived from ``D`` (default ``sd.DEFAULT_WEIGHTS``), duplicates dropped."""
+def variants(D=None, P=None):
+    """``[(label, Weights)]``: the paper's terms from ``P``, extensions and defaults from ``D``; duplicates dropped.
+
+    ``P`` (default :meth:`sparsedepth.Weights.paper`, the reference paper's objective with its own weights) gives
+    the rows of paper Table 3.2; ``D`` (default ``sd.DEFAULT_WEIGHTS``, whose tuned β and γ may be 0) gives the
+    weight of each extension term added to the paper's objective, and the last row.
+    """
     D = sd.DEFAULT_WEIGHTS if D is None else D
+    P = sd.Weights.paper() if P is None else P
     # every weight beyond the paper's alpha, beta, gamma, delta, kappa is an extension term
     ext = [k for k in D.as_dict() if k not in PAPER_FIELDS]
     no_ext = {k: 0.0 for k in ext}
-    prior = D.delta if D.delta > 0 else 1e-6 * max(D.alpha, 1.0)
-    w_img = D.beta_image if D.beta_image > 0 else D.beta
+    P = P.replace(**no_ext)
+    prior = P.delta if P.delta > 0 else 1e-6 * max(P.alpha, 1.0)
+    w_img = D.beta_image if D.beta_image > 0 else P.beta
     out = [
-        ("data only (α, δ)", D.replace(beta=0.0, gamma=0.0, delta=prior, **no_ext)),
-        ("edge only (α, γ)", D.replace(beta=0.0, delta=0.0, **no_ext)),
-        ("L2 only (α, β)", D.replace(gamma=0.0, delta=0.0, **no_ext)),
-        ("L2 + edge (α, β, γ)", D.replace(delta=0.0, **no_ext)),
-        ("full objective of the paper (α, β, γ, δ)", D.replace(**no_ext)),
+        ("data only (α, δ)", P.replace(beta=0.0, gamma=0.0, delta=prior)),
+        ("edge only (α, γ)", P.replace(beta=0.0, delta=0.0)),
+        ("L2 only (α, β)", P.replace(gamma=0.0, delta=0.0)),
+        ("L2 + edge (α, β, γ)", P.replace(delta=0.0)),
+        ("full objective of the paper (α, β, γ, δ)", P),
     ]
     for k in ext:
-        value = getattr(D, k) if getattr(D, k) > 0 else D.beta
-        out.append((f"paper + {EXT_LABELS.get(k, k)} ({k} = {value:g})", D.replace(**{**no_ext, k: value})))
+        value = getattr(D, k) if getattr(D, k) > 0 else P.beta
+        out.append((f"paper + {EXT_LABELS.get(k, k)} ({k} = {value:g})", P.replace(**{k: value})))
         if k == "beta_image":
             out.append((f"image-weighted L2 instead of L2 (beta = 0, beta_image = {w_img:g})",
-                        D.replace(**{**no_ext, "beta": 0.0, "beta_image": w_img})))
+                        P.replace(beta=0.0, beta_image=w_img)))
     out.append(("defaults (sd.DEFAULT_WEIGHTS)", D))
     seen, kept = {}, []
     for label, w in out:

@@ -76,7 +76,7 @@ FRACTION = 0.05
 SEED = 0
 #: The fixed L1 weight set of the gamma > 0 target (the defaults of
 #: sparsedepth 0.1.0 written out, so the row does not move when the defaults do).
-L1_WEIGHTS = sd.Weights(alpha=1.0, beta=0.1, gamma=0.01, delta=1e-3, kappa=10.0)
+L1_WEIGHTS = sd.Weights.paper(alpha=1.0, beta=0.1, gamma=0.01, delta=1e-3, kappa=10.0)
 QUAD13 = dict(beta_second=0.5, beta_image=0.5)
 REL = 1e-6
 MP8 = (2448, 3264)

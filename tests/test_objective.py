@@ -23,13 +23,13 @@ def _central_difference(f, z, h=1e-6):
 @pytest.mark.parametrize(
     "weights",
     [
-        Weights(alpha=1, beta=0, gamma=0, delta=0.1),  # data + prior
-        Weights(alpha=0, beta=0.7, gamma=0, delta=0.1),  # smooth
-        Weights(alpha=0, beta=0, gamma=0.3, delta=0.1, kappa=2),  # edge L1 (smoothed)
-        Weights(alpha=0, beta=0, gamma=0, delta=0.2),  # prior
-        Weights(alpha=0, beta=0, gamma=0, delta=0.1, beta_image=0.5, kappa=2),
-        Weights(alpha=0, beta=0, gamma=0, delta=0.1, beta_second=0.5),
-        Weights(alpha=0, beta=0, gamma=0, delta=0.1, beta_second_image=0.5, kappa=4),
+        Weights.paper(alpha=1, beta=0, gamma=0, delta=0.1),  # data + prior
+        Weights.paper(alpha=0, beta=0.7, gamma=0, delta=0.1),  # smooth
+        Weights.paper(alpha=0, beta=0, gamma=0.3, delta=0.1, kappa=2),  # edge L1 (smoothed)
+        Weights.paper(alpha=0, beta=0, gamma=0, delta=0.2),  # prior
+        Weights.paper(alpha=0, beta=0, gamma=0, delta=0.1, kappa=2).replace(beta_image=0.5),
+        Weights.paper(alpha=0, beta=0, gamma=0, delta=0.1).replace(beta_second=0.5),
+        Weights.paper(alpha=0, beta=0, gamma=0, delta=0.1, kappa=4).replace(beta_second_image=0.5),
         ALL_TERMS,
     ],
 )
@@ -103,6 +103,15 @@ def test_normal_equations_reproduce_quadratic_part():
     z = np.random.default_rng(5).random(obj.size)
     assert z @ (A @ z) - 2 * b @ z + c == pytest.approx(obj.value(z), rel=1e-10)
     assert abs(A - A.T).max() < 1e-12
+
+
+def test_paper_weights_switch_the_extension_terms_off():
+    w = Weights.paper(gamma=0.0)
+    assert (w.beta_image, w.beta_second, w.beta_second_image) == (0.0, 0.0, 0.0)
+    image, sparse, mask, _ = make_problem((6, 5))
+    obj, _, _ = build_objective(image, sparse, mask, weights=w)
+    assert {t.name for t in obj.quadratic_terms} == {"data", "smooth", "prior"}
+    assert not obj.has_l1
 
 
 def test_edge_weight_definition():

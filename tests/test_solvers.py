@@ -7,8 +7,9 @@ from sparsedepth import Weights, build_objective, complete_depth
 
 from conftest import make_problem
 
-QUAD = Weights(alpha=1.0, beta=0.5, gamma=0.0, delta=0.01, kappa=5.0)
-L1 = Weights(alpha=1.0, beta=0.2, gamma=0.05, delta=0.01, kappa=5.0)
+# the reference paper's four terms only (the default extension terms are off)
+QUAD = Weights.paper(alpha=1.0, beta=0.5, gamma=0.0, delta=0.01, kappa=5.0)
+L1 = Weights.paper(alpha=1.0, beta=0.2, gamma=0.05, delta=0.01, kappa=5.0)
 
 
 @pytest.fixture(scope="module")

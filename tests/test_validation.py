@@ -92,7 +92,7 @@ def test_negative_weight(field):
 def test_ill_posed_weights(inputs):
     image, sparse, mask = inputs
     with pytest.raises(ValueError, match="unique solution"):
-        complete_depth(image, sparse, mask, weights=Weights(alpha=1, beta=0, gamma=0, delta=0))
+        complete_depth(image, sparse, mask, weights=Weights.paper(alpha=1, beta=0, gamma=0, delta=0))
 
 
 def test_weights_are_immutable():
