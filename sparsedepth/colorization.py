@@ -34,6 +34,8 @@ import scipy.linalg
 import scipy.sparse
 import scipy.sparse.linalg
 
+from ._validation import as_float_image
+
 __all__ = [
     "GREY_WEIGHTS",
     "rgb_to_grey",
@@ -61,37 +63,16 @@ _MIN_CSIG = 2e-6
 # input checks
 # ----------------------------------------------------------------------------
 def _as_grey(image, name="image"):
-    """Check ``image`` and return its grey version, float64 (H, W) in [0, 1]."""
-    arr = np.asarray(image)
-    if arr.ndim == 3 and arr.shape[2] == 3:
-        pass
-    elif arr.ndim != 2:
-        raise ValueError(
-            f"{name} must have shape (H, W) or (H, W, 3), got shape {arr.shape}; "
-            "drop an alpha channel with image[..., :3]"
-        )
-    if arr.shape[0] == 0 or arr.shape[1] == 0:
-        raise ValueError(f"{name} is empty (shape {arr.shape})")
-    if arr.dtype == np.uint8:
-        out = arr.astype(np.float64) / 255.0
-    elif arr.dtype == np.uint16:
-        out = arr.astype(np.float64) / 65535.0
-    elif np.issubdtype(arr.dtype, np.floating):
-        out = arr.astype(np.float64)
-        if not np.all(np.isfinite(out)):
-            raise ValueError(f"{name} contains NaN or infinite values")
-        lo, hi = float(out.min()), float(out.max())
-        if lo < 0.0 or hi > 1.0:
-            raise ValueError(
-                f"float {name} must lie in [0, 1], got values in [{lo:g}, {hi:g}]; "
-                "pass uint8/uint16 or rescale it"
-            )
-    else:
-        raise ValueError(f"{name} dtype must be uint8, uint16 or float, got {arr.dtype}")
-    if out.ndim == 3:
-        r, g, b = GREY_WEIGHTS
-        out = r * out[..., 0] + g * out[..., 1] + b * out[..., 2]
-    return out
+    """Check ``image`` and return its grey version, float64 (H, W) in [0, 1].
+
+    The checks and the [0, 1] scaling are :func:`sparsedepth._validation.as_float_image`'s;
+    three channels become ``GREY_WEIGHTS``-weighted grey, one channel is used as is.
+    """
+    out = as_float_image(image, name=name)
+    if out.shape[2] == 1:
+        return out[..., 0]
+    r, g, b = GREY_WEIGHTS
+    return r * out[..., 0] + g * out[..., 1] + b * out[..., 2]
 
 
 def _check_radius(window_radius):
@@ -261,8 +242,9 @@ def rgb_to_grey(image):
     Raises
     ------
     ValueError
-        If the shape is not (H, W) or (H, W, 3), the dtype is not uint8, uint16
-        or float, or a float image has NaN/inf or values outside [0, 1].
+        If the shape is not (H, W) or (H, W, C) with C in {1, 3, 4} (an alpha
+        channel is dropped), the dtype is not uint8, uint16 or float, or a
+        float image has NaN/inf or values outside [0, 1].
     """
     return _as_grey(image)
 
