@@ -52,10 +52,7 @@ def run(argv=None):
 
 def main(argv=None) -> int:
     args = H.parser(__doc__.splitlines()[0], default_step=DEFAULT_STEP).parse_args(argv)
-    H.PROGRESS = True
-    text, _ = run(argv)
-    H.finish(args, text)
-    return 0
+    return H.script_main(run, args, argv)
 
 
 if __name__ == "__main__":

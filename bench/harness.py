@@ -362,6 +362,15 @@ def parser(description: str, *, default_step: int) -> argparse.ArgumentParser:
     return p
 
 
+def script_main(run, args, argv) -> int:
+    """The body of every table script's ``main``: progress lines on, ``run(argv)``, then :func:`finish`."""
+    global PROGRESS
+    PROGRESS = True
+    text, _ = run(argv)
+    finish(args, text)
+    return 0
+
+
 def finish(args, text: str) -> None:  # noqa: D401
     """Print the section and write it to ``--out`` if given."""
     print(text)

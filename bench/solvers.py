@@ -155,10 +155,7 @@ def main(argv=None) -> int:
     p = H.parser(__doc__.splitlines()[0], default_step=DEFAULT_STEP)
     p.add_argument("--no-plot", action="store_true")
     args = p.parse_args(argv)
-    H.PROGRESS = True
-    text, _ = run(argv)
-    H.finish(args, text)
-    return 0
+    return H.script_main(run, args, argv)
 
 
 if __name__ == "__main__":
