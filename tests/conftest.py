@@ -27,3 +27,12 @@ def make_problem(shape=(40, 50), fraction=0.08, seed=0):
     mask[0, 0] = True
     sparse = np.where(mask, truth, np.nan)
     return image, sparse, mask, truth
+
+
+def make_scene(shape=(40, 60), seed=0):
+    """A tilted plane with a 0.5 m step, and a uint8 image whose edge is the step (for CLI and batch tests)."""
+    rng = np.random.default_rng(seed)
+    ii, jj = np.mgrid[0 : shape[0], 0 : shape[1]]
+    depth = 1.0 + 0.02 * ii + 0.01 * jj + 0.5 * (jj > shape[1] // 2)
+    image = np.clip(60 + 120 * (jj > shape[1] // 2)[..., None] + rng.integers(0, 30, shape + (3,)), 0, 255)
+    return image.astype(np.uint8), depth

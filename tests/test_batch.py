@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 import sparsedepth as sd
+
+from conftest import make_scene as _scene
 from sparsedepth.batch import (
     CSV_COLUMNS,
     BatchOptions,
@@ -20,14 +22,6 @@ from sparsedepth.batch import (
 )
 
 FAST = sd.Weights(gamma=0.0)  # quadratic objective: the direct solver is exact and fast
-
-
-def _scene(shape=(40, 60), seed=0):
-    rng = np.random.default_rng(seed)
-    ii, jj = np.mgrid[0 : shape[0], 0 : shape[1]]
-    depth = 1.0 + 0.02 * ii + 0.01 * jj + 0.5 * (jj > shape[1] // 2)
-    image = np.clip(60 + 120 * (jj > shape[1] // 2)[..., None] + rng.integers(0, 30, shape + (3,)), 0, 255)
-    return image.astype(np.uint8), depth
 
 
 def _read_csv(path):
