@@ -46,6 +46,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from pyamg import amg_core
 
+from .stencil import csr_to_stencil, stencil_to_csr
+
 __all__ = [
     "GridMultigrid",
     "SolveInfo",
@@ -207,6 +209,9 @@ def _offset_image(A, shape, dy, dx, out):
 def _stencil_of(A, shape, radius=None):
     """Offsets present in ``A`` (radius <= 2, or ``radius``) and their stencil images.
 
+    A matrix in the full in-grid pattern of :func:`~sparsedepth.stencil.stencil_to_csr`
+    (as :meth:`~sparsedepth.objective.Objective.normal_equations` returns) is
+    read in one pass over its non-zeros.  Otherwise:
     Two passes over the candidate offsets: the first only counts the non-zeros
     of each offset (one ``(H, W)`` work image; the 5-point, then the 3x3, then
     the 5x5 offsets, stopping as soon as every non-zero is accounted for), the
@@ -217,6 +222,12 @@ def _stencil_of(A, shape, radius=None):
     up to the number of stored non-zeros of ``A``.
     """
     largest = 2 if radius is None else int(radius)
+    read = csr_to_stencil(A, shape)  # one pass when A is in the full in-grid pattern
+    if read is not None and all(max(abs(dy), abs(dx)) <= largest for dy, dx in read[0]):
+        offsets, S = read
+        keep = [k for k, o in enumerate(offsets) if o == (0, 0) or np.any(S[k])]
+        return [offsets[k] for k in keep], (S if len(keep) == len(offsets) else S[keep])
+    del read
     if radius is None:  # 5-point first, then 3x3, then 5x5: stop once all is found
         rings = [[(-1, 0), (0, -1), (0, 0), (0, 1), (1, 0)], _square_offsets(1), _square_offsets(2)]
     else:
@@ -289,28 +300,6 @@ def _pattern_from_slots(shape, n_slots, slots, index_dtype):
         gather[where] = rows[ys, xs] + index_dtype(k * n)
         pos[ys, xs] += 1
     return indptr, indices, gather
-
-
-def _csr_pattern(offsets, shape):
-    """CSR structure of a stencil operator and the gather index from stencil to data.
-
-    ``data = S.reshape(-1)[gather]`` lists the coefficients in CSR order (rows in
-    C order, columns ascending, which is the lexicographic order of offsets).
-    """
-    h, w = shape
-    n = h * w
-    index_dtype = _index_dtype(n * len(offsets))
-    rows = np.arange(n, dtype=index_dtype).reshape(h, w)
-
-    def slots():
-        for k, (dy, dx) in enumerate(offsets):
-            ys = slice(max(0, -dy), min(h, h - dy))
-            xs = slice(max(0, -dx), min(w, w - dx))
-            if ys.start >= ys.stop or xs.start >= xs.stop:
-                continue
-            yield k, ys, xs, rows[ys, xs] + index_dtype(dy * w + dx)
-
-    return _pattern_from_slots(shape, len(offsets), slots(), index_dtype)
 
 
 # --------------------------------------------------------------------------
@@ -572,14 +561,13 @@ def _gs_backward(A, x, b, sweeps):
 class _Level:
     """One level of the hierarchy: operator, prolongation to it from below, smoother."""
 
-    __slots__ = ("shape", "A", "offsets", "gather", "P", "p_gather", "diag_inv",
+    __slots__ = ("shape", "A", "offsets", "P", "p_gather", "diag_inv",
                  "omega")
 
     def __init__(self, shape):
         self.shape = shape
         self.A = None
         self.offsets = None
-        self.gather = None  # stencil -> CSR data of A (coarse levels)
         self.P = None  # prolongation from the next coarser level
         self.p_gather = None  # weights -> CSR data of P
         self.diag_inv = None
@@ -761,18 +749,13 @@ class GridMultigrid:
             if li == 0:
                 lvl.A = A
             levels.append(lvl)
-        # structure: offsets and CSR patterns of the coarse operators, patterns of P
+        # structure: offsets of the coarse operators (their CSR form is made by
+        # stencil_to_csr in _numeric), patterns of P
         levels[0].offsets = offsets
         for li in range(1, len(levels)):
             lvl = levels[li]
             lvl.offsets = _galerkin_offsets(levels[li - 1].offsets)
-            indptr, indices, gather = _csr_pattern(lvl.offsets, lvl.shape)
             n = lvl.shape[0] * lvl.shape[1]
-            lvl.gather = gather
-            lvl.A = sp.csr_array(
-                (np.zeros(indices.shape[0]), indices, indptr), shape=(n, n))
-            lvl.A.has_sorted_indices = True
-            lvl.A.has_canonical_format = True
             fine = levels[li - 1]
             p_indptr, p_indices, p_gather = _prolongation_pattern(fine.shape)
             fine.p_gather = p_gather
@@ -802,7 +785,7 @@ class GridMultigrid:
                 np.take(interp.dense(fine.shape).reshape(-1), fine.p_gather,
                         out=fine.P.data)
             S = _galerkin(fine.offsets, S, interp, fine.shape, coarse.offsets)
-            np.take(S.reshape(-1), coarse.gather, out=coarse.A.data)
+            coarse.A = stencil_to_csr(coarse.offsets, S)
         del S
         for lvl in levels[:-1]:
             self._setup_smoother(lvl)
@@ -870,7 +853,16 @@ class GridMultigrid:
         """
         A, _ = _check_matrix(A, self.shape)
         offsets = self.levels[0].offsets
-        S = _extract_stencil(A, self.shape, offsets)
+        read = csr_to_stencil(A, self.shape)
+        if read is not None and set(read[0]) <= set(offsets):
+            slot = {o: k for k, o in enumerate(read[0])}
+            S = np.zeros((len(offsets),) + self.shape)
+            for k, o in enumerate(offsets):
+                if o in slot:
+                    S[k] = read[1][slot[o]]
+        else:
+            S = _extract_stencil(A, self.shape, offsets)
+        del read
         if int(np.count_nonzero(S)) != int(np.count_nonzero(A.data)):
             # the stencil grew (a pixel and a diagonal determine at most one
             # in-grid offset, so equal non-zero counts mean nothing is missing)

@@ -30,7 +30,8 @@ import scipy.sparse as sp
 
 from ._validation import as_depth_and_mask, as_float_image, check_same_shape
 from .baselines import nearest_fill
-from .operators import forward_diff, gradient, hessian_operator
+from .operators import StencilOperator, gradient, gradient_stencil, hessian_stencil
+from .stencil import stencil_to_csr
 from .weights import DEFAULT_WEIGHTS, Weights
 
 __all__ = [
@@ -66,8 +67,11 @@ class QuadraticTerm:
         Name used in per-term reports.
     weight : float
         Non-negative scalar weight.
-    operator : scipy.sparse matrix of shape (m, N), or None
-        ``K``; ``None`` means the identity (``m = N``).
+    operator : scipy.sparse matrix or StencilOperator of shape (m, N), or None
+        ``K``; ``None`` means the identity (``m = N``).  A
+        :class:`~sparsedepth.operators.StencilOperator` is applied matrix-free
+        and lets :meth:`Objective.normal_equations` assemble ``KᵀK`` as a
+        stencil.
     row_weights : ndarray of shape (m,), or None
         ``r >= 0``; ``None`` means all ones.
     target : ndarray of shape (m,), or None
@@ -76,7 +80,7 @@ class QuadraticTerm:
 
     name: str
     weight: float
-    operator: Optional[sp.spmatrix] = None
+    operator: Optional[object] = None
     row_weights: Optional[np.ndarray] = None
     target: Optional[np.ndarray] = None
 
@@ -108,6 +112,11 @@ class QuadraticTerm:
         if self.operator is None:
             return sp.diags(self.weight * r, format="csr")
         K = self.operator
+        if isinstance(K, StencilOperator):
+            offsets = K.offsets()
+            stencil = np.zeros((len(offsets),) + K.grid_shape)
+            K.add_normal_stencil(stencil, offsets, self.row_weights, self.weight)
+            return sp.csr_matrix(stencil_to_csr(offsets, stencil))
         return (K.T @ sp.diags(self.weight * r) @ K).tocsr()
 
     def normal_rhs(self, n: int):
@@ -135,13 +144,16 @@ class AbsTerm:
     ----------
     name : str
     weight : float
-    operator : scipy.sparse matrix of shape (m, N)
+    operator : scipy.sparse matrix or StencilOperator of shape (m, N)
+        ``build_objective`` passes the CSR :func:`~sparsedepth.operators.gradient`
+        when the weight is positive (the L1 solvers need its rows) and the
+        matrix-free form otherwise.
     row_weights : ndarray of shape (m,), or None
     """
 
     name: str
     weight: float
-    operator: sp.spmatrix
+    operator: object
     row_weights: Optional[np.ndarray] = None
 
     def scaled_row_weights(self):
@@ -273,21 +285,79 @@ class Objective:
 
         For the depth objective ``A = αM + β(∂xᵀ∂x + ∂yᵀ∂y) + δI`` (+ the
         optional terms) and ``b = αM z_obs + δ z_c``.
+
+        Notes
+        -----
+        ``A`` is assembled as a stencil (:meth:`normal_stencil`: one
+        coefficient image per neighbour offset, one whole-array operation per
+        pair of taps of each term's operator) and converted once to CSR in
+        the full in-grid pattern of :func:`~sparsedepth.stencil.stencil_to_csr`,
+        which the multigrid set-up reads back without sparse diagonal
+        extraction.  Terms whose operator is a general sparse matrix are
+        added as ``K^T diag(r) K`` products.
         """
         if self._normal is None:
             n = self.size
-            A = sp.csr_matrix((n, n))
+            offsets, stencil, general = self._stencil_parts()
+            A = stencil_to_csr(offsets, stencil)
+            del stencil
+            for t in general:
+                A = A + t.normal_matrix(n)
+            if general:
+                A = sp.csr_array(A)
+                A.sum_duplicates()
+                A.sort_indices()
             b = np.zeros(n)
             c = 0.0
             for t in self.quadratic_terms:
-                A = A + t.normal_matrix(n)
                 b += t.normal_rhs(n)
                 c += t.constant()
-            A = A.tocsr()
-            A.sum_duplicates()
-            A.sort_indices()
             self._normal = (A, b, c)
         return self._normal
+
+    def normal_stencil(self):
+        """Stencil of the quadratic part's matrix ``A`` (see :mod:`sparsedepth.stencil`).
+
+        Returns
+        -------
+        offsets : list of tuple of int
+            Neighbour offsets ``(dy, dx)``, sorted.
+        stencil : ndarray, shape (len(offsets), H, W)
+            ``stencil[k, y, x] = A[y*W + x, (y+dy_k)*W + (x+dx_k)]`` (0 outside the grid).
+
+        Raises
+        ------
+        ValueError
+            If a quadratic term's operator is a general sparse matrix (not a
+            :class:`~sparsedepth.operators.StencilOperator`).
+        """
+        offsets, stencil, general = self._stencil_parts()
+        if general:
+            raise ValueError(f"terms {[t.name for t in general]} have general sparse operators; no stencil form")
+        return offsets, stencil
+
+    def _stencil_parts(self):
+        """Stencil of the stencil-form terms, and the list of the other quadratic terms."""
+        offsets = {(0, 0)}
+        stencil_terms, general = [], []
+        for t in self.quadratic_terms:
+            if t.operator is None:
+                stencil_terms.append(t)
+            elif isinstance(t.operator, StencilOperator):
+                stencil_terms.append(t)
+                offsets.update(t.operator.offsets())
+            else:
+                general.append(t)
+        offsets = sorted(offsets)
+        stencil = np.zeros((len(offsets),) + self.shape)
+        centre = offsets.index((0, 0))
+        for t in stencil_terms:
+            if t.operator is None:
+                r = 1.0 if t.row_weights is None else np.asarray(t.row_weights).reshape(self.shape)
+                stencil[centre] += t.weight * r
+            else:
+                t.operator.add_normal_stencil(stencil, offsets, t.row_weights, t.weight)
+        return offsets, stencil, general
 
     def _flat(self, z):
         z = np.asarray(z, dtype=np.float64)
@@ -423,13 +493,13 @@ def build_objective(
     w = edge_weights(img, weights.kappa).ravel() if weights.gamma > 0 else None
     ww = None if w is None else np.concatenate([w, w])
     pair = pair_edge_weights(img, weights.kappa) if (weights.beta_image > 0 or weights.beta_second_image > 0) else None
-    G = gradient(shape)
-    hessian = hessian_operator(shape) if (weights.beta_second > 0 or weights.beta_second_image > 0) else None
+    G = gradient_stencil(shape)
+    hessian = hessian_stencil(shape) if (weights.beta_second > 0 or weights.beta_second_image > 0) else None
     w2 = None if weights.beta_second_image == 0 else second_order_edge_weights(pair, shape)
     terms = [
         QuadraticTerm("data", weights.alpha, None, observed.ravel().astype(np.float64), depth.ravel()),
         QuadraticTerm("smooth", weights.beta, G),
-        AbsTerm("edge", weights.gamma, G, ww),
+        AbsTerm("edge", weights.gamma, gradient(shape) if weights.gamma > 0 else G, ww),
         QuadraticTerm("prior", weights.delta, None, None, coarse.ravel()),
         QuadraticTerm("smooth_image", weights.beta_image, G, pair),
         QuadraticTerm("second_order", weights.beta_second, hessian),

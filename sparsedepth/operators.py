@@ -166,3 +166,217 @@ def hessian_operator(shape) -> sp.csr_matrix:
     ``z = a + b*i + c*j``.
     """
     return _hessian_cached(_check_shape(shape))
+
+
+# --------------------------------------------------------------------------
+# matrix-free stencil form of the same operators
+# --------------------------------------------------------------------------
+def _anchor_region(taps, shape):
+    """Slices ``(ys, xs)`` of the pixels whose taps all lie inside the grid."""
+    H, W = shape
+    dys = [dy for (dy, _), _ in taps]
+    dxs = [dx for (_, dx), _ in taps]
+    y0, x0 = max(0, -min(dys)), max(0, -min(dxs))
+    y1, x1 = H - max(0, max(dys)), W - max(0, max(dxs))
+    if y1 <= y0 or x1 <= x0:  # no pixel has all its taps inside the grid
+        return slice(0, 0), slice(0, 0)
+    return slice(y0, y1), slice(x0, x1)
+
+
+def _shifted(region, offset):
+    ys, xs = region
+    if ys.stop == 0:  # empty region: stays empty (no wrap-around of negative stops)
+        return region
+    dy, dx = offset
+    return slice(ys.start + dy, ys.stop + dy), slice(xs.start + dx, xs.stop + dx)
+
+
+class StencilOperator:
+    r"""Matrix-free stack of pixel-anchored difference operators on an ``(H, W)`` grid.
+
+    Block ``b`` has one row per pixel (C order).  The row of pixel ``p`` is
+    :math:`\sum_t c_t\, z[p + o_t]` over the block's taps ``(o_t, c_t)`` when
+    every tap lies inside the grid, and zero otherwise -- the boundary rule of
+    :func:`forward_diff` (zero last column / row) and :func:`second_diff`
+    (zero first and last line).  The stacked operator has shape
+    ``(n_blocks * H * W, H * W)`` and equals :meth:`tocsr`, but is applied by
+    array slicing, stores nothing per pixel, and yields the stencil of
+    :math:`K^\top \operatorname{diag}(r) K` directly (:meth:`normal_stencil`),
+    so the normal equations are assembled without sparse matrix products.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Grid shape ``(H, W)``.
+    blocks : sequence of sequence of ((int, int), float)
+        Per block, its taps ``((dy, dx), coefficient)``.
+
+    See Also
+    --------
+    gradient_stencil, hessian_stencil : the stencil forms of :func:`gradient`
+        and :func:`hessian_operator`.
+
+    Examples
+    --------
+    >>> D = StencilOperator((2, 3), [[((0, 0), -1.0), ((0, 1), 1.0)]])
+    >>> D @ np.arange(6.0)
+    array([1., 1., 0., 1., 1., 0.])
+    >>> np.array_equal(D.tocsr().toarray(), forward_diff((2, 3), 1).toarray())
+    True
+    """
+
+    def __init__(self, shape, blocks):
+        self.grid_shape = _check_shape(shape)
+        self.blocks = tuple(tuple(((int(dy), int(dx)), float(c)) for (dy, dx), c in block) for block in blocks)
+        if not self.blocks or any(len(block) == 0 for block in self.blocks):
+            raise ValueError("a StencilOperator needs at least one block, each with at least one tap")
+        self._regions = tuple(_anchor_region(block, self.grid_shape) for block in self.blocks)
+
+    @property
+    def shape(self):
+        n = self.grid_shape[0] * self.grid_shape[1]
+        return (len(self.blocks) * n, n)
+
+    @property
+    def T(self):
+        """The adjoint ``Kᵀ`` (matrix-free; ``K.T @ v``)."""
+        return _AdjointStencilOperator(self)
+
+    def _as_image(self, z):
+        z = np.asarray(z, dtype=np.float64)
+        n = self.shape[1]
+        if z.ndim != 1 or z.shape[0] != n:
+            raise ValueError(f"expected a vector of length {n} (grid {self.grid_shape}), got shape {z.shape}")
+        return z.reshape(self.grid_shape)
+
+    def matvec(self, z):
+        """``K z`` for a vector of length ``H * W``; returns length ``n_blocks * H * W``."""
+        img = self._as_image(z)
+        out = np.zeros((len(self.blocks),) + self.grid_shape)
+        for b, (block, region) in enumerate(zip(self.blocks, self._regions)):
+            view = out[b][region]
+            for offset, coef in block:
+                view += coef * img[_shifted(region, offset)]
+        return out.reshape(-1)
+
+    def rmatvec(self, v):
+        """``Kᵀ v`` for a vector of length ``n_blocks * H * W``."""
+        v = np.asarray(v, dtype=np.float64)
+        if v.ndim != 1 or v.shape[0] != self.shape[0]:
+            raise ValueError(f"expected a vector of length {self.shape[0]}, got shape {v.shape}")
+        rows = v.reshape((len(self.blocks),) + self.grid_shape)
+        out = np.zeros(self.grid_shape)
+        for b, (block, region) in enumerate(zip(self.blocks, self._regions)):
+            src = rows[b][region]
+            for offset, coef in block:
+                out[_shifted(region, offset)] += coef * src
+        return out.reshape(-1)
+
+    def __matmul__(self, z):
+        return self.matvec(z)
+
+    def offsets(self):
+        """Offsets ``(dy, dx)`` of :math:`K^\\top K`, sorted (lexicographic = CSR column order)."""
+        out = {(0, 0)}
+        for block in self.blocks:
+            for (oi, _) in block:
+                for (ok, _) in block:
+                    out.add((ok[0] - oi[0], ok[1] - oi[1]))
+        return sorted(out)
+
+    def add_normal_stencil(self, stencil, offsets, row_weights=None, scale=1.0):
+        r"""Accumulate ``scale · Kᵀ diag(r) K`` into stencil images, in place.
+
+        Row ``p`` of block ``b`` contributes
+        :math:`\mathrm{scale}\; r_p\, c_i c_k` to the coupling of pixels
+        ``p + o_i`` and ``p + o_k``, i.e. to the image of offset
+        ``o_k − o_i`` at pixel ``p + o_i``: one whole-array operation per
+        pair of taps.
+
+        Parameters
+        ----------
+        stencil : ndarray, shape (len(offsets), H, W)
+            ``stencil[j, y, x]`` is the coupling of pixel ``(y, x)`` with
+            ``(y, x) + offsets[j]``; updated in place.
+        offsets : list of tuple of int
+            Must contain :meth:`offsets`.
+        row_weights : ndarray, shape (n_blocks * H * W,), optional
+            ``r`` (default ones).
+        scale : float
+        """
+        slot = {o: j for j, o in enumerate(offsets)}
+        H, W = self.grid_shape
+        r = None if row_weights is None else np.asarray(row_weights, dtype=np.float64).reshape(
+            (len(self.blocks), H, W))
+        for b, (block, region) in enumerate(zip(self.blocks, self._regions)):
+            rb = None if r is None else r[b][region]
+            for oi, ci in block:
+                target = _shifted(region, oi)
+                for ok, ck in block:
+                    view = stencil[slot[(ok[0] - oi[0], ok[1] - oi[1])]][target]
+                    if rb is None:
+                        view += scale * ci * ck
+                    else:
+                        view += (scale * ci * ck) * rb
+        return stencil
+
+    def tocsr(self):
+        """The same operator as a ``scipy.sparse`` CSR matrix (zero rows kept, no stored zeros)."""
+        H, W = self.grid_shape
+        n = H * W
+        index = np.arange(n).reshape(H, W)
+        rows, cols, vals = [], [], []
+        for b, (block, region) in enumerate(zip(self.blocks, self._regions)):
+            anchors = index[region].ravel()
+            for offset, coef in block:
+                if coef == 0:
+                    continue
+                rows.append(anchors + b * n)
+                cols.append(index[_shifted(region, offset)].ravel())
+                vals.append(np.full(anchors.size, coef))
+        if not rows:
+            return sp.csr_matrix(self.shape)
+        out = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=self.shape)
+        out.sum_duplicates()
+        out.eliminate_zeros()
+        return out
+
+    def __repr__(self):
+        return f"StencilOperator(shape={self.grid_shape}, blocks={len(self.blocks)})"
+
+
+class _AdjointStencilOperator:
+    """``Kᵀ`` of a :class:`StencilOperator` (only ``@`` and ``shape``)."""
+
+    def __init__(self, op):
+        self._op = op
+
+    @property
+    def shape(self):
+        return self._op.shape[::-1]
+
+    @property
+    def T(self):
+        return self._op
+
+    def __matmul__(self, v):
+        return self._op.rmatvec(v)
+
+
+_FORWARD_X = (((0, 0), -1.0), ((0, 1), 1.0))
+_FORWARD_Y = (((0, 0), -1.0), ((1, 0), 1.0))
+
+
+def gradient_stencil(shape) -> StencilOperator:
+    """Matrix-free :func:`gradient` (``[∂x; ∂y]``, same rows and boundary rule)."""
+    return StencilOperator(shape, [_FORWARD_X, _FORWARD_Y])
+
+
+def hessian_stencil(shape) -> StencilOperator:
+    """Matrix-free :func:`hessian_operator` (``[∂xx; ∂yy; √2 ∂xy]``, same rows)."""
+    r2 = np.sqrt(2.0)
+    return StencilOperator(shape, [
+        (((0, -1), 1.0), ((0, 0), -2.0), ((0, 1), 1.0)),
+        (((-1, 0), 1.0), ((0, 0), -2.0), ((1, 0), 1.0)),
+        (((0, 0), r2), ((0, 1), -r2), ((1, 0), -r2), ((1, 1), r2)),
+    ])

@@ -2,7 +2,16 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from sparsedepth.operators import forward_diff, gradient, hessian_operator, mixed_diff, second_diff
+from sparsedepth.operators import (
+    StencilOperator,
+    forward_diff,
+    gradient,
+    gradient_stencil,
+    hessian_operator,
+    hessian_stencil,
+    mixed_diff,
+    second_diff,
+)
 
 
 @pytest.mark.parametrize("shape", [(1, 1), (1, 5), (6, 1), (4, 7), (9, 3)])
@@ -69,3 +78,49 @@ def test_operators_are_cached_and_sparse():
 def test_bad_shape(bad):
     with pytest.raises(ValueError, match="shape"):
         forward_diff(bad, 1)
+
+
+SHAPES = [(1, 1), (1, 5), (6, 1), (2, 2), (4, 7), (9, 3), (2, 9)]
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("pair", [(gradient_stencil, gradient), (hessian_stencil, hessian_operator)])
+def test_stencil_operator_equals_the_csr_operator(shape, pair):
+    stencil_form, csr_form = pair
+    K, C = stencil_form(shape), csr_form(shape)
+    assert K.shape == C.shape
+    assert abs(K.tocsr() - C).max() == 0 if C.nnz else K.tocsr().nnz == 0
+    rng = np.random.default_rng(4)
+    z, v = rng.standard_normal(C.shape[1]), rng.standard_normal(C.shape[0])
+    np.testing.assert_allclose(K @ z, C @ z, atol=1e-13)
+    np.testing.assert_allclose(K.T @ v, C.T @ v, atol=1e-13)
+    assert np.isclose(v @ (K @ z), (K.T @ v) @ z, rtol=1e-12)  # dot test
+
+
+@pytest.mark.parametrize("shape", [(3, 3), (5, 4), (7, 9), (2, 6)])
+def test_normal_stencil_is_KT_diag_r_K(shape):
+    rng = np.random.default_rng(5)
+    K = hessian_stencil(shape)
+    r = rng.random(K.shape[0])
+    offsets = K.offsets()
+    S = np.zeros((len(offsets),) + shape)
+    K.add_normal_stencil(S, offsets, r, scale=0.3)
+    expected = 0.3 * (K.tocsr().T @ sp.diags(r) @ K.tocsr()).toarray()
+    H, W = shape
+    got = np.zeros((H * W, H * W))
+    for k, (dy, dx) in enumerate(offsets):  # the stencil definition, pixel by pixel
+        for y in range(H):
+            for x in range(W):
+                if 0 <= y + dy < H and 0 <= x + dx < W:
+                    got[y * W + x, (y + dy) * W + x + dx] = S[k, y, x]
+    np.testing.assert_allclose(got, expected, atol=1e-14)
+
+
+def test_stencil_operator_rejects_bad_vectors_and_blocks():
+    K = gradient_stencil((3, 4))
+    with pytest.raises(ValueError, match="length 12"):
+        K @ np.zeros(11)
+    with pytest.raises(ValueError, match="length 24"):
+        K.T @ np.zeros(12)
+    with pytest.raises(ValueError, match="at least one"):
+        StencilOperator((3, 4), [])
