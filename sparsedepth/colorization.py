@@ -18,9 +18,6 @@ colorization_weights
     The row-stochastic window affinity matrix ``W`` of the toolbox.
 colorization_fill
     The toolbox fill, ``(I - W + alpha M) x = alpha M d``.
-image_affinity_edges
-    Symmetric image-driven edge weights on the 4- or 8-neighbour grid, for an
-    image-weighted L2 smoothness term ``sum_e w_e (z_i - z_j)^2``.
 """
 
 from __future__ import annotations
@@ -41,7 +38,6 @@ __all__ = [
     "rgb_to_grey",
     "colorization_weights",
     "colorization_fill",
-    "image_affinity_edges",
 ]
 
 GREY_WEIGHTS = (0.2989, 0.5870, 0.1140)

@@ -92,3 +92,11 @@ def test_input_not_modified():
     colorization_fill(image, depth)
     np.testing.assert_array_equal(image, image0)
     np.testing.assert_array_equal(depth, depth0)
+
+
+def test_every_public_name_exists():
+    # ``from sparsedepth.colorization import *`` must not fail on a stale ``__all__`` entry
+    import sparsedepth.colorization as module
+
+    missing = [name for name in module.__all__ if not hasattr(module, name)]
+    assert missing == []
