@@ -5,8 +5,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.sparse
+import scipy.sparse.linalg
 
-from sparsedepth.colorization import colorization_fill
+from sparsedepth.colorization import colorization_fill, colorization_weights
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -44,6 +46,72 @@ def test_matches_naive_port_uint8_and_large_hole(naive):
     depth[4:16, 5:20] = 0.0  # one big hole, no known pixel inside
     expected = naive.fill_depth_colorization(image8 / 255.0, depth)
     np.testing.assert_allclose(colorization_fill(image8, depth), expected, rtol=0, atol=1e-6)
+
+
+def _direct_solution(naive, grey, depth, known, alpha=1.0, win_rad=1):
+    """The toolbox system built by the naive port, solved by sparse LU (no iteration)."""
+    A = naive.naive_colorization_matrix(grey, win_rad)
+    m = known.ravel().astype(float)
+    scale = depth[known].max()
+    system = (A + scipy.sparse.diags(alpha * m)).tocsc()
+    x = scipy.sparse.linalg.spsolve(system, alpha * m * np.where(known, depth, 0.0).ravel() / scale)
+    return x.reshape(depth.shape) * scale
+
+
+def _hand_made_frame():
+    # two flat grey regions with a JPEG-like quantised ramp, a big hole that crosses the region edge,
+    # a hole touching the image border, and an island of two known pixels inside the big hole
+    ii, jj = np.mgrid[0:26, 0:34]
+    grey = np.where(jj < 15, 0.25, 0.7) + np.round(0.02 * ii * 8) / 255.0
+    depth = 1.0 + 0.1 * ii + np.where(jj < 15, 0.0, 1.5)
+    known = np.ones(grey.shape, dtype=bool)
+    known[6:20, 8:25] = False
+    known[12, 16:18] = True
+    known[:3, 28:] = False
+    known[(ii * 7 + jj * 3) % 11 == 0] = False
+    return grey, depth, known
+
+
+@pytest.mark.parametrize("window_radius", [1, 2])
+@pytest.mark.parametrize("alpha", [1.0, 0.3])
+def test_matches_direct_solve_at_tight_tolerance(naive, window_radius, alpha):
+    grey, depth, known = _hand_made_frame()
+    expected = _direct_solution(naive, grey, depth, known, alpha, window_radius)
+    got = colorization_fill(grey, np.where(known, depth, 0.0), alpha=alpha, rtol=1e-13,
+                            window_radius=window_radius)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("rtol", [1e-3, 1e-6])
+def test_error_bound_of_rtol(naive, rtol):
+    # documented: |out - exact| <= rtol * max |depth[mask]| at every pixel
+    grey, depth, known = _hand_made_frame()
+    expected = _direct_solution(naive, grey, depth, known)
+    got = colorization_fill(grey, np.where(known, depth, 0.0), rtol=rtol)
+    assert np.abs(got - expected).max() <= rtol * depth[known].max()
+
+
+@pytest.mark.parametrize("case", ["all known", "one known", "one unknown"])
+def test_extreme_masks_match_direct_solve(naive, case):
+    grey, depth, _ = _hand_made_frame()
+    known = np.full(grey.shape, case == "all known")
+    if case == "one known":
+        known[3, 4] = True
+    elif case == "one unknown":
+        known[:] = True
+        known[3, 4] = False
+    expected = _direct_solution(naive, grey, depth, known)
+    got = colorization_fill(grey, depth, mask=known, rtol=1e-13)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("window_radius", [1, 2])
+def test_weights_are_the_naive_matrix(naive, window_radius):
+    grey, _, _ = _hand_made_frame()
+    W = colorization_weights(grey, window_radius=window_radius)
+    A = naive.naive_colorization_matrix(grey, window_radius)
+    np.testing.assert_allclose(W.toarray(), np.eye(grey.size) - A.toarray(), rtol=0, atol=1e-15)
+    assert W.has_sorted_indices and np.all(np.diff(W.indptr) > 0)
 
 
 def test_maximum_principle():
