@@ -137,6 +137,7 @@ def pcg(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=No
         z = r if prec is None else prec(r)
         rz = _dot(r, z)
         p = z.copy()
+        del z  # (here and below) drop work vectors early: peak memory of 8-MP frames
         while it < maxiter:
             q = A @ p
             pq = _dot(p, q)
@@ -144,7 +145,9 @@ def pcg(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=No
                 break  # breakdown: A or M not SPD (or exact solution reached)
             step = rz / pq
             x += step * p
-            r -= step * q
+            q *= step
+            r -= q
+            del q
             it += 1
             if callback is not None:
                 if callback_residual:
@@ -158,6 +161,7 @@ def pcg(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=No
             rz_new = _dot(r, z)
             p *= rz_new / rz
             p += z
+            del z
             rz = rz_new
         r = b - A @ x
         rr = _dot(r, r)

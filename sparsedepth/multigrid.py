@@ -46,7 +46,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from pyamg import amg_core
 
-from .stencil import csr_to_stencil, stencil_to_csr
+from .stencil import csr_to_stencil, full_pattern_offsets, stencil_to_csr
 
 __all__ = [
     "GridMultigrid",
@@ -59,6 +59,8 @@ __all__ = [
 _INTERPOLATIONS = ("bilinear", "operator", "auto")
 _SMOOTHERS = ("gauss_seidel", "jacobi")
 _PRECONDITIONERS = ("grid", "amg", "sa", "jacobi", "none")
+#: fine grids from this many pixels keep their coarse levels in float32 (coarse_precision="auto")
+_SINGLE_COARSE_PIXELS = 1 << 21
 
 
 # --------------------------------------------------------------------------
@@ -269,6 +271,47 @@ def _stencil_of(A, shape, radius=None):
     return present, S
 
 
+class _StencilSource:
+    """A level's stencil for the numeric set-up, handed out one parity class at a time.
+
+    Either an array ``(K, H, W)`` (coarse levels, or a fine operator whose
+    stencil had to be extracted diagonal by diagonal) or a CSR matrix in the
+    full in-grid pattern of :func:`~sparsedepth.stencil.stencil_to_csr`, read
+    class by class so that the fine stencil is never held whole (8 MP,
+    13-point: 210 MB per class instead of 830 MB).
+    """
+
+    def __init__(self, offsets, shape, *, array=None, csr=None, csr_offsets=None):
+        self.offsets = list(offsets)
+        self.shape = tuple(shape)
+        self.array = array
+        self.csr = csr
+        self.csr_offsets = None if csr_offsets is None else list(csr_offsets)
+
+    def parity_class(self, py, px):
+        """Stencil images on the pixels ``(py::2, px::2)``, shape ``(K, ny, nx)``."""
+        if self.array is not None:
+            return np.ascontiguousarray(self.array[:, py::2, px::2])
+        _, part = csr_to_stencil(self.csr, self.shape, offsets=self.csr_offsets, parity=(py, px))
+        if self.csr_offsets == self.offsets:
+            return part
+        out = np.zeros((len(self.offsets),) + part.shape[1:])
+        slot = {o: k for k, o in enumerate(self.offsets)}
+        for k, o in enumerate(self.csr_offsets):
+            out[slot[o]] = part[k]
+        return out
+
+
+def _fine_source(A, shape, radius=None):
+    """Offsets and :class:`_StencilSource` of a fine operator (pattern read, else extraction)."""
+    largest = 2 if radius is None else int(radius)
+    offsets = full_pattern_offsets(A, shape)
+    if offsets is not None and all(max(abs(dy), abs(dx)) <= largest for dy, dx in offsets):
+        return offsets, _StencilSource(offsets, shape, csr=A, csr_offsets=offsets)
+    offsets, S = _stencil_of(A, shape, radius)
+    return offsets, _StencilSource(offsets, shape, array=S)
+
+
 def _index_dtype(*sizes):
     return np.int32 if max(sizes) < np.iinfo(np.int32).max else np.int64
 
@@ -321,13 +364,20 @@ class _Interp:
             return self.full[ey, ex, py::2, px::2]
         return self.wy[ey, py::2][:, None] * self.wx[ex, px::2][None, :]
 
-    def padded_cls(self, ry, rx, pad):
-        """All parent weights on class (ry, rx), zero-padded (pad, pad+1) per axis."""
+    def padded_cls(self, ry, rx, pad, separable=False):
+        """All parent weights on class (ry, rx), zero-padded (pad, pad+1) per axis.
+
+        ``separable=True`` (bilinear only) returns the two 1-D factors
+        ``(wy, wx)`` of shapes ``(2, ny)`` and ``(2, nx)`` instead of their
+        ``(2, 2, ny, nx)`` product.
+        """
         if self.full is not None:
             sub = self.full[:, :, ry::2, rx::2]
             return np.pad(sub, ((0, 0), (0, 0), (pad, pad + 1), (pad, pad + 1)))
         wy = np.pad(self.wy[:, ry::2], ((0, 0), (pad, pad + 1)))
         wx = np.pad(self.wx[:, rx::2], ((0, 0), (pad, pad + 1)))
+        if separable:
+            return wy, wx
         return wy[:, None, :, None] * wx[None, :, None, :]
 
     def dense(self, shape):
@@ -354,6 +404,76 @@ def _bilinear_interp(shape):
     return _Interp(wy=_linear_weights_1d(h), wx=_linear_weights_1d(w))
 
 
+def _interp_matrix_1d(weights):
+    """``(n, nc)`` CSR matrix of 1-D interpolation weights ``(2, n)`` (parents ``i//2`` and ``i//2 + 1``)."""
+    n = weights.shape[1]
+    nc = (n + 1) // 2
+    i = np.arange(n)
+    rows = np.concatenate([i, i])
+    cols = np.concatenate([i // 2, i // 2 + 1])
+    vals = np.concatenate([weights[0], weights[1]])
+    keep = (vals != 0) & (cols < nc)
+    return sp.csr_array((vals[keep], (rows[keep], cols[keep])), shape=(n, nc))
+
+
+class _SeparableProlongation:
+    r"""Bilinear prolongation :math:`P = P_y \otimes P_x`, applied one axis at a time.
+
+    ``P @ x`` is :math:`\operatorname{vec}(P_y X P_x^	op)` and ``P.T @ r`` is
+    :math:`\operatorname{vec}(P_y^	op R P_x)`, with the 1-D interpolation
+    matrices only (a few hundred rows): no ``N``-row matrix is stored (8 MP:
+    ~300 MB saved over a CSR ``P``).
+    """
+
+    def __init__(self, interp):
+        self.Py = _interp_matrix_1d(interp.wy)
+        self.Px = _interp_matrix_1d(interp.wx)
+        self.PyT = self.Py.T.tocsr()
+        self.PxT = self.Px.T.tocsr()
+        (h, hc), (w, wc) = self.Py.shape, self.Px.shape
+        self.fine_shape, self.coarse_shape = (h, w), (hc, wc)
+        self.shape = (h * w, hc * wc)
+
+    def __matmul__(self, x):
+        X = np.asarray(x, dtype=np.float64).reshape(self.coarse_shape)
+        T = (self.Py @ X).T  # (wc, h)
+        return np.ascontiguousarray((self.Px @ T).T).reshape(-1)
+
+    def add_prolonged(self, out, x):
+        """``out += P @ x`` without an ``N``-long temporary (``out`` is C-contiguous)."""
+        T = (self.Py @ np.asarray(x, dtype=np.float64).reshape(self.coarse_shape)).T  # (wc, h)
+        out.reshape(self.fine_shape)[...] += (self.Px @ T).T
+        return out
+
+    def rmatvec(self, r):
+        R = np.asarray(r, dtype=np.float64).reshape(self.fine_shape)
+        T = (self.PyT @ R).T  # (w, hc)
+        return np.ascontiguousarray((self.PxT @ T).T).reshape(-1)
+
+    @property
+    def T(self):
+        return _Transposed(self)
+
+    def tocsr(self):
+        """The same ``P`` as a CSR matrix (``kron(P_y, P_x)``)."""
+        return sp.kron(self.Py, self.Px, format="csr")
+
+    def toarray(self):
+        return self.tocsr().toarray()
+
+
+class _Transposed:
+    def __init__(self, op):
+        self._op = op
+        self.shape = op.shape[::-1]
+
+    def __matmul__(self, r):
+        return self._op.rmatvec(r)
+
+    def tocsr(self):
+        return self._op.tocsr().T.tocsr()
+
+
 def _safe_ratio(num, den, default):
     out = np.full(np.broadcast(num, den).shape, default, dtype=float)
     ok = den > 0
@@ -369,7 +489,7 @@ def _window(arr, oy, ox, ny, nx):
     return out
 
 
-def _operator_interp(offsets, S, shape):
+def _operator_interp(offsets, source, shape):
     """Dendy's black-box interpolation from a radius-1 (up to 9-point) stencil.
 
     Works on the parity classes that need each quantity (the collapsed
@@ -380,26 +500,25 @@ def _operator_interp(offsets, S, shape):
     h, w = shape
     full = np.zeros((2, 2, h, w))
 
-    def collapsed(cls, axis, value):
+    def collapsed(part, axis, value):
         """Sum of the stencil images whose offset has ``offset[axis] == value``, on one parity class."""
-        out = None
+        out = np.zeros(part.shape[1:])
         for k, off in enumerate(offsets):
             if off[axis] == value:
-                part = S[k][cls]
-                out = part.copy() if out is None else out + part
-        return np.zeros(S[0][cls].shape) if out is None else out
+                out += part[k]
+        return out
 
     # pixels between two coarse points horizontally: (even y, odd x)
-    eo = (slice(0, None, 2), slice(1, None, 2))
-    c_mid = collapsed(eo, 1, 0)
-    wxW = _safe_ratio(-collapsed(eo, 1, -1), c_mid, 0.5)
-    wxE = _safe_ratio(-collapsed(eo, 1, 1), c_mid, 0.5)
+    part = source.parity_class(0, 1)
+    c_mid = collapsed(part, 1, 0)
+    wxW = _safe_ratio(-collapsed(part, 1, -1), c_mid, 0.5)
+    wxE = _safe_ratio(-collapsed(part, 1, 1), c_mid, 0.5)
     # ... and vertically: (odd y, even x)
-    oe = (slice(1, None, 2), slice(0, None, 2))
-    c_mid = collapsed(oe, 0, 0)
-    wyN = _safe_ratio(-collapsed(oe, 0, -1), c_mid, 0.5)
-    wyS = _safe_ratio(-collapsed(oe, 0, 1), c_mid, 0.5)
-    del c_mid
+    part = source.parity_class(1, 0)
+    c_mid = collapsed(part, 0, 0)
+    wyN = _safe_ratio(-collapsed(part, 0, -1), c_mid, 0.5)
+    wyS = _safe_ratio(-collapsed(part, 0, 1), c_mid, 0.5)
+    del c_mid, part
     full[0, 0, 0::2, 0::2] = 1.0
     full[0, 0, 0::2, 1::2] = wxW
     full[0, 1, 0::2, 1::2] = wxE
@@ -408,8 +527,8 @@ def _operator_interp(offsets, S, shape):
     # cell centres (odd y, odd x): harmonic combination of the neighbours' rows
     ny, nx = h // 2, w // 2
     if ny and nx:
-        oo = (slice(1, None, 2), slice(1, None, 2))
-        c = {(dy, dx): S[k][oo] for k, (dy, dx) in enumerate(offsets)}
+        part = source.parity_class(1, 1)
+        c = {(dy, dx): part[k] for k, (dy, dx) in enumerate(offsets)}
         zero = np.zeros((ny, nx))
 
         def cc(dy, dx):
@@ -483,7 +602,7 @@ def _galerkin_offsets(offsets):
     return sorted(out)
 
 
-def _galerkin(offsets, S, interp, shape, coarse_offsets):
+def _galerkin(offsets, source, interp, shape, coarse_offsets):
     r"""Coarse stencil of :math:`P^\top A P` by parity-class stencil arithmetic.
 
     For a fine pixel :math:`i = (2Y+p_y, 2X+p_x)`, neighbour offset
@@ -503,17 +622,18 @@ def _galerkin(offsets, S, interp, shape, coarse_offsets):
     radius = max(max(abs(dy), abs(dx)) for dy, dx in offsets)
     pad = (radius + 1) // 2
     slot = {d: i for i, d in enumerate(coarse_offsets)}
+    separable = interp.full is None
     acc = np.zeros((len(coarse_offsets), hc + 1, wc + 1))
     padded = {}
     for ry in (0, 1):
         for rx in (0, 1):
             if ry < h and rx < w:
-                padded[ry, rx] = interp.padded_cls(ry, rx, pad)
+                padded[ry, rx] = interp.padded_cls(ry, rx, pad, separable=separable)
     for py in (0, 1):
         for px in (0, 1):
             if py >= h or px >= w:
                 continue
-            Ssub = np.ascontiguousarray(S[:, py::2, px::2])
+            Ssub = source.parity_class(py, px)
             ny, nx = Ssub.shape[1:]
             a = np.empty((ny, nx))
             tmp = np.empty((ny, nx))
@@ -533,8 +653,13 @@ def _galerkin(offsets, S, interp, shape, coarse_offsets):
                         np.multiply(we, Ssub[k], out=a)
                     for fy in range(ry + 1):
                         for fx in range(rx + 1):
-                            wf = Pj[fy, fx, pad + qy: pad + qy + ny, pad + qx: pad + qx + nx]
-                            np.multiply(a, wf, out=tmp)
+                            if separable:  # (ny, 1) and (1, nx) factors: no dense weight images
+                                wfy, wfx = Pj
+                                np.multiply(a, wfy[fy, pad + qy: pad + qy + ny, None], out=tmp)
+                                tmp *= wfx[fx, None, pad + qx: pad + qx + nx]
+                            else:
+                                wf = Pj[fy, fx, pad + qy: pad + qy + ny, pad + qx: pad + qx + nx]
+                                np.multiply(a, wf, out=tmp)
                             view = acc[slot[(qy + fy - ey, qx + fx - ex)],
                                        ey: ey + ny, ex: ex + nx]
                             np.add(view, tmp, out=view)
@@ -614,6 +739,12 @@ class GridMultigrid:
         level is solved directly (sparse LU).
     max_levels : int, optional
         Upper bound on the number of levels.
+    coarse_precision : {"auto", "double", "single"}, default "auto"
+        Storage and smoothing precision of the coarse levels (level 1 on;
+        the fine level is always float64, so the PCG residuals are exact).
+        ``"single"`` halves the coarse operators' values (8 MP, 13-point:
+        ~200 MB) and perturbs the preconditioner by float32 rounding only;
+        ``"auto"`` takes it for fine grids of at least ``2**21`` pixels.
 
     Attributes
     ----------
@@ -690,7 +821,11 @@ class GridMultigrid:
 
     def __init__(self, A, shape, *, interpolation="bilinear",
                  smoother="gauss_seidel", sweeps=1, max_coarse=1024,
-                 max_levels=None):
+                 max_levels=None, coarse_precision="auto"):
+        if coarse_precision not in ("auto", "double", "single"):
+            raise ValueError(
+                f"`coarse_precision` must be 'auto', 'double' or 'single', got {coarse_precision!r}."
+            )
         if interpolation not in _INTERPOLATIONS:
             raise ValueError(
                 f"unknown interpolation {interpolation!r}; "
@@ -718,6 +853,9 @@ class GridMultigrid:
         self.max_levels = None if max_levels is None else int(max_levels)
         A, shape = _check_matrix(A, shape)
         self.shape = shape
+        single = coarse_precision == "single" or (
+            coarse_precision == "auto" and shape[0] * shape[1] >= _SINGLE_COARSE_PIXELS)
+        self.coarse_dtype = np.dtype(np.float32 if single else np.float64)
         self._build(A)
 
     # ---- construction -------------------------------------------------------
@@ -733,7 +871,7 @@ class GridMultigrid:
         return shapes
 
     def _build(self, A):
-        offsets, S = _stencil_of(A, self.shape)
+        offsets, source = _fine_source(A, self.shape)
         wide = any(max(abs(dy), abs(dx)) > 1 for dy, dx in offsets)
         if self.requested_interpolation == "auto":
             self.interpolation = "bilinear" if wide else "operator"
@@ -757,36 +895,45 @@ class GridMultigrid:
             lvl.offsets = _galerkin_offsets(levels[li - 1].offsets)
             n = lvl.shape[0] * lvl.shape[1]
             fine = levels[li - 1]
-            p_indptr, p_indices, p_gather = _prolongation_pattern(fine.shape)
-            fine.p_gather = p_gather
-            fine.P = sp.csr_array(
-                (np.zeros(p_indices.shape[0]), p_indices, p_indptr),
-                shape=(fine.shape[0] * fine.shape[1], n))
+            if self.interpolation == "operator":
+                p_indptr, p_indices, p_gather = _prolongation_pattern(fine.shape)
+                fine.p_gather = p_gather
+                fine.P = sp.csr_array(
+                    (np.zeros(p_indices.shape[0]), p_indices, p_indptr),
+                    shape=(fine.shape[0] * fine.shape[1], n))
         self.levels = levels
-        box = [S]
-        del S  # _numeric drops the fine stencil as soon as the first Galerkin product is done
+        box = [source]
+        del source  # _numeric drops the fine stencil as soon as the first Galerkin product is done
         self._numeric(box)
 
     def _numeric(self, box, refill_p=True):
         """Numeric setup: interpolation weights, Galerkin products, smoothers, LU.
 
-        ``box`` is a one-element list holding the fine stencil, emptied here so
-        that the fine stencil is freed after the first Galerkin product.
+        ``box`` is a one-element list holding the fine :class:`_StencilSource`,
+        emptied here so that the fine stencil is freed after the first
+        Galerkin product.
         """
-        S = box.pop()
+        source = box.pop()
         levels = self.levels
         for li in range(len(levels) - 1):
             fine, coarse = levels[li], levels[li + 1]
             if self.interpolation == "operator":
-                interp = _operator_interp(fine.offsets, S, fine.shape)
+                interp = _operator_interp(fine.offsets, source, fine.shape)
+                np.take(interp.dense(fine.shape).reshape(-1), fine.p_gather, out=fine.P.data)
             else:
                 interp = _bilinear_interp(fine.shape)
-            if refill_p or self.interpolation == "operator":
-                np.take(interp.dense(fine.shape).reshape(-1), fine.p_gather,
-                        out=fine.P.data)
-            S = _galerkin(fine.offsets, S, interp, fine.shape, coarse.offsets)
-            coarse.A = stencil_to_csr(coarse.offsets, S)
-        del S
+                if refill_p:
+                    fine.P = _SeparableProlongation(interp)
+            S = _galerkin(fine.offsets, source, interp, fine.shape, coarse.offsets)
+            del source
+            coarse.A = stencil_to_csr(coarse.offsets, S, dtype=self.coarse_dtype)
+            if full_pattern_offsets(coarse.A, coarse.shape) == coarse.offsets:
+                # read back class by class: the coarse stencil array can go
+                source = _StencilSource(coarse.offsets, coarse.shape, csr=coarse.A, csr_offsets=coarse.offsets)
+            else:
+                source = _StencilSource(coarse.offsets, coarse.shape, array=S)
+            del S
+        del source
         for lvl in levels[:-1]:
             self._setup_smoother(lvl)
         self._factor_coarsest()
@@ -808,7 +955,7 @@ class GridMultigrid:
         self._pinv = None
         self._lu = None
         try:
-            lu = spla.splu(sp.csc_matrix(Ac))
+            lu = spla.splu(sp.csc_matrix(Ac, dtype=np.float64))
             pivots = np.abs(lu.U.diagonal())
             if not pivots.min() > 1e3 * Ac.shape[0] * np.finfo(float).eps * pivots.max():
                 raise RuntimeError("numerically singular")
@@ -816,7 +963,7 @@ class GridMultigrid:
         except RuntimeError:
             # singular coarsest operator (e.g. pure Neumann problem): pseudo-inverse
             self._lu = None
-            self._pinv = scipy.linalg.pinvh(Ac.toarray())
+            self._pinv = scipy.linalg.pinvh(Ac.toarray().astype(np.float64))
 
     def _coarse_solve(self, b):
         if self._lu is not None:
@@ -853,25 +1000,22 @@ class GridMultigrid:
         """
         A, _ = _check_matrix(A, self.shape)
         offsets = self.levels[0].offsets
-        read = csr_to_stencil(A, self.shape)
-        if read is not None and set(read[0]) <= set(offsets):
-            slot = {o: k for k, o in enumerate(read[0])}
-            S = np.zeros((len(offsets),) + self.shape)
-            for k, o in enumerate(offsets):
-                if o in slot:
-                    S[k] = read[1][slot[o]]
+        pattern = full_pattern_offsets(A, self.shape)
+        if pattern is not None and set(pattern) <= set(offsets):
+            source = _StencilSource(offsets, self.shape, csr=A, csr_offsets=pattern)
         else:
             S = _extract_stencil(A, self.shape, offsets)
-        del read
-        if int(np.count_nonzero(S)) != int(np.count_nonzero(A.data)):
-            # the stencil grew (a pixel and a diagonal determine at most one
-            # in-grid offset, so equal non-zero counts mean nothing is missing)
+            if int(np.count_nonzero(S)) != int(np.count_nonzero(A.data)):
+                # the stencil grew (a pixel and a diagonal determine at most one
+                # in-grid offset, so equal non-zero counts mean nothing is missing)
+                del S
+                self._build(A)
+                return self
+            source = _StencilSource(offsets, self.shape, array=S)
             del S
-            self._build(A)
-            return self
         self.levels[0].A = A
-        box = [S]
-        del S
+        box = [source]
+        del source
         self._numeric(box, refill_p=False)
         return self
 
@@ -898,13 +1042,18 @@ class GridMultigrid:
                 _gs_forward(A, x, b, nu)
             else:
                 self._jacobi(lvl, x, b)
-            r = b - A @ x
+            r = A @ x
+            np.subtract(b, r, out=r)
             xs.append(x)
             bs.append(b)
-            b = lvl.P.T @ r
-        x = self._coarse_solve(b)
+            b = (lvl.P.T @ r).astype(self.coarse_dtype, copy=False)
+            del r  # work vectors go as soon as possible: peak memory of 8-MP frames
+        x = self._coarse_solve(b.astype(np.float64, copy=False)).astype(self.coarse_dtype, copy=False)
         for lvl, xf, bf in zip(levels[-2::-1], xs[::-1], bs[::-1]):
-            xf += lvl.P @ x
+            if isinstance(lvl.P, _SeparableProlongation):
+                lvl.P.add_prolonged(xf, x)
+            else:
+                xf += lvl.P @ x
             if lvl.diag_inv is None:
                 _gs_backward(lvl.A, xf, bf, nu)
             else:
@@ -1011,8 +1160,8 @@ class GridMultigrid:
             L = MultilevelSolver.Level()
             L.A = lvl.A
             if lvl.P is not None:
-                L.P = lvl.P
-                L.R = lvl.P.T.tocsr()
+                L.P = lvl.P if sp.issparse(lvl.P) else lvl.P.tocsr()
+                L.R = L.P.T.tocsr()
                 if lvl.diag_inv is None:
                     nu = self.sweeps
                     L.presmoother = lambda A, x, b, nu=nu: _gs_forward(A, x, b, nu)

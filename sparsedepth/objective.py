@@ -88,23 +88,48 @@ class QuadraticTerm:
         t = _apply(self.operator, z)
         return t if self.target is None else t - self.target
 
+    def _block_residuals(self, z):
+        """``(rows, K_b z − d_b)`` per block: one ``H*W`` work vector for a StencilOperator."""
+        K = self.operator
+        if not isinstance(K, StencilOperator):
+            yield slice(None), self.residual(z)
+            return
+        n = K.shape[1]
+        work = np.empty(n)
+        for b in range(len(K.blocks)):
+            rows = slice(b * n, (b + 1) * n)
+            K.block_matvec(z, b, out=work)
+            if self.target is not None:
+                work -= self.target[rows]
+            yield rows, work
+
     def value(self, z) -> float:
         if self.weight == 0:
             return 0.0
-        res = self.residual(z)
-        sq = res * res
-        if self.row_weights is not None:
-            sq = sq * self.row_weights
-        return float(self.weight * np.sum(sq))
+        total = 0.0
+        for rows, res in self._block_residuals(z):
+            sq = res * res
+            if self.row_weights is not None:
+                sq *= self.row_weights[rows]
+            total += float(np.sum(sq))
+        return float(self.weight * total)
 
     def gradient(self, z):
         """``2 · weight · Kᵀ (r ⊙ (K z − d))``."""
         if self.weight == 0:
             return np.zeros_like(z)
-        res = self.residual(z)
-        if self.row_weights is not None:
-            res = res * self.row_weights
-        return 2.0 * self.weight * _apply_adjoint(self.operator, res)
+        if not isinstance(self.operator, StencilOperator):
+            res = self.residual(z)
+            if self.row_weights is not None:
+                res = res * self.row_weights
+            return 2.0 * self.weight * _apply_adjoint(self.operator, res)
+        grad = np.zeros(self.operator.shape[1])
+        for b, (rows, res) in enumerate(self._block_residuals(z)):
+            if self.row_weights is not None:
+                res *= self.row_weights[rows]
+            self.operator.block_rmatvec_add(grad, b, res)
+        grad *= 2.0 * self.weight
+        return grad
 
     def normal_matrix(self, n: int) -> sp.csr_matrix:
         """Half the Hessian: ``weight · Kᵀ diag(r) K`` (sparse, ``(n, n)``)."""

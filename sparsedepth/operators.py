@@ -249,28 +249,44 @@ class StencilOperator:
             raise ValueError(f"expected a vector of length {n} (grid {self.grid_shape}), got shape {z.shape}")
         return z.reshape(self.grid_shape)
 
+    def block_matvec(self, z, b, out=None):
+        """Rows of block ``b`` of ``K z`` (length ``H * W``), into ``out`` if given."""
+        img = self._as_image(z)
+        out = np.zeros(self.grid_shape) if out is None else out.reshape(self.grid_shape)
+        out[...] = 0.0
+        region = self._regions[b]
+        view = out[region]
+        for offset, coef in self.blocks[b]:
+            view += coef * img[_shifted(region, offset)]
+        return out.reshape(-1)
+
+    def block_rmatvec_add(self, out, b, v):
+        """``out += K_bᵀ v`` for the rows ``v`` (length ``H * W``) of block ``b``; returns ``out``."""
+        target = out.reshape(self.grid_shape)
+        region = self._regions[b]
+        src = np.asarray(v, dtype=np.float64).reshape(self.grid_shape)[region]
+        for offset, coef in self.blocks[b]:
+            target[_shifted(region, offset)] += coef * src
+        return out
+
     def matvec(self, z):
         """``K z`` for a vector of length ``H * W``; returns length ``n_blocks * H * W``."""
-        img = self._as_image(z)
-        out = np.zeros((len(self.blocks),) + self.grid_shape)
-        for b, (block, region) in enumerate(zip(self.blocks, self._regions)):
-            view = out[b][region]
-            for offset, coef in block:
-                view += coef * img[_shifted(region, offset)]
-        return out.reshape(-1)
+        n = self.shape[1]
+        out = np.empty(self.shape[0])
+        for b in range(len(self.blocks)):
+            self.block_matvec(z, b, out=out[b * n:(b + 1) * n])
+        return out
 
     def rmatvec(self, v):
         """``Kᵀ v`` for a vector of length ``n_blocks * H * W``."""
         v = np.asarray(v, dtype=np.float64)
         if v.ndim != 1 or v.shape[0] != self.shape[0]:
             raise ValueError(f"expected a vector of length {self.shape[0]}, got shape {v.shape}")
-        rows = v.reshape((len(self.blocks),) + self.grid_shape)
-        out = np.zeros(self.grid_shape)
-        for b, (block, region) in enumerate(zip(self.blocks, self._regions)):
-            src = rows[b][region]
-            for offset, coef in block:
-                out[_shifted(region, offset)] += coef * src
-        return out.reshape(-1)
+        n = self.shape[1]
+        out = np.zeros(n)
+        for b in range(len(self.blocks)):
+            self.block_rmatvec_add(out, b, v[b * n:(b + 1) * n])
+        return out
 
     def __matmul__(self, z):
         return self.matvec(z)

@@ -25,7 +25,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["stencil_to_csr", "csr_to_stencil"]
+__all__ = ["stencil_to_csr", "csr_to_stencil", "full_pattern_offsets"]
+
+#: entries per chunk of the conversions (their temporaries stay ~16 MB)
+_CHUNK_ENTRIES = 1 << 21
 
 
 def _index_dtype(n_entries):
@@ -70,7 +73,8 @@ def _blocks(offsets, shape, indptr):
     start)``: image rows ``y0:y1``, columns ``xs`` (a slice), offset indices
     ``ks`` (a slice or an index array) and the first position of the block in
     the group's rows, so that ``rows[:, start:start + nx * nk]`` reshaped to
-    ``(rows, nx, nk)`` is the block.
+    ``(rows, nx, nk)`` is the block.  Groups are cut into chunks of about
+    ``_CHUNK_ENTRIES`` entries so that the callers' temporaries stay small.
     """
     H, W = shape
     dy = np.array([o[0] for o in offsets])
@@ -90,13 +94,17 @@ def _blocks(offsets, shape, indptr):
         full = np.flatnonzero(counts == in_rows.size) if in_rows.size else np.array([], dtype=int)
         if full.size and full.size == full[-1] - full[0] + 1:
             x_lo, x_hi = int(full[0]), int(full[-1]) + 1
-            yield y, y1, L, slice(x_lo, x_hi), slice(int(in_rows[0]), int(in_rows[-1]) + 1), int(before[x_lo])
         else:
             x_lo = x_hi = 0
-        for x in range(W):
-            if (x_lo <= x < x_hi) or counts[x] == 0:
-                continue
-            yield y, y1, L, slice(x, x + 1), np.flatnonzero(present[x]), int(before[x])
+        step = max(1, _CHUNK_ENTRIES // max(L, 1))  # rows per chunk: bounded temporaries
+        for c0 in range(y, y1, step):
+            c1 = min(y1, c0 + step)
+            if x_hi > x_lo:
+                yield c0, c1, L, slice(x_lo, x_hi), slice(int(in_rows[0]), int(in_rows[-1]) + 1), int(before[x_lo])
+            for x in range(W):
+                if (x_lo <= x < x_hi) or counts[x] == 0:
+                    continue
+                yield c0, c1, L, slice(x, x + 1), np.flatnonzero(present[x]), int(before[x])
         y = y1
 
 
@@ -111,13 +119,12 @@ def _block_view(array, indptr, W, y0, y1, L, xs, ks, start):
 
 def _block_columns(offsets, W, y0, y1, xs, ks, dtype):
     """Column indices of one block: ``(y + dy_k) W + x + dx_k``."""
-    delta = np.array([dy * W + dx for dy, dx in offsets], dtype=np.int64)[ks]
-    cols = (np.arange(y0, y1, dtype=np.int64)[:, None, None] * W
-            + np.arange(xs.start, xs.stop, dtype=np.int64)[None, :, None] + delta[None, None, :])
-    return cols.astype(dtype, copy=False)
+    delta = np.array([dy * W + dx for dy, dx in offsets], dtype=dtype)[ks]
+    return (np.arange(y0, y1, dtype=dtype)[:, None, None] * dtype.type(W)
+            + np.arange(xs.start, xs.stop, dtype=dtype)[None, :, None] + delta[None, None, :])
 
 
-def stencil_to_csr(offsets, stencil):
+def stencil_to_csr(offsets, stencil, *, dtype=np.float64):
     """CSR matrix of a stencil, in the full in-grid pattern.
 
     Parameters
@@ -127,6 +134,9 @@ def stencil_to_csr(offsets, stencil):
     stencil : ndarray, shape (len(offsets), H, W)
         Coefficient images; entries whose neighbour lies outside the grid are
         ignored.
+
+    dtype : numpy dtype, default float64
+        Type of the stored values (float32 for single-precision coarse levels).
 
     Returns
     -------
@@ -148,7 +158,7 @@ def stencil_to_csr(offsets, stencil):
     n = H * W
     indptr = _row_starts(offsets, (H, W), _index_dtype(n * K))
     nnz = int(indptr[-1])
-    data = np.empty(nnz)
+    data = np.empty(nnz, dtype=dtype)
     indices = np.empty(nnz, dtype=indptr.dtype)
     for block in _blocks(offsets, (H, W), indptr):
         y0, y1, _, xs, ks, _ = block
@@ -167,8 +177,8 @@ def _offsets_of_row(A, row, W):
     return [(int(a), int(b)) for a, b in zip(dy, delta - dy * W)]
 
 
-def csr_to_stencil(A, shape):
-    """Offsets and stencil images of a CSR matrix stored in the full in-grid pattern.
+def full_pattern_offsets(A, shape):
+    """Offsets of a CSR matrix stored in the full in-grid pattern, else None.
 
     Parameters
     ----------
@@ -178,11 +188,12 @@ def csr_to_stencil(A, shape):
 
     Returns
     -------
-    (offsets, stencil) or None
-        ``None`` when ``A`` is not in the layout of :func:`stencil_to_csr`
-        (checked exactly: ``indptr`` and ``indices`` must equal the pattern
-        of the offsets read from a row of the grid's centre), in which case
-        the caller extracts the stencil by other means.
+    list of tuple of int, or None
+        The offsets read from a row at the grid's centre, when ``A.indptr``
+        and ``A.indices`` equal exactly the pattern :func:`stencil_to_csr`
+        makes for them (checked chunk by chunk, no large temporaries);
+        ``None`` otherwise (small grids whose centre row misses an offset
+        included).
     """
     H, W = shape
     n = H * W
@@ -192,15 +203,57 @@ def csr_to_stencil(A, shape):
     offsets = _offsets_of_row(A, centre, W)
     if offsets != sorted(set(offsets)) or any(2 * abs(dx) >= W for _, dx in offsets):
         return None
-    K = len(offsets)
     indptr = _row_starts(offsets, (H, W), np.int64)
     if not np.array_equal(A.indptr, indptr):
         return None
-    stencil = np.zeros((K, H, W))
     for block in _blocks(offsets, (H, W), indptr):
         y0, y1, _, xs, ks, _ = block
         if not np.array_equal(_block_view(A.indices, indptr, W, *block),
-                              _block_columns(offsets, W, y0, y1, xs, ks, np.int64)):
+                              _block_columns(offsets, W, y0, y1, xs, ks, A.indices.dtype)):
             return None
-        stencil[ks, y0:y1, xs] = np.moveaxis(_block_view(A.data, indptr, W, *block), -1, 0)
+    return offsets
+
+
+def csr_to_stencil(A, shape, *, offsets=None, parity=None):
+    """Offsets and stencil images of a CSR matrix stored in the full in-grid pattern.
+
+    Parameters
+    ----------
+    A : scipy.sparse CSR matrix or array, shape (H*W, H*W)
+    shape : tuple of int
+        ``(H, W)``.
+    offsets : list of tuple of int, optional
+        The result of :func:`full_pattern_offsets` when already checked.
+    parity : tuple of int, optional
+        ``(py, px)``: read only the pixels ``(py::2, px::2)`` (one parity
+        class, a quarter of the memory).
+
+    Returns
+    -------
+    (offsets, stencil) or None
+        ``stencil`` has shape ``(len(offsets), H, W)`` (or the class's
+        shape); ``None`` when ``A`` is not in the layout of
+        :func:`stencil_to_csr` (see :func:`full_pattern_offsets`), in which
+        case the caller extracts the stencil by other means.
+    """
+    H, W = shape
+    if offsets is None:
+        offsets = full_pattern_offsets(A, shape)
+        if offsets is None:
+            return None
+    indptr = A.indptr
+    py, px = (0, 0) if parity is None else parity
+    step = 1 if parity is None else 2
+    stencil = np.zeros((len(offsets), len(range(py, H, step)), len(range(px, W, step))))
+    for block in _blocks(offsets, (H, W), indptr):
+        y0, y1, _, xs, ks, _ = block
+        view = _block_view(A.data, indptr, W, *block)
+        ly = (py - y0) % step
+        lx = (px - xs.start) % step
+        part = view[ly::step, lx::step]
+        if part.size == 0:
+            continue
+        r0 = (y0 + ly - py) // step
+        c0 = (xs.start + lx - px) // step
+        stencil[ks, r0:r0 + part.shape[0], c0:c0 + part.shape[1]] = np.moveaxis(part, -1, 0)
     return offsets, stencil

@@ -93,6 +93,11 @@ def test_bilinear_prolongation_is_kron_of_1d_interpolation(shape):
     P = mg.levels[0].P.toarray()
     expected = np.kron(linear_1d(shape[0]), linear_1d(shape[1]))
     np.testing.assert_array_equal(P, expected)
+    # applied matrix-free, one axis at a time: same products as the dense matrix
+    x = rng.standard_normal(expected.shape[1])
+    r = rng.standard_normal(expected.shape[0])
+    np.testing.assert_allclose(mg.levels[0].P @ x, expected @ x, atol=1e-14)
+    np.testing.assert_allclose(mg.levels[0].P.T @ r, expected.T @ r, atol=1e-13)
 
 
 @pytest.mark.parametrize("interpolation", ["bilinear", "operator"])
@@ -103,7 +108,7 @@ def test_galerkin_equals_scipy_triple_product(shape, interpolation):
     mg = GridMultigrid(A, shape, max_coarse=1, interpolation=interpolation)
     assert len(mg.levels) >= 2
     for fine, coarse in zip(mg.levels[:-1], mg.levels[1:]):
-        P = sp.csr_array(fine.P)
+        P = sp.csr_array(fine.P if sp.issparse(fine.P) else fine.P.tocsr())
         expected = (P.T @ fine.A @ P).toarray()
         # rounding is relative to the terms summed, not to the (cancelled) result
         scale = (abs(P).T @ abs(fine.A) @ abs(P)).toarray()
@@ -116,7 +121,7 @@ def test_galerkin_of_13_point_operator(shape):
     A = biharmonic_system(shape, np.random.default_rng(2))
     mg = GridMultigrid(A, shape, max_coarse=1)
     for fine, coarse in zip(mg.levels[:-1], mg.levels[1:]):
-        P = sp.csr_array(fine.P)
+        P = sp.csr_array(fine.P if sp.issparse(fine.P) else fine.P.tocsr())
         expected = (P.T @ fine.A @ P).toarray()
         np.testing.assert_allclose(coarse.A.toarray(), expected, rtol=0,
                                    atol=1e-13 * np.abs(expected).max())
@@ -456,3 +461,22 @@ def test_rhs_size_checked():
     A = random_system((4, 4), np.random.default_rng(28))
     with pytest.raises(ValueError, match="`b` has 15 entries"):
         solve_spd(A, np.ones(15), (4, 4))
+
+
+def test_single_precision_coarse_levels_round_the_double_ones_and_converge():
+    shape = (40, 56)
+    rng = np.random.default_rng(11)
+    A = random_system(shape, rng, jump=True)
+    double = GridMultigrid(A, shape, coarse_precision="double")
+    single = GridMultigrid(A, shape, coarse_precision="single")
+    assert single.levels[0].A.dtype == np.float64  # the fine operator is never rounded
+    for a, b in zip(double.levels[1:], single.levels[1:]):
+        assert b.A.dtype == np.float32
+        scale = abs(a.A).max()
+        np.testing.assert_allclose(b.A.toarray(), a.A.toarray(), rtol=0, atol=1e-6 * scale)
+    rhs = rng.standard_normal(A.shape[0])
+    x, info = single.solve(rhs, rtol=1e-10)
+    assert info.converged
+    assert np.linalg.norm(rhs - A @ x) <= 1e-10 * np.linalg.norm(rhs)
+    with pytest.raises(ValueError, match="coarse_precision"):
+        GridMultigrid(A, shape, coarse_precision="half")
