@@ -79,12 +79,11 @@ def _blocks(offsets, shape, indptr):
     H, W = shape
     dy = np.array([o[0] for o in offsets])
     dx = np.array([o[1] for o in offsets])
-    y = 0
-    while y < H:
-        rows_ok = (y + dy >= 0) & (y + dy < H)
-        y1 = y + 1
-        while y1 < H and np.array_equal((y1 + dy >= 0) & (y1 + dy < H), rows_ok):
-            y1 += 1
+    ys = np.arange(H)[:, None] + dy[None, :]
+    ok = (ys >= 0) & (ys < H)  # (H, K): vertical offsets inside the grid, per image row
+    starts = np.concatenate([[0], 1 + np.flatnonzero(np.any(ok[1:] != ok[:-1], axis=1)), [H]])
+    for y, y1 in zip(starts[:-1].tolist(), starts[1:].tolist()):
+        rows_ok = ok[y]
         columns = np.arange(W)[:, None] + dx[None, :]
         present = rows_ok[None, :] & (columns >= 0) & (columns < W)  # (W, K)
         counts = present.sum(axis=1)
@@ -105,7 +104,6 @@ def _blocks(offsets, shape, indptr):
                 if (x_lo <= x < x_hi) or counts[x] == 0:
                     continue
                 yield c0, c1, L, slice(x, x + 1), np.flatnonzero(present[x]), int(before[x])
-        y = y1
 
 
 def _block_view(array, indptr, W, y0, y1, L, xs, ks, start):
