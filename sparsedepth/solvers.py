@@ -15,8 +15,10 @@ amg         γ = 0        PCG with a multigrid V-cycle (geometric GridMultigrid;
                          ``options={"preconditioner": "amg"}`` for pyamg
                          Ruge–Stüben), same rule
 irls        any          ``F_{k-1} − F_k ≤ tol · F_k`` at the final ε
-admm        any          primal and dual residuals ``<= tol`` (relative),
-                         then an exact active-set polish
+admm        any          primal residual ``<= tol`` (relative) starts exact
+                         active-set polishes, one every 5 iterations; stops
+                         when the best polished F changes by ``<= 2e-7``
+                         (relative) between two of them
 lbfgsb      any          SciPy L-BFGS-B on the smoothed objective scaled by
                          ``1/F(x0)``; ``ftol = tol``
 adam        any          projected Adam on the smoothed objective; relative
@@ -34,6 +36,7 @@ import scipy.optimize
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
+from ._l1 import StackedL1
 from .linear import make_preconditioner, pcg
 from .multigrid import GridMultigrid
 from .result import IterationRecord, SolverState
@@ -251,63 +254,114 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
 # ---------------------------------------------------------------------------
 # L1 problem: ADMM / split Bregman with a constant system matrix
 # ---------------------------------------------------------------------------
-def _stack_l1(objective):
-    terms = objective.abs_terms
-    K = sp.vstack([t.operator for t in terms], format="csr")
-    c = np.concatenate([t.scaled_row_weights() for t in terms])
-    return K, c
-
-
 def _default_rho(objective):
-    """ADMM penalty: twice the data weight α (weight of the ``data`` term), else 2.
+    """ADMM penalty: 1.5 × the data weight α (weight of the ``data`` term), else 1.5.
 
-    ρ has the units of the quadratic weights.  With tol = 1e-3 plus the
-    active-set polish, ρ = 2α reached the exact objective within ~1e-7 of a
-    long reference run on two real 640x480 NYU frames (γ = 0.01), where
-    ρ = α stopped ~1e-6 short at the same tolerance (bench/perf.py).
+    ρ has the units of the quadratic weights.  With over-relaxation 1.9 and
+    the polishes of :func:`solve_admm`, ρ = 1.5α reached the optimum of the
+    ``bench/perf.py`` frame (γ = 0.01) within ~2e-7 in 40 iterations; ρ = α
+    identifies the tied edges faster at first but then stalls, ρ = 2α … 8α is
+    slower from the start (measured as the polished F after k iterations).
     """
     for term in objective.quadratic_terms:
         if term.name == "data":
-            return 2.0 * float(term.weight)
-    return 2.0
+            return 1.5 * float(term.weight)
+    return 1.5
 
 
-def _shrink(v, threshold):
-    return np.sign(v) * np.maximum(np.abs(v) - threshold, 0.0)
+def _inner_pcg(S, precondition, z, Sz, rhs, *, rtol, factor, max_steps):
+    r"""PCG steps on ``S z = rhs`` from the current ``z``, updating ``z`` and ``Sz = S z`` in place.
+
+    Stops when ``‖rhs − S z‖ <= max(rtol ‖rhs‖, factor ‖rhs − S z_start‖)``
+    or after ``max_steps`` steps; the residual is ``rhs − Sz`` with ``Sz``
+    updated alongside ``z`` (one product with ``S`` per step).  Returns the
+    number of steps.
+    """
+    from .linear import _dot
+
+    r = rhs - Sz
+    rr = _dot(r, r)
+    target = max(rtol * rtol * _dot(rhs, rhs), factor * factor * rr)
+    if rr <= target:
+        return 0
+    d = precondition(r)
+    rd = _dot(r, d)
+    p = d
+    for step in range(1, max_steps + 1):
+        q = S @ p
+        pq = _dot(p, q)
+        if not pq > 0:
+            return step - 1
+        alpha = rd / pq
+        z += alpha * p
+        Sz += alpha * q
+        r -= alpha * q
+        if step == max_steps or _dot(r, r) <= target:
+            return step
+        d = precondition(r)
+        rd_new = _dot(r, d)
+        p = d + (rd_new / rd) * p
+        rd = rd_new
+    return max_steps
 
 
 def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
-    r"""ADMM (split Bregman) with over-relaxation for the L1 terms.
+    r"""ADMM (split Bregman) with over-relaxation for the L1 terms, finished by exact active-set polishes.
 
     Notes
     -----
-    With ``u = K z`` (``K`` the stacked L1 operators, ``c`` their weights), the
-    scaled-form iteration is::
+    With ``u = K z`` (``K`` the stacked L1 operators, ``c`` their weights,
+    see :class:`~sparsedepth._l1.StackedL1`), the scaled-form iteration is::
 
         z ← (2A + ρ KᵀK)⁻¹ (2b + ρ Kᵀ(u − λ))      # PCG, warm-started, inexact
-        v ← a K z + (1 − a) u                       # over-relaxation, a = 1.6
-        u ← shrink(v + λ, c/ρ)
-        λ ← λ + v − u
+        v ← a K z + (1 − a) u                       # over-relaxation, a = 1.9
+        u ← shrink(v + λ, c/ρ)                      # = v + λ − clip(v + λ, ±c/ρ)
+        λ ← λ + v − u                               # = clip(v + λ, ±c/ρ)
 
-    The system matrix ``2A + ρKᵀK`` does not depend on the iterate and is a
-    grid operator of stencil radius <= 2, so ONE geometric multigrid hierarchy
-    (:class:`~sparsedepth.multigrid.GridMultigrid`, option ``preconditioner``,
-    default ``"grid"``; ``"amg"`` for pyamg) preconditions every inner PCG
-    solve, warm-started from the previous ``z``, stops when its residual is
-    ``<= max(inner_rtol ‖rhs‖, inner_factor ‖rhs − S z_prev‖)`` (defaults
-    ``inner_rtol = 1e-10``, ``inner_factor = 0.1``): a fixed reduction of the
-    residual the new right-hand side creates, i.e. one or two V-cycles, with
-    an error that shrinks as the iterates (and so the right-hand sides)
-    settle.  ρ (option ``rho``; default
-    :func:`_default_rho`) is adapted by residual balancing (factor 2 when one
-    residual exceeds 10× the other, checked every 5 iterations) during the
-    first ``adapt_iters`` iterations (default 0); the hierarchy is then
-    re-computed numerically with :meth:`GridMultigrid.update`.  Stops when
-    the primal and dual residuals ``r_k = ‖Kz − u‖ / max(‖Kz‖, ‖u‖)`` and
-    ``s_k = ρ‖Kᵀ(u − u_prev)‖ / ‖ρKᵀλ‖`` are both ``<= tol``.  Finally an
-    *active-set polish* (:func:`_active_set_polish`) solves the quadratic
-    problem with the edges where ``u = 0`` tied (pixels merged) and the signs
-    of the others fixed, and keeps it only if it lowers the exact F.
+    The system matrix ``S = 2A + ρKᵀK`` does not depend on the iterate and is
+    a grid operator of stencil radius <= 2, so ONE geometric multigrid
+    hierarchy (:class:`~sparsedepth.multigrid.GridMultigrid`, option
+    ``preconditioner``, default ``"grid"``; ``"amg"`` for pyamg)
+    preconditions every inner solve.  The inner solve takes PCG steps from the
+    previous ``z`` until ``‖rhs − S z‖ <= max(inner_rtol ‖rhs‖, inner_factor
+    ‖rhs − S z_prev‖)`` (defaults ``1e-10`` and ``0.1``; at most
+    ``inner_max_iter = 5`` steps): in practice one V-cycle and one product with
+    ``S`` per iteration, as ``S z`` is carried along with ``z``.  When ``K`` is
+    the image gradient, ``K z`` and ``Kᵀ v`` are array slices
+    (:meth:`StackedL1.apply`), not sparse products.  The exact objective of
+    every iterate is recorded; for ``z >= 0`` it is evaluated as
+    ``zᵀAz − 2bᵀz + c + Σ c_k |(Kz)_k|`` with ``zᵀAz = ½(zᵀSz − ρ‖Kz‖²)``.
+    The residuals are ``r_k = ‖Kz − u‖ / max(‖Kz‖, ‖u‖)`` (primal) and
+    ``s_k = ‖u − u_prev‖ / ‖λ‖`` (dual, measured on the edges).
+
+    ADMM finds the set of edges with ``(K z*)_k = 0`` long before its iterates
+    are accurate, so once ``r_k <= tol`` (default 1e-3) it switches to
+    *active-set polishes* (:func:`_polish_active_set`): the quadratic problem
+    with the edges where ``u = 0`` tied (pixels merged into connected
+    components) and the signs of the other ``u_k`` fixed, solved exactly; an
+    edge whose polished difference has the wrong sign is then tied too and the
+    polish repeated (up to ``polish_rounds = 2`` solves).  With the optimal
+    tied set and signs the polished point is the exact minimiser.  ADMM goes
+    on and is polished again every ``check_every = 5`` iterations; the solver
+    stops when a polish changes the best polished ``F`` by at most
+    ``check_rtol · F`` (default 2e-7).  This is a heuristic, not a
+    certificate: the polished ``F`` can stall while ADMM slowly releases a
+    wrongly tied edge.  The best polished point is returned if it is below the
+    last ADMM iterate, so the reported ``F`` is exact and ``z >= 0``.  With
+    ``polish=False``, or when the reduced model is singular (a component
+    without any quadratic term), it is plain ADMM stopped by
+    ``r_k, s_k <= tol``.
+
+    ρ (option ``rho``; default :func:`_default_rho`) may be adapted by
+    residual balancing (factor 2 when one residual exceeds 10× the other,
+    checked every 5 iterations) during the first ``adapt_iters`` iterations
+    (default 0); the hierarchy is then re-computed numerically with
+    :meth:`GridMultigrid.update`.
+
+    Options: ``rho``, ``relaxation`` (1.9), ``inner_rtol``, ``inner_factor``,
+    ``inner_max_iter``, ``adapt_iters``, ``preconditioner``, ``polish``,
+    ``polish_rounds``, ``check_every``, ``check_rtol``, ``polish_rtol``
+    (1e-7), ``polish_preconditioner`` (``"jacobi"``; or ``"amg"``).
 
     References
     ----------
@@ -318,9 +372,9 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     """
     from .linear import _dot
 
-    A0, b, _ = objective.normal_equations()
+    A0, b, const = objective.normal_equations()
     z = np.maximum(np.asarray(x0, dtype=float).copy(), 0.0)
-    F = recorder(0, z, inner=0)
+    recorder(0, z, inner=0)
     kind = options.get("preconditioner", "grid")
     if not objective.has_l1:
         # nothing to split: one PCG solve
@@ -328,114 +382,211 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
         z, n, ok, rel = pcg(A0, b, x0=z, M=M, rtol=options.get("inner_rtol", 1e-10))
         recorder(1, z, inner=n)
         return _output(z, 1, ok, f"quadratic problem: relative residual {rel:.1e}", recorder)
-    K, c = _stack_l1(objective)
-    KT = K.T  # a CSC view, no copy
-    relax = float(options.get("relaxation", 1.6))
+    l1 = StackedL1(objective)
+    c = l1.weights
+    relax = float(options.get("relaxation", 1.9))
     inner_rtol = float(options.get("inner_rtol", 1e-10))
     inner_factor = float(options.get("inner_factor", 0.1))
+    inner_max = int(options.get("inner_max_iter", 5))
     adapt_iters = int(options.get("adapt_iters", 0))
-    polish = bool(options.get("polish", True))
-    Kz = K @ z
+    polish = bool(options.get("polish", True)) and l1.pixel_pairs()[3]
+    polish_args = dict(rounds=int(options.get("polish_rounds", 2)), rtol=float(options.get("polish_rtol", 1e-7)),
+                       preconditioner=options.get("polish_preconditioner", "jacobi"))
+    check_every = int(options.get("check_every", 5))
+    check_rtol = float(options.get("check_rtol", 2e-7))
     rho = float(options["rho"]) if "rho" in options else _default_rho(objective)
-    KtK = (KT @ K).tocsr()
-    u = Kz.copy()
-    lam = np.zeros_like(u)
+    KtK = l1.gram()
     S = (2.0 * A0 + rho * KtK).tocsr()
     if adapt_iters <= 0:
         del KtK  # only needed to rebuild S for a new rho
     if kind == "grid":
         hierarchy = GridMultigrid(S, objective.shape, interpolation="auto")
-        M = hierarchy.aspreconditioner()
+        precondition = hierarchy.vcycle
     else:
         hierarchy = None
-        M = make_preconditioner(S, kind, shape=objective.shape)
+        precondition = make_preconditioner(S, kind, shape=objective.shape).matvec
+    Sz = S @ z
+    Kz = l1.apply(z)
+    u = Kz.copy()
+    lam = np.zeros_like(u)
+    threshold = c / rho
     inner_total = 0
+    r_norm = s_norm = np.inf
+    polish_steps = 0
+    best = None  # (F, z, components) of the best polished point
+    next_polish = None
     converged = False
     message = f"reached max_iter = {max_iter}"
+    trace = options.get("_trace")
     k = 0
     while k < max_iter:
         k += 1
-        rhs = 2.0 * b + rho * (KT @ (u - lam))
-        res0 = rhs - S @ z
-        atol_k = inner_factor * np.sqrt(_dot(res0, res0))
-        z, n_inner, _, _ = pcg(S, rhs, x0=z, M=M, rtol=inner_rtol, atol=atol_k,
-                               maxiter=options.get("inner_max_iter", 200))
-        inner_total += n_inner
-        Kz = K @ z
-        v = relax * Kz + (1.0 - relax) * u
+        rhs = l1.adjoint(u - lam)
+        rhs *= rho
+        rhs += 2.0 * b
+        if k % 25 == 0:
+            Sz = S @ z  # drop the rounding drift of the carried product
+        inner_total += _inner_pcg(S, precondition, z, Sz, rhs, rtol=inner_rtol, factor=inner_factor,
+                                  max_steps=inner_max)
+        Kz = l1.apply(z)
+        # v = a Kz + (1 − a) u;  x = v + λ;  λ ← clip(x, ±c/ρ);  u ← x − λ
+        x = Kz * relax
+        if relax != 1.0:
+            x += (1.0 - relax) * u
+        x += lam
         u_prev = u
-        u = _shrink(v + lam, c / rho)
-        lam += v - u
-        d = Kz - u
-        r_norm = np.sqrt(_dot(d, d)) / max(np.sqrt(_dot(Kz, Kz)), np.sqrt(_dot(u, u)), 1e-300)
-        du = KT @ (u - u_prev)
-        KTl = KT @ lam
-        s_norm = np.sqrt(_dot(du, du)) / max(np.sqrt(_dot(KTl, KTl)), 1e-300)
-        recorder(k, np.maximum(z, 0.0), inner=inner_total)
-        if r_norm <= tol and s_norm <= tol:
+        np.clip(x, -threshold, threshold, out=lam)
+        u = np.subtract(x, lam, out=x)
+        Kz_sq = _dot(Kz, Kz)
+        # between polishes the residuals decide nothing: skip their dot products
+        if best is None or not polish or k <= adapt_iters or trace is not None:
+            u_sq = _dot(u, u)
+            r_norm = np.sqrt(max(Kz_sq - 2.0 * _dot(Kz, u) + u_sq, 0.0)) / max(np.sqrt(max(Kz_sq, u_sq)), 1e-300)
+        if not polish or k <= adapt_iters or trace is not None:
+            u_prev -= u
+            s_norm = np.sqrt(_dot(u_prev, u_prev) / max(_dot(lam, lam), 1e-300))
+        if trace is not None:
+            trace.append((k, r_norm, s_norm))
+        if z.min() >= 0:
+            value = 0.5 * (_dot(z, Sz) - rho * Kz_sq) - 2.0 * _dot(b, z) + const + l1.value(Kz)
+            recorder(k, z, inner=inner_total, value=value)
+        else:
+            recorder(k, np.maximum(z, 0.0), inner=inner_total)
+        if not polish and r_norm <= tol and s_norm <= tol:
             converged = True
             message = f"primal {r_norm:.1e} and dual {s_norm:.1e} residuals <= tol {tol:.1e} (rho = {rho:.3g})"
             break
+        if polish and (k == next_polish or (next_polish is None and r_norm <= tol)):
+            F_prev = None if best is None else best[0]
+            polished = _polish_active_set(A0, b, const, l1, u, z0=z if best is None else best[1], **polish_args)
+            if polished is None:  # the reduced model is singular: plain ADMM
+                polish = False
+                continue
+            z_pol, F_pol, n_comp, steps = polished
+            polish_steps += steps
+            if best is None or F_pol < best[0]:
+                best = (F_pol, z_pol, n_comp)
+            next_polish = k + check_every
+            if F_prev is not None and abs(F_prev - F_pol) <= check_rtol * abs(F_pol):
+                converged = True
+                message = (f"active-set polish at iteration {k} changed the best polished F by "
+                           f"{(F_prev - F_pol) / abs(F_pol):.1e} (relative), |.| <= check_rtol {check_rtol:.1e} "
+                           f"(rho = {rho:.3g})")
+                break
         if k <= adapt_iters and k % 5 == 0 and (r_norm > 10 * s_norm or s_norm > 10 * r_norm):
             factor = 2.0 if r_norm > s_norm else 0.5
             rho *= factor
             lam /= factor
+            threshold = c / rho
             S = (2.0 * A0 + rho * KtK).tocsr()
+            Sz = S @ z
             if hierarchy is not None:
                 hierarchy.update(S)
             else:
-                M = make_preconditioner(S, kind, shape=objective.shape)
+                precondition = make_preconditioner(S, kind, shape=objective.shape).matvec
     z = np.maximum(z, 0.0)
-    if polish:
-        z_pol = _active_set_polish(objective, A0, b, K, c, u, kind, z0=z)
-        if z_pol is not None:
-            z_pol = np.maximum(z_pol, 0.0)
-            F_pol, F_cur = objective.value(z_pol), objective.value(z)
-            if F_pol < F_cur:
-                z = z_pol
-                recorder(k + 1, z, inner=inner_total, value=F_pol)
-                message += "; active-set polish lowered F"
+    if polish and best is None:
+        polished = _polish_active_set(A0, b, const, l1, u, z0=z, **polish_args)
+        if polished is not None:
+            polish_steps += polished[3]
+            best = (polished[1], polished[0], polished[2])
+    if best is not None:
+        F_cur = objective.value(z)
+        if best[0] < F_cur:
+            z = best[1]
+            recorder(k + 1, z, inner=inner_total + polish_steps, value=best[0])
+            message += f"; returned the best active-set polish ({best[2]} components, {polish_steps} CG steps in all)"
+        else:
+            message += "; no active-set polish lowered F"
     return _output(z, k, converged, message, recorder)
 
 
-def _active_set_polish(objective, A, b, K, c, u, kind, z0=None, rtol=1e-11):
-    r"""Minimise the quadratic model with edges where ``u == 0`` tied and other signs fixed.
-
-    Pixels joined by a tied edge are merged (connected components); with
-    ``C`` the pixel-to-component indicator, ``z = C y`` and::
-
-        Cᵀ A C y = Cᵀ(b − ½ Kᵀ(c ⊙ sign u))
-
-    is solved by PCG with a pyamg Ruge–Stüben preconditioner (the reduced
-    system is no longer a grid operator) to relative residual ``rtol``,
-    warm-started from the component means of ``z0``.  Returns None where
-    ``K`` has rows that are not pixel differences.
-    """
+def _components(n, first, second):
+    """Connected components of the graph on ``n`` nodes with edges ``first[i]–second[i]``; ``(labels, count)``."""
     from scipy.sparse.csgraph import connected_components
 
+    graph = sp.csr_matrix((np.ones(first.size), (first, second)), shape=(n, n))
+    count, labels = connected_components(graph, directed=False)
+    return labels, count
+
+
+def _merge(M, labels, count):
+    """``Cᵀ M C`` for the indicator ``C`` of ``labels``: the entries of ``M`` summed per pair of labels."""
+    M = sp.csr_matrix(M)
+    row_labels = np.repeat(labels, np.diff(M.indptr))
+    return sp.csr_matrix((M.data, (row_labels, labels[M.indices])), shape=(count, count))
+
+
+def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, preconditioner="jacobi"):
+    r"""Active-set polish: the quadratic model with the edges where ``u == 0`` tied and the other signs fixed.
+
+    Pixels joined by a tied row of ``K`` (every row must be a difference of
+    two pixels, :meth:`StackedL1.pixel_pairs`) are merged into connected
+    components; with ``C`` the pixel-to-component indicator, ``z = C y`` and,
+    for the signs ``s = sign(u)``, the polished point solves::
+
+        Cᵀ A C y = Cᵀ(b − ½ Kᵀ(c ⊙ s))
+
+    ``CᵀAC`` is assembled by summing the entries of ``A`` per pair of
+    components and solved by PCG (``preconditioner``: ``"jacobi"``, the
+    default, or ``"amg"`` for pyamg Ruge–Stüben) to relative residual
+    ``rtol``, warm-started from the component means of ``z0``.
+
+    A pixel-difference row whose polished value ``t_k`` has ``t_k s_k <= 0``
+    contradicts its fixed sign (the minimiser of the model would cross the
+    kink of ``|t_k|``); such rows are tied in the next round, whose
+    components and reduced matrix are merged from the previous ones, for at
+    most ``rounds`` solves, stopping when no sign is wrong or ``F`` stops
+    decreasing.
+
+    Returns
+    -------
+    None, or the tuple:
+    z : ndarray, shape (N,)
+        The polished point with the lowest exact ``F``, clipped at 0.
+    F : float
+        Its objective ``zᵀAz − 2bᵀz + const + Σ c_k |(Kz)_k|``.
+    components : int
+        Number of components of that polish.
+    cg_steps : int
+        PCG steps of all rounds.
+    """
+    from .linear import _dot
+
+    rows, first, second, _ = l1.pixel_pairs()
     n = A.shape[0]
-    counts = np.diff(K.indptr)
-    pair_rows = np.flatnonzero(counts == 2)
-    if np.any(counts > 2):
-        return None
-    first = K.indices[K.indptr[pair_rows]]
-    second = K.indices[K.indptr[pair_rows] + 1]
-    tied = u[pair_rows] == 0
-    graph = sp.coo_matrix((np.ones(int(tied.sum())), (first[tied], second[tied])), shape=(n, n))
-    n_comp, labels = connected_components(graph, directed=False)
-    C = sp.csr_matrix((np.ones(n), (np.arange(n), labels)), shape=(n, n_comp))
-    CT = C.T.tocsr()
-    reduced = (CT @ A @ C).tocsr()
-    rhs = CT @ (b - 0.5 * (K.T @ (c * np.sign(u))))
-    y0 = None
-    if z0 is not None:
-        y0 = (CT @ z0) / np.bincount(labels, minlength=n_comp)
-    pkind = "amg" if kind == "grid" else kind
-    try:
-        y, _, ok, _ = pcg(reduced, rhs, x0=y0, M=make_preconditioner(reduced, pkind), rtol=rtol, maxiter=2000)
-    except ValueError:
-        return None
-    return C @ y
+    signs = np.sign(u)
+    tied = signs[rows] == 0
+    labels, count = _components(n, first[tied], second[tied])
+    reduced = _merge(A, labels, count)
+    if not np.all(reduced.diagonal() > 0):
+        return None  # a component without quadratic coupling: the model is not strictly convex
+    best_F, best_z, best_count, steps = np.inf, None, 0, 0
+    z_start = z0
+    for _ in range(max(int(rounds), 1)):
+        sizes = np.bincount(labels, minlength=count)
+        rhs = np.bincount(labels, weights=b - 0.5 * l1.adjoint(l1.weights * signs), minlength=count)
+        y0 = np.bincount(labels, weights=z_start, minlength=count) / sizes
+        y, n_steps, _, _ = pcg(reduced, rhs, x0=y0, M=make_preconditioner(reduced, preconditioner), rtol=rtol,
+                               maxiter=5000)
+        steps += n_steps
+        z = np.maximum(y[labels], 0.0)
+        Kz = l1.apply(z)
+        F = _dot(z, A @ z) - 2.0 * _dot(b, z) + const + l1.value(Kz)
+        if F >= best_F:
+            break
+        best_F, best_z, best_count = F, z, count
+        t = Kz[rows]
+        s = signs[rows]
+        wrong = (s != 0) & (t * s <= 0)
+        if not wrong.any():
+            break
+        signs[rows[wrong]] = 0.0
+        merged, count = _components(count, labels[first[wrong]], labels[second[wrong]])
+        reduced = _merge(reduced, merged, count)
+        labels = merged[labels]
+        z_start = z
+    return best_z, best_F, best_count, steps
 
 
 # ---------------------------------------------------------------------------
