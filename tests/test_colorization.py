@@ -168,3 +168,21 @@ def test_every_public_name_exists():
 
     missing = [name for name in module.__all__ if not hasattr(module, name)]
     assert missing == []
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 9), (9, 1), (2, 2), (5, 7), (33, 20)])
+def test_nested_dissection_order_is_a_permutation(shape):
+    from sparsedepth.colorization import _nested_dissection_keys, _nested_dissection_order
+
+    keys = _nested_dissection_keys(*shape)
+    np.testing.assert_array_equal(np.sort(keys), np.arange(shape[0] * shape[1]))
+    np.testing.assert_array_equal(_nested_dissection_order(*shape), np.argsort(keys))
+
+
+def test_large_alpha_matches_direct_solve(naive):
+    # with alpha = 1e4 the preconditioned Schur complement is the identity to 1e-4, so Gram-Schmidt
+    # cancels catastrophically and is repeated (the rarely taken branch of the GMRES)
+    grey, depth, known = _hand_made_frame()
+    expected = _direct_solution(naive, grey, depth, known, alpha=1e4)
+    got = colorization_fill(grey, np.where(known, depth, 0.0), alpha=1e4, rtol=1e-13)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10)
