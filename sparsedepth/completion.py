@@ -96,7 +96,8 @@ def complete_depth(
         raise ValueError(f"unknown solver {solver!r}; choose one of {['auto', *sorted(SOLVERS)]}")
     objective, coarse, observed = build_objective(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing)
     if x0 is None:
-        start = coarse.ravel().copy()
+        start = coarse.reshape(-1).view()  # no copy (8-MP memory); every solver copies its start
+        start.flags.writeable = False  # ... and the prior's target must stay intact
     else:
         start = np.asarray(x0, dtype=np.float64)
         if start.shape != objective.shape:

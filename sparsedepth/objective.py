@@ -73,7 +73,8 @@ class QuadraticTerm:
         and lets :meth:`Objective.normal_equations` assemble ``KᵀK`` as a
         stencil.
     row_weights : ndarray of shape (m,), or None
-        ``r >= 0``; ``None`` means all ones.
+        ``r >= 0`` (float, or bool for a 0/1 selection such as the data
+        term's observation mask); ``None`` means all ones.
     target : ndarray of shape (m,), or None
         ``d``; ``None`` means zeros.
     """
@@ -522,7 +523,7 @@ def build_objective(
     hessian = hessian_stencil(shape) if (weights.beta_second > 0 or weights.beta_second_image > 0) else None
     w2 = None if weights.beta_second_image == 0 else second_order_edge_weights(pair, shape)
     terms = [
-        QuadraticTerm("data", weights.alpha, None, observed.ravel().astype(np.float64), depth.ravel()),
+        QuadraticTerm("data", weights.alpha, None, observed.reshape(-1), depth.ravel()),  # bool weights: 1/8 memory
         QuadraticTerm("smooth", weights.beta, G),
         AbsTerm("edge", weights.gamma, gradient(shape) if weights.gamma > 0 else G, ww),
         QuadraticTerm("prior", weights.delta, None, None, coarse.ravel()),
