@@ -190,9 +190,9 @@ def _window_weights(grey, radius):
 
     # unnormalised weights exp(-d^2 / c) on the two contiguous blocks of
     # neighbour planes, then 0 again outside the image
+    neg_csig = np.negative(csig)  # x / (-c) is exactly -(x / c)
     for block in (planes[:centre], planes[centre + 1 :]):
-        block /= csig
-        np.negative(block, out=block)
+        np.divide(block, neg_csig, out=block)
         np.exp(block, out=block)
     for k in neighbours:
         di, dj = offsets[k]
@@ -729,15 +729,16 @@ def _solve_schur(A, n_unknown, b_K, *, x0, atol, maxiter, diag_K):
             return np.negative(x_U, out=x_U)
 
     # first two terms of the Neumann series of A_KK^{-1} = (D - P_KK)^{-1},
-    # (2 v - A_KK v / D) / D, with A_KK v computed as A_K [0; v]
+    # (2 v - A_KK v / D) / D = 2 y - A_KK y / D with y = v / D, and A_KK y
+    # computed as A_K [0; y]
     y = np.zeros(n)
     y_K = y[n_u:]
 
     def apply_precond(v):
         np.divide(v, diag_K, out=y_K)
         t = A_K @ y
-        np.subtract(2.0 * v, t, out=t)
-        t /= diag_K
+        np.subtract(y_K, t / diag_K, out=t)
+        t += y_K
         return t
 
     x_K, x_U, history, res_inf, converged = _gmres(apply, lift, b_K, x0, apply_precond, atol, maxiter)
