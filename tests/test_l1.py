@@ -174,10 +174,16 @@ def test_admm_without_polish_stops_on_its_residuals():
     assert "polish" not in res.message
 
 
-def test_admm_falls_back_to_plain_admm_when_the_polish_model_is_singular():
-    # no prior and no quadratic smoothness: unobserved components have no quadratic term
+def test_polish_declines_a_singular_reduced_model():
+    # no prior and no quadratic smoothness: an unobserved pixel on its own has no quadratic term
     weights = Weights.paper(alpha=1.0, beta=0.0, gamma=0.05, delta=0.0, kappa=5.0)
     image, sparse, mask, _ = make_problem((20, 25))
-    res = complete_depth(image, sparse, mask, weights=weights, solver="admm", tol=1e-3)
-    assert res.converged and "residuals" in res.message and "polish" not in res.message
+    obj, coarse, _ = build_objective(image, sparse, mask, weights=weights)
+    A, b, const = obj.normal_equations()
+    l1 = StackedL1(obj)
+    untied = np.ones(l1.rows)
+    assert _polish_active_set(A, b, const, l1, untied, z0=coarse.ravel()) is None
+    # the solver still runs (plain ADMM where the polish is declined) and returns a valid point
+    res = complete_depth(image, sparse, mask, weights=weights, solver="admm", max_iter=200)
     assert np.all(np.isfinite(res.depth)) and res.depth.min() >= 0
+    assert res.objective == pytest.approx(obj.value(res.depth), rel=1e-12)
