@@ -111,17 +111,18 @@ class StackedL1:
             return self._transpose @ v
         H, W = self.shape
         n = H * W
-        vx = v[:n].reshape(H, W)
-        vy = v[n:].reshape(H, W)
-        out = np.zeros((H, W))
-        out[:, 1:] += vx[:, :-1]
-        out[:, :-1] -= vx[:, :-1]
-        out[1:] += vy[:-1]
-        out[:-1] -= vy[:-1]
+        vx = v[:n].reshape(H, W)[:, :-1]  # the rows of the last column / row are zero
+        vy = v[n:].reshape(H, W)[:-1]
+        out = np.empty((H, W))
+        np.negative(vx, out=out[:, :-1])
+        out[:, -1] = 0.0
+        out[:, 1:] += vx
+        out[:-1] -= vy
+        out[1:] += vy
         return out.reshape(-1)
 
     def gram(self):
-        """``KᵀK`` as a CSR matrix (a graph Laplacian for the grid gradient)."""
+        """``KᵀK`` as a CSR matrix (the 5-point Neumann Laplacian for the grid gradient)."""
         K = self.matrix
         return (K.T @ K).tocsr()
 
