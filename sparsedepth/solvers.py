@@ -280,18 +280,20 @@ def _default_rho(objective, weights, depth_scale):
 def _inner_pcg(S, precondition, z, Sz, rhs, *, rtol, factor, max_steps):
     r"""PCG steps on ``S z = rhs`` from the current ``z``, updating ``z`` and ``Sz = S z`` in place.
 
-    Stops when ``‖rhs − S z‖ <= max(rtol ‖rhs‖, factor ‖rhs − S z_start‖)``
-    or after ``max_steps`` steps; the residual is ``rhs − Sz`` with ``Sz``
-    updated alongside ``z`` (one product with ``S`` per step).  Returns the
-    number of steps.
+    With ``max_steps = 1``: one preconditioned step with exact line search
+    along ``d = M⁻¹(rhs − Sz)``.  With more: CG steps until ``‖rhs − S z‖ <=
+    max(rtol ‖rhs‖, factor ‖rhs − S z_start‖)`` or ``max_steps``.  The
+    residual is ``rhs − Sz`` with ``Sz`` updated alongside ``z`` (one product
+    with ``S`` per step).  Returns the number of steps.
     """
     from .linear import _dot
 
     r = rhs - Sz
-    rr = _dot(r, r)
-    target = max(rtol * rtol * _dot(rhs, rhs), factor * factor * rr)
-    if rr <= target:
-        return 0
+    if max_steps > 1:
+        rr = _dot(r, r)
+        target = max(rtol * rtol * _dot(rhs, rhs), factor * factor * rr)
+        if rr <= target:
+            return 0
     d = precondition(r)
     rd = _dot(r, d)
     p = d
@@ -303,8 +305,10 @@ def _inner_pcg(S, precondition, z, Sz, rhs, *, rtol, factor, max_steps):
         alpha = rd / pq
         z += alpha * p
         Sz += alpha * q
+        if step == max_steps:
+            return step
         r -= alpha * q
-        if step == max_steps or _dot(r, r) <= target:
+        if _dot(r, r) <= target:
             return step
         d = precondition(r)
         rd_new = _dot(r, d)
@@ -330,11 +334,13 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     a grid operator of stencil radius <= 2, so ONE geometric multigrid
     hierarchy (:class:`~sparsedepth.multigrid.GridMultigrid`, option
     ``preconditioner``, default ``"grid"``; ``"amg"`` for pyamg)
-    preconditions every inner solve.  The inner solve takes PCG steps from the
-    previous ``z`` until ``‖rhs − S z‖ <= max(inner_rtol ‖rhs‖, inner_factor
-    ‖rhs − S z_prev‖)`` (defaults ``1e-10`` and ``0.1``; at most
-    ``inner_max_iter = 5`` steps): in practice one V-cycle and one product with
-    ``S`` per iteration, as ``S z`` is carried along with ``z``.  When ``K`` is
+    preconditions every inner solve.  The inner solve is one V-cycle
+    preconditioned step with exact line search from the previous ``z``
+    (option ``inner_max_iter``, default 1; with more, PCG steps until
+    ``‖rhs − S z‖ <= max(inner_rtol ‖rhs‖, inner_factor ‖rhs − S z_prev‖)``,
+    defaults ``1e-10`` and ``0.1``, which one step always met on the
+    ``bench/perf.py`` frame): one V-cycle and one product with ``S`` per
+    iteration, as ``S z`` is carried along with ``z``.  When ``K`` is
     the image gradient, ``K z`` and ``Kᵀ v`` are array slices
     (:meth:`StackedL1.apply`), not sparse products.  The exact objective of
     every iterate is recorded; for ``z >= 0`` it is evaluated as
@@ -395,7 +401,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     relax = float(options.get("relaxation", 1.9))
     inner_rtol = float(options.get("inner_rtol", 1e-10))
     inner_factor = float(options.get("inner_factor", 0.1))
-    inner_max = int(options.get("inner_max_iter", 5))
+    inner_max = int(options.get("inner_max_iter", 1))
     adapt_iters = int(options.get("adapt_iters", 0))
     polish = bool(options.get("polish", True)) and l1.pixel_pairs()[3]
     polish_args = dict(rounds=int(options.get("polish_rounds", 2)), rtol=float(options.get("polish_rtol", 1e-7)),
