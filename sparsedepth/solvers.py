@@ -277,6 +277,15 @@ def _default_rho(objective, weights, depth_scale):
     return 1.5 * max(alpha, 300.0 * float(np.max(weights)) / depth_scale)
 
 
+def _combine(a, A, b, B):
+    """``a A + b B`` for CSR matrices; one vector operation when both have the same sparsity pattern."""
+    A, B = sp.csr_matrix(A), sp.csr_matrix(B)
+    if (A.shape == B.shape and A.nnz == B.nnz and A.has_canonical_format and B.has_canonical_format
+            and np.array_equal(A.indptr, B.indptr) and np.array_equal(A.indices, B.indices)):
+        return sp.csr_matrix((a * A.data + b * B.data, A.indices, A.indptr), shape=A.shape)
+    return (a * A + b * B).tocsr()
+
+
 def _inner_pcg(S, precondition, z, Sz, rhs, *, rtol, factor, max_steps):
     r"""PCG steps on ``S z = rhs`` from the current ``z``, updating ``z`` and ``Sz = S z`` in place.
 
@@ -412,7 +421,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     depth_scale = float(np.median(positive)) if positive.size else 1.0
     rho = float(options["rho"]) if "rho" in options else _default_rho(objective, c, depth_scale)
     KtK = l1.gram()
-    S = (2.0 * A0 + rho * KtK).tocsr()
+    S = _combine(2.0, A0, rho, KtK)
     if adapt_iters <= 0:
         del KtK  # only needed to rebuild S for a new rho
     if kind == "grid":
@@ -496,7 +505,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
             rho *= factor
             lam /= factor
             threshold = c / rho
-            S = (2.0 * A0 + rho * KtK).tocsr()
+            S = _combine(2.0, A0, rho, KtK)
             Sz = S @ z
             if hierarchy is not None:
                 hierarchy.update(S)
