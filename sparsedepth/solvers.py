@@ -538,10 +538,19 @@ def _components(n, first, second):
 
 
 def _merge(M, labels, count):
-    """``Cᵀ M C`` for the indicator ``C`` of ``labels``: the entries of ``M`` summed per pair of labels."""
+    """``Cᵀ M C`` for the indicator ``C`` of ``labels``: the entries of ``M`` summed per pair of labels.
+
+    ``M C`` only relabels the column indices of ``M`` (repeated labels in a
+    row are summed by the product that follows); ``Cᵀ (M C)`` is one sparse
+    product with the label-sorted indicator.
+    """
     M = sp.csr_matrix(M)
-    row_labels = np.repeat(labels, np.diff(M.indptr))
-    return sp.csr_matrix((M.data, (row_labels, labels[M.indices])), shape=(count, count))
+    n = M.shape[0]
+    right = sp.csr_matrix((M.data, labels[M.indices], M.indptr), shape=(n, count))
+    members = np.argsort(labels, kind="stable")
+    starts = np.concatenate([[0], np.cumsum(np.bincount(labels, minlength=count))])
+    left = sp.csr_matrix((np.ones(n), members, starts), shape=(count, n))
+    return (left @ right).tocsr()
 
 
 def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, preconditioner="jacobi"):
