@@ -444,7 +444,6 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     next_polish = None
     converged = False
     message = f"reached max_iter = {max_iter}"
-    trace = options.get("_trace")
     k = 0
     while k < max_iter:
         k += 1
@@ -466,14 +465,12 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
         u, spare = x, u
         Kz_sq = _dot(Kz, Kz)
         # between polishes the residuals decide nothing: skip their dot products
-        if best is None or not polish or k <= adapt_iters or trace is not None:
+        if best is None or not polish or k <= adapt_iters:
             u_sq = _dot(u, u)
             r_norm = np.sqrt(max(Kz_sq - 2.0 * _dot(Kz, u) + u_sq, 0.0)) / max(np.sqrt(max(Kz_sq, u_sq)), 1e-300)
-        if not polish or k <= adapt_iters or trace is not None:
+        if not polish or k <= adapt_iters:
             spare -= u  # u_prev − u
             s_norm = np.sqrt(_dot(spare, spare) / max(_dot(lam, lam), 1e-300))
-        if trace is not None:
-            trace.append((k, r_norm, s_norm))
         if z.min() >= 0:
             value = 0.5 * (_dot(z, Sz) - rho * Kz_sq) - 2.0 * _dot(b, z) + const + l1.value(Kz)
             recorder(k, z, inner=inner_total, value=value)
