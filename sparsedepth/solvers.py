@@ -596,7 +596,8 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
         return None  # a component without quadratic coupling: the model is not strictly convex
     best_F, best_z, best_count, steps = np.inf, None, 0, 0
     z_start = z0
-    for _ in range(max(int(rounds), 1)):
+    rounds = max(int(rounds), 1)
+    for round_ in range(1, rounds + 1):
         sizes = np.bincount(labels, minlength=count)
         rhs = np.bincount(labels, weights=b - 0.5 * l1.adjoint(l1.weights * signs), minlength=count)
         y0 = np.bincount(labels, weights=z_start, minlength=count) / sizes
@@ -609,6 +610,8 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
         if F >= best_F:
             break
         best_F, best_z, best_count = F, z, count
+        if round_ == rounds:
+            break
         t = Kz[rows]
         s = signs[rows]
         wrong = (s != 0) & (t * s <= 0)
