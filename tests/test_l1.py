@@ -187,3 +187,34 @@ def test_polish_declines_a_singular_reduced_model():
     res = complete_depth(image, sparse, mask, weights=weights, solver="admm", max_iter=200)
     assert np.all(np.isfinite(res.depth)) and res.depth.min() >= 0
     assert res.objective == pytest.approx(obj.value(res.depth), rel=1e-12)
+
+
+def test_merge_sums_entries_per_pair_of_components():
+    from sparsedepth.solvers import _merge
+
+    rng = np.random.default_rng(4)
+    M = sp.random(30, 30, density=0.2, random_state=5, format="csr")
+    labels = rng.integers(0, 7, 30)
+    labels[:7] = np.arange(7)  # every label used
+    C = sp.csr_matrix((np.ones(30), (np.arange(30), labels)), shape=(30, 7))
+    np.testing.assert_allclose(_merge(M, labels, 7).toarray(), (C.T @ M @ C).toarray(), atol=1e-14)
+
+
+def test_combine_same_and_different_patterns():
+    from sparsedepth.solvers import _combine
+
+    A = sp.random(20, 20, density=0.3, random_state=1, format="csr")
+    same = sp.csr_matrix((np.arange(1.0, A.nnz + 1), A.indices, A.indptr), shape=A.shape)
+    other = sp.random(20, 20, density=0.3, random_state=2, format="csr")
+    for B in (same, other):
+        np.testing.assert_allclose(_combine(2.0, A, 1.5, B).toarray(), (2.0 * A + 1.5 * B).toarray(), atol=1e-14)
+
+
+@pytest.mark.parametrize("options", [{"inner_max_iter": 3}, {"adapt_iters": 20}, {"preconditioner": "amg"},
+                                     {"polish_preconditioner": "amg"}])
+def test_admm_options_reach_the_same_optimum(options):
+    image, sparse, mask, _ = make_problem((24, 30))
+    obj, _, _ = build_objective(image, sparse, mask, weights=L1)
+    res = complete_depth(image, sparse, mask, weights=L1, solver="admm", options=options)
+    assert res.depth.min() > 0
+    assert _kkt_gap_bound(obj, res.depth.ravel()) <= 1e-7 * res.objective, res.message
