@@ -16,9 +16,9 @@ amg         γ = 0        PCG with a multigrid V-cycle (geometric GridMultigrid;
                          Ruge–Stüben), same rule
 irls        any          ``F_{k-1} − F_k ≤ tol · F_k`` at the final ε
 admm        any          primal residual ``<= tol`` (relative) starts exact
-                         active-set polishes, one every 3 iterations; stops
-                         when the best polished F changes by ``<= 2e-7``
-                         (relative) between two of them
+                         active-set polishes, 3, 6, 12, 12, ... iterations
+                         apart; stops when the best polished F changes by
+                         ``<= 2e-7`` (relative) between two of them
 lbfgsb      any          SciPy L-BFGS-B on the smoothed objective scaled by
                          ``1/F(x0)``; ``ftol = tol``
 adam        any          projected Adam on the smoothed objective; relative
@@ -365,9 +365,11 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     edge whose polished difference has the wrong sign is then tied too and the
     polish repeated (up to ``polish_rounds = 2`` solves).  With the optimal
     tied set and signs the polished point is the exact minimiser.  ADMM goes
-    on and is polished again every ``check_every = 3`` iterations; the solver
-    stops when a polish changes the best polished ``F`` by at most
-    ``check_rtol · F`` (default 2e-7).  This is a heuristic, not a
+    on and is polished again ``check_every = 3`` iterations later (each
+    further wait twice the previous one, at most ``4 check_every``, so that
+    a slowly converging run is not dominated by polishes); the solver stops
+    when a polish changes the best polished ``F`` by at most ``check_rtol ·
+    F`` (default 2e-7).  This is a heuristic, not a
     certificate: the polished ``F`` can stall while ADMM slowly releases a
     wrongly tied edge.  The best polished point is returned if it is below the
     last ADMM iterate, so the reported ``F`` is exact and ``z >= 0``.  With
@@ -490,7 +492,10 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
             polish_steps += steps
             if best is None or F_pol < best[0]:
                 best = (F_pol, z_pol, n_comp)
-            next_polish = k + check_every
+            # the first check comes check_every iterations later; each failed check doubles the wait
+            # (up to 4 check_every), so that slow cases are not dominated by polishes
+            interval = check_every if F_prev is None else min(2 * interval, 4 * check_every)
+            next_polish = k + interval
             if F_prev is not None and abs(F_prev - F_pol) <= check_rtol * abs(F_pol):
                 converged = True
                 message = (f"active-set polish at iteration {k} changed the best polished F by "
