@@ -129,7 +129,9 @@ def test_admm_matches_a_long_reference_run():
     assert np.all(np.diff(inner) >= 0)
 
 
-def test_polish_from_the_optimal_signs_is_the_optimum():
+@pytest.fixture(scope="module")
+def optimal_signs():
+    """A small L1 problem, a long plain-ADMM run and the tied set / signs read off it."""
     image, sparse, mask, _ = make_problem((20, 25))
     obj, coarse, _ = build_objective(image, sparse, mask, weights=L1)
     ref, _ = solve(obj, coarse.ravel(), solver="admm", tol=1e-10, max_iter=20000, options={"polish": False})
@@ -137,6 +139,11 @@ def test_polish_from_the_optimal_signs_is_the_optimum():
     l1 = StackedL1(obj)
     t = l1.apply(ref.z)
     u = np.where(np.abs(t) <= 1e-7, 0.0, t)  # the optimal tied set and signs, read off a long run
+    return obj, coarse, ref, (A, b, const), l1, u
+
+
+def test_polish_from_the_optimal_signs_is_the_optimum(optimal_signs):
+    obj, coarse, ref, (A, b, const), l1, u = optimal_signs
     z, F, count, _ = _polish_active_set(A, b, const, l1, u, z0=coarse.ravel(), rtol=1e-12)
     assert F == pytest.approx(obj.value(z), rel=1e-10)
     assert F <= obj.value(ref.z) * (1 + 1e-12)
@@ -147,15 +154,9 @@ def test_polish_from_the_optimal_signs_is_the_optimum():
     assert np.all(l1.apply(z)[tied] == 0)
 
 
-def test_polish_ties_edges_whose_sign_comes_out_wrong():
-    image, sparse, mask, _ = make_problem((20, 25))
-    obj, coarse, _ = build_objective(image, sparse, mask, weights=L1)
-    ref, _ = solve(obj, coarse.ravel(), solver="admm", tol=1e-10, max_iter=20000, options={"polish": False})
-    A, b, const = obj.normal_equations()
-    l1 = StackedL1(obj)
+def test_polish_ties_edges_whose_sign_comes_out_wrong(optimal_signs):
+    obj, coarse, ref, (A, b, const), l1, u = optimal_signs
     rows = l1.pixel_pairs()[0]
-    t = l1.apply(ref.z)
-    u = np.where(np.abs(t) <= 1e-7, 0.0, t)
     # untie some optimal ties with an arbitrary sign: the first round has wrong signs there
     tied_rows = rows[u[rows] == 0]
     spoiled = u.copy()
