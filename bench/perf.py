@@ -39,8 +39,8 @@ Problems (frame ``nyu_metric3d/00000``, 5 % of the valid pixels observed,
 4. *Scaling*: image and depth resized to 2× and 4× per side (4× and 16×
    pixels); the quadratic solve of 1. (set-up + solve) and the whole
    ``complete_depth`` call; peak memory of a whole ``complete_depth`` call
-   on an 8-MP frame (3264x2448) measured in a fresh process (``ru_maxrss``,
-   image decoding included).
+   on an 8-MP frame (3264x2448) measured in a fresh process started before
+   the others (``VmHWM``, image decoding included).
 """
 
 from __future__ import annotations
