@@ -46,7 +46,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from pyamg import amg_core
 
-from .stencil import csr_to_stencil, full_pattern_offsets, stencil_to_csr
+from .stencil import _index_dtype, csr_to_stencil, full_pattern_offsets, stencil_to_csr
 
 __all__ = [
     "GridMultigrid",
@@ -310,10 +310,6 @@ def _fine_source(A, shape, radius=None):
         return offsets, _StencilSource(offsets, shape, csr=A, csr_offsets=offsets)
     offsets, S = _stencil_of(A, shape, radius)
     return offsets, _StencilSource(offsets, shape, array=S)
-
-
-def _index_dtype(*sizes):
-    return np.int32 if max(sizes) < np.iinfo(np.int32).max else np.int64
 
 
 def _pattern_from_slots(shape, n_slots, slots, index_dtype):

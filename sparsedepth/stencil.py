@@ -31,8 +31,9 @@ __all__ = ["stencil_to_csr", "csr_to_stencil", "full_pattern_offsets"]
 _CHUNK_ENTRIES = 1 << 21
 
 
-def _index_dtype(n_entries):
-    return np.int32 if n_entries < np.iinfo(np.int32).max else np.int64
+def _index_dtype(*sizes):
+    """int32 when every size fits, else int64 (CSR index arrays)."""
+    return np.int32 if max(sizes) < np.iinfo(np.int32).max else np.int64
 
 
 def _check_offsets(offsets):
