@@ -188,7 +188,12 @@ def grid_stencil(A, shape, *, radius=None):
     [(0, -1), (0, 0), (0, 1)]
     """
     A, shape = _check_matrix(A, shape)
-    return _stencil_of(A, shape, radius)
+    offsets = _pattern_offsets(A, shape, radius)  # one pass when A is in the full in-grid pattern
+    if offsets is None:
+        return _stencil_of(A, shape, radius)
+    _, S = csr_to_stencil(A, shape, offsets=offsets)
+    keep = [k for k, o in enumerate(offsets) if o == (0, 0) or np.any(S[k])]
+    return [offsets[k] for k in keep], (S if len(keep) == len(offsets) else S[keep])
 
 
 def _offset_image(A, shape, dy, dx, out):
@@ -211,9 +216,8 @@ def _offset_image(A, shape, dy, dx, out):
 def _stencil_of(A, shape, radius=None):
     """Offsets present in ``A`` (radius <= 2, or ``radius``) and their stencil images.
 
-    A matrix in the full in-grid pattern of :func:`~sparsedepth.stencil.stencil_to_csr`
-    (as :meth:`~sparsedepth.objective.Objective.normal_equations` returns) is
-    read in one pass over its non-zeros.  Otherwise:
+    (Matrices in the full in-grid pattern of :func:`~sparsedepth.stencil.stencil_to_csr`
+    are read by the callers, see :func:`_pattern_offsets`, before this is tried.)
     Two passes over the candidate offsets: the first only counts the non-zeros
     of each offset (one ``(H, W)`` work image; the 5-point, then the 3x3, then
     the 5x5 offsets, stopping as soon as every non-zero is accounted for), the
@@ -224,12 +228,6 @@ def _stencil_of(A, shape, radius=None):
     up to the number of stored non-zeros of ``A``.
     """
     largest = 2 if radius is None else int(radius)
-    read = csr_to_stencil(A, shape)  # one pass when A is in the full in-grid pattern
-    if read is not None and all(max(abs(dy), abs(dx)) <= largest for dy, dx in read[0]):
-        offsets, S = read
-        keep = [k for k, o in enumerate(offsets) if o == (0, 0) or np.any(S[k])]
-        return [offsets[k] for k in keep], (S if len(keep) == len(offsets) else S[keep])
-    del read
     if radius is None:  # 5-point first, then 3x3, then 5x5: stop once all is found
         rings = [[(-1, 0), (0, -1), (0, 0), (0, 1), (1, 0)], _square_offsets(1), _square_offsets(2)]
     else:
@@ -302,11 +300,19 @@ class _StencilSource:
         return out
 
 
-def _fine_source(A, shape, radius=None):
-    """Offsets and :class:`_StencilSource` of a fine operator (pattern read, else extraction)."""
+def _pattern_offsets(A, shape, radius=None):
+    """Offsets of ``A`` when it is in the full in-grid pattern within the radius (default 2), else None."""
     largest = 2 if radius is None else int(radius)
     offsets = full_pattern_offsets(A, shape)
     if offsets is not None and all(max(abs(dy), abs(dx)) <= largest for dy, dx in offsets):
+        return offsets
+    return None
+
+
+def _fine_source(A, shape, radius=None):
+    """Offsets and :class:`_StencilSource` of a fine operator (pattern read, else extraction)."""
+    offsets = _pattern_offsets(A, shape, radius)
+    if offsets is not None:
         return offsets, _StencilSource(offsets, shape, csr=A, csr_offsets=offsets)
     offsets, S = _stencil_of(A, shape, radius)
     return offsets, _StencilSource(offsets, shape, array=S)
@@ -415,8 +421,8 @@ def _interp_matrix_1d(weights):
 class _SeparableProlongation:
     r"""Bilinear prolongation :math:`P = P_y \otimes P_x`, applied one axis at a time.
 
-    ``P @ x`` is :math:`\operatorname{vec}(P_y X P_x^	op)` and ``P.T @ r`` is
-    :math:`\operatorname{vec}(P_y^	op R P_x)`, with the 1-D interpolation
+    ``P @ x`` is :math:`\operatorname{vec}(P_y X P_x^\top)` and ``P.T @ r`` is
+    :math:`\operatorname{vec}(P_y^\top R P_x)`, with the 1-D interpolation
     matrices only (a few hundred rows): no ``N``-row matrix is stored (8 MP:
     ~300 MB saved over a CSR ``P``).
     """
