@@ -13,8 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy import ndimage
+from scipy.sparse.csgraph import connected_components
 
-from .operators import gradient
+from .operators import StencilOperator, gradient, gradient_stencil
+from .stencil import stencil_to_csr
 
 __all__ = ["StackedL1", "is_grid_gradient"]
 
@@ -45,6 +48,38 @@ def is_grid_gradient(K, shape) -> bool:
     )
 
 
+_LAPLACIAN_OFFSETS = {(-1, 0), (0, -1), (0, 0), (0, 1), (1, 0)}
+_CHUNK = 1 << 20
+
+
+def _is_gradient_operator(operator, shape) -> bool:
+    """True for :func:`~sparsedepth.operators.gradient_stencil` of ``shape`` or a sparse matrix equal to it."""
+    if isinstance(operator, StencilOperator):
+        return operator.grid_shape == tuple(shape) and operator.blocks == gradient_stencil(shape).blocks
+    return sp.issparse(operator) and is_grid_gradient(operator, shape)
+
+
+def _grid_gradient_pairs(shape):
+    """:meth:`StackedL1.pixel_pairs` of the grid gradient, by index arithmetic (int32 when it fits)."""
+    H, W = shape
+    n = H * W
+    dtype = np.int32 if 2 * n < np.iinfo(np.int32).max else np.int64
+    pixels = np.arange(n, dtype=dtype).reshape(H, W)
+    x_first = pixels[:, :-1].reshape(-1)  # rows 0 .. n-1: pixel p and p + 1 (not in the last column)
+    y_first = pixels[:-1].reshape(-1)     # rows n .. 2n-1: pixel p and p + W (not in the last row)
+    rows = np.concatenate([x_first, y_first + dtype(n)])
+    first = np.concatenate([x_first, y_first])
+    second = np.concatenate([x_first + dtype(1), y_first + dtype(W)])
+    return rows, first, second, True
+
+
+def _graph_components(n, first, second):
+    """Connected components of the graph on ``n`` nodes with edges ``first[i]–second[i]``: ``(labels, count)``."""
+    graph = sp.csr_matrix((np.ones(first.size), (first, second)), shape=(n, n))
+    count, labels = connected_components(graph, directed=False)
+    return labels, int(count)
+
+
 class StackedL1:
     r"""The L1 terms of an objective as one operator ``K`` with row weights ``c``.
 
@@ -62,9 +97,11 @@ class StackedL1:
     Attributes
     ----------
     matrix : scipy.sparse.csr_matrix, shape (m, N)
-        ``K``.
+        ``K`` (built on first access; the grid-gradient fast paths never
+        need it).
     weights : ndarray, shape (m,)
-        ``c >= 0``.
+        ``c >= 0`` (formed on access; :meth:`value` and :meth:`weighted`
+        use the terms' row weights without forming it).
     grid_gradient : bool
         True when ``K`` is the forward-difference gradient of the grid
         (``m = 2N``; products by slicing).
@@ -74,27 +111,63 @@ class StackedL1:
         terms = objective.abs_terms
         if not terms:
             raise ValueError("the objective has no L1 term with a positive weight")
-        operators = [t.operator if sp.issparse(t.operator) else t.operator.tocsr() for t in terms]
-        K = sp.csr_matrix(operators[0]) if len(operators) == 1 else sp.vstack(operators, format="csr")
-        self.matrix = K
-        self.weights = np.concatenate([t.scaled_row_weights() for t in terms])
         self.shape = tuple(objective.shape)
-        self.grid_gradient = is_grid_gradient(K, self.shape)
+        # c is not stored (2N floats): per term its weight and the term's own row weights
+        self._row_weights = [(float(t.weight), t.row_weights, t.operator.shape[0]) for t in terms]
+        self.grid_gradient = len(terms) == 1 and _is_gradient_operator(terms[0].operator, self.shape)
+        # the grid gradient is applied by slicing: its CSR matrix (~88 bytes per pixel) is built only on request
+        self._operators = [t.operator for t in terms]
+        self._matrix = None
         self._transpose = None
         self._pairs = None
 
     @property
-    def rows(self) -> int:
-        return self.matrix.shape[0]
+    def weights(self):
+        """``c >= 0``, shape (m,): a new array on every access (kept by nobody between calls)."""
+        return np.concatenate([w * (np.ones(m) if r is None else r) for w, r, m in self._row_weights])
 
-    def apply(self, z):
-        """``K z`` for ``z`` of shape (N,); returns shape (m,)."""
+    def _weight_chunks(self):
+        """``(rows, weight, r[rows])`` in chunks of at most ``_CHUNK`` rows (``r`` None for ones)."""
+        start = 0
+        for w, r, m in self._row_weights:
+            for lo in range(0, m, _CHUNK):
+                hi = min(lo + _CHUNK, m)
+                yield slice(start + lo, start + hi), w, (None if r is None else r[lo:hi])
+            start += m
+
+    def weighted(self, v):
+        """``c ⊙ v`` as a new float64 array (without forming ``c``)."""
+        out = np.empty(v.shape[0])
+        for rows, w, r in self._weight_chunks():
+            np.multiply(v[rows], w, out=out[rows])
+            if r is not None:
+                out[rows] *= r
+        return out
+
+    @property
+    def matrix(self):
+        """``K`` as a CSR matrix, shape (m, N) (built on first access)."""
+        if self._matrix is None:
+            ops = [op if sp.issparse(op) else op.tocsr() for op in self._operators]
+            self._matrix = sp.csr_matrix(ops[0]) if len(ops) == 1 else sp.vstack(ops, format="csr")
+        return self._matrix
+
+    @property
+    def rows(self) -> int:
+        n = self.shape[0] * self.shape[1]
+        return 2 * n if self.grid_gradient else self.matrix.shape[0]
+
+    def apply(self, z, out=None):
+        """``K z`` for ``z`` of shape (N,); returns shape (m,), written into ``out`` if given."""
         if not self.grid_gradient:
-            return self.matrix @ z
+            if out is None:
+                return self.matrix @ z
+            out[...] = self.matrix @ z
+            return out
         H, W = self.shape
         n = H * W
         z2 = np.asarray(z, dtype=np.float64).reshape(H, W)
-        t = np.empty(2 * n)
+        t = np.empty(2 * n) if out is None else out
         tx = t[:n].reshape(H, W)
         ty = t[n:].reshape(H, W)
         np.subtract(z2[:, 1:], z2[:, :-1], out=tx[:, :-1])
@@ -121,17 +194,98 @@ class StackedL1:
         out[1:] += vy
         return out.reshape(-1)
 
-    def gram(self):
-        """``KᵀK`` as a CSR matrix (the 5-point Neumann Laplacian for the grid gradient)."""
-        K = self.matrix
-        return (K.T @ K).tocsr()
+    def gram(self, offsets=None):
+        """``KᵀK`` as a CSR matrix (the 5-point Neumann Laplacian for the grid gradient).
+
+        Parameters
+        ----------
+        offsets : list of tuple of int, optional
+            For the grid gradient: the result is stored in the full in-grid
+            pattern (:func:`~sparsedepth.stencil.stencil_to_csr`) of these
+            offsets joined with the 5-point ones; pass those of a matrix ``A``
+            in that pattern that has the 5-point offsets and ``KᵀK`` has
+            exactly ``A``'s ``indptr`` and ``indices``, so ``a A + b KᵀK`` is
+            one vector operation.  Default: the 5 offsets.  Ignored for a
+            general ``K`` (sparse product).
+        """
+        if not self.grid_gradient:
+            K = self.matrix
+            return (K.T @ K).tocsr()
+        offsets = sorted(_LAPLACIAN_OFFSETS.union(() if offsets is None else offsets))
+        stencil = np.zeros((len(offsets),) + self.shape)
+        gradient_stencil(self.shape).add_normal_stencil(stencil, offsets)
+        return stencil_to_csr(offsets, stencil)
 
     def value(self, Kz) -> float:
-        """``Σ_k c_k |(K z)_k|`` from ``K z``."""
-        return float(np.einsum("i,i->", self.weights, np.abs(Kz)))
+        """``Σ_k c_k |(K z)_k|`` from ``K z`` (in chunks: no temporary as long as ``K z``)."""
+        total = 0.0
+        for rows, w, r in self._weight_chunks():
+            a = np.abs(Kz[rows])
+            total += w * float(np.sum(a) if r is None else np.dot(r, a))
+        return total
+
+    def tied_components(self, tied):
+        """Connected components of the pixels joined by the pixel-pair rows where ``tied`` is True.
+
+        Parameters
+        ----------
+        tied : ndarray of bool, shape (m,)
+            Rows of ``K``; rows that are not pixel differences are ignored.
+
+        Returns
+        -------
+        labels : ndarray of int, shape (N,)
+            Component of every pixel, ``0 .. count-1``.
+        count : int
+
+        Notes
+        -----
+        For the grid gradient the pixels and the tied edges are drawn on a
+        ``(2H-1, 2W-1)`` boolean image (pixel ``(y, x)`` at ``(2y, 2x)``, the
+        edge to its right neighbour at ``(2y, 2x+1)``, to the one below at
+        ``(2y+1, 2x)``) and labelled by :func:`scipy.ndimage.label` with
+        4-connectivity: about 20 bytes per pixel, where a graph of up to
+        ``2N`` edges for :func:`scipy.sparse.csgraph.connected_components`
+        takes several times that.
+        """
+        tied = np.asarray(tied, dtype=bool)
+        if not self.grid_gradient:
+            rows, first, second, _ = self.pixel_pairs()
+            sel = tied[rows]
+            return _graph_components(self.shape[0] * self.shape[1], first[sel], second[sel])
+        H, W = self.shape
+        n = H * W
+        sites = np.zeros((2 * H - 1, 2 * W - 1), dtype=bool)
+        sites[::2, ::2] = True
+        sites[::2, 1::2] = tied[:n].reshape(H, W)[:, :-1]
+        sites[1::2, ::2] = tied[n:].reshape(H, W)[:-1]
+        image, count = ndimage.label(sites)
+        del sites
+        labels = image[::2, ::2].reshape(-1)
+        labels -= 1
+        return labels, int(count)
+
+    def pairs_where(self, mask):
+        """The two pixels of each pixel-pair row where ``mask`` (bool, shape (m,)) is True: ``(first, second)``."""
+        mask = np.asarray(mask, dtype=bool)
+        if not self.grid_gradient:
+            rows, first, second, _ = self.pixel_pairs()
+            sel = mask[rows]
+            return first[sel], second[sel]
+        H, W = self.shape
+        n = H * W
+        x_rows = mask[:n].reshape(H, W).copy()
+        x_rows[:, -1] = False  # the last column's rows are empty
+        x_first = np.flatnonzero(x_rows)
+        y_first = np.flatnonzero(mask[n:n + (H - 1) * W])  # the last row's rows are empty
+        return np.concatenate([x_first, y_first]), np.concatenate([x_first + 1, y_first + W])
 
     def pixel_pairs(self):
-        """Rows of ``K`` that are differences of two pixels (computed once).
+        """Rows of ``K`` that are differences of two pixels.
+
+        For the grid gradient by index arithmetic (int32 indices when they
+        fit, nothing kept between calls); otherwise read from the rows of
+        :attr:`matrix` once and cached.
 
         Returns
         -------
@@ -143,6 +297,8 @@ class StackedL1:
             True when every non-empty row of ``K`` is such a difference, i.e.
             ``(K z)_k = 0`` means ``z_first = z_second`` for every row.
         """
+        if self.grid_gradient:
+            return _grid_gradient_pairs(self.shape)
         if self._pairs is not None:
             return self._pairs
         K = self.matrix

@@ -899,9 +899,9 @@ class GridMultigrid:
             fine = levels[li - 1]
             if self.interpolation == "operator":
                 p_indptr, p_indices, p_gather = _prolongation_pattern(fine.shape)
-                fine.p_gather = p_gather
+                fine.p_gather = p_gather  # used once by _numeric, then dropped (update() recomputes it)
                 fine.P = sp.csr_array(
-                    (np.zeros(p_indices.shape[0]), p_indices, p_indptr),
+                    (np.zeros(p_indices.shape[0], dtype=self.coarse_dtype), p_indices, p_indptr),
                     shape=(fine.shape[0] * fine.shape[1], n))
         self.levels = levels
         box = [source]
@@ -921,7 +921,10 @@ class GridMultigrid:
             fine, coarse = levels[li], levels[li + 1]
             if self.interpolation == "operator":
                 interp = _operator_interp(fine.offsets, source, fine.shape)
-                np.take(interp.dense(fine.shape).reshape(-1), fine.p_gather, out=fine.P.data)
+                gather = fine.p_gather if fine.p_gather is not None else _prolongation_pattern(fine.shape)[2]
+                fine.p_gather = None  # an index per entry of P: not kept (8-MP memory)
+                fine.P.data[...] = np.take(interp.dense(fine.shape).reshape(-1), gather)
+                del gather
             else:
                 interp = _bilinear_interp(fine.shape)
                 if refill_p:

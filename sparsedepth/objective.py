@@ -30,7 +30,7 @@ import scipy.sparse as sp
 
 from ._validation import as_depth_and_mask, as_float_image, check_same_shape
 from .baselines import nearest_fill
-from .operators import StencilOperator, gradient, gradient_stencil, hessian_stencil
+from .operators import StencilOperator, gradient_stencil, hessian_stencil
 from .stencil import stencil_to_csr
 from .weights import DEFAULT_WEIGHTS, Weights
 
@@ -171,9 +171,10 @@ class AbsTerm:
     name : str
     weight : float
     operator : scipy.sparse matrix or StencilOperator of shape (m, N)
-        ``build_objective`` passes the CSR :func:`~sparsedepth.operators.gradient`
-        when the weight is positive (the L1 solvers need its rows) and the
-        matrix-free form otherwise.
+        ``build_objective`` passes the matrix-free
+        :func:`~sparsedepth.operators.gradient_stencil`; the L1 solvers
+        recognise it (:class:`~sparsedepth._l1.StackedL1`) and apply it by
+        slicing.
     row_weights : ndarray of shape (m,), or None
     """
 
@@ -525,7 +526,7 @@ def build_objective(
     terms = [
         QuadraticTerm("data", weights.alpha, None, observed.reshape(-1), depth.ravel()),  # bool weights: 1/8 memory
         QuadraticTerm("smooth", weights.beta, G),
-        AbsTerm("edge", weights.gamma, gradient(shape) if weights.gamma > 0 else G, ww),
+        AbsTerm("edge", weights.gamma, G, ww),
         QuadraticTerm("prior", weights.delta, None, None, coarse.ravel()),
         QuadraticTerm("smooth_image", weights.beta_image, G, pair),
         QuadraticTerm("second_order", weights.beta_second, hessian),

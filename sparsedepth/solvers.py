@@ -36,9 +36,10 @@ import scipy.optimize
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from ._l1 import StackedL1
+from ._l1 import StackedL1, _graph_components
 from .linear import make_preconditioner, pcg
 from .multigrid import GridMultigrid
+from .stencil import full_pattern_offsets
 from .result import IterationRecord, SolverState
 
 __all__ = ["SolverOutput", "SOLVERS", "DEFAULT_TOL", "solve"]
@@ -192,6 +193,8 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
     """
     A0, b, _ = objective.normal_equations()
     l1 = objective.abs_terms
+    # the reweighted normal matrices Kᵀ diag(ω) K are sparse products: CSR operators, converted once
+    l1_csr = [t.operator if sp.issparse(t.operator) else t.operator.tocsr() for t in l1]
     scale = options.get("scale") or max(float(np.median(np.abs(x0[x0 > 0]))) if np.any(x0 > 0) else 1.0, 1e-12)
     eps = float(options.get("eps_start", 1e-2 * scale))
     eps_min = float(options.get("eps_min", 1e-7 * scale))
@@ -211,10 +214,10 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
             system = A0
         else:
             parts = [A0]
-            for term in l1:
-                t = term.operator @ z
+            for term, K in zip(l1, l1_csr):
+                t = K @ z
                 omega = term.scaled_row_weights() / np.maximum(np.abs(t), eps)
-                parts.append(0.5 * (term.operator.T @ sp.diags(omega) @ term.operator))
+                parts.append(0.5 * (K.T @ sp.diags(omega) @ K))
             system = sum(parts[1:], parts[0]).tocsr()
         if preconditioner == "grid":
             # one hierarchy for the whole run: numeric update for new weights
@@ -408,7 +411,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
         recorder(1, z, inner=n)
         return _output(z, 1, ok, f"quadratic problem: relative residual {rel:.1e}", recorder)
     l1 = StackedL1(objective)
-    c = l1.weights
+    threshold = l1.weights  # c, divided by rho below (c itself is not kept: 2N floats)
     relax = float(options.get("relaxation", 1.9))
     inner_rtol = float(options.get("inner_rtol", 1e-10))
     inner_factor = float(options.get("inner_factor", 0.1))
@@ -421,8 +424,11 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     check_rtol = float(options.get("check_rtol", 2e-7))
     positive = z[z > 0]
     depth_scale = float(np.median(positive)) if positive.size else 1.0
-    rho = float(options["rho"]) if "rho" in options else _default_rho(objective, c, depth_scale)
-    KtK = l1.gram()
+    del positive
+    rho = float(options["rho"]) if "rho" in options else _default_rho(objective, threshold, depth_scale)
+    threshold /= rho
+    # KᵀK in A0's own pattern when A0 is a full in-grid stencil matrix: S then shares A0's index arrays
+    KtK = l1.gram(full_pattern_offsets(A0, objective.shape) if l1.grid_gradient else None)
     S = _combine(2.0, A0, rho, KtK)
     if adapt_iters <= 0:
         del KtK  # only needed to rebuild S for a new rho
@@ -433,12 +439,9 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
         hierarchy = None
         precondition = make_preconditioner(S, kind, shape=objective.shape).matvec
     Sz = S @ z
-    Kz = l1.apply(z)
-    u = Kz.copy()
+    u = l1.apply(z)
     lam = np.zeros_like(u)
-    spare = np.empty_like(u)  # work vector; holds the previous u after each update
-    two_b = 2.0 * b
-    threshold = c / rho
+    spare = np.empty_like(u)  # work vector: K z, then x; holds the previous u after each update
     inner_total = 0
     r_norm = s_norm = np.inf
     polish_steps = 0
@@ -451,30 +454,41 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
         k += 1
         rhs = l1.adjoint(np.subtract(u, lam, out=spare))
         rhs *= rho
-        rhs += two_b
+        rhs += b
+        rhs += b
         if k % 25 == 0:
             Sz = S @ z  # drop the rounding drift of the carried product
         inner_total += _inner_pcg(S, precondition, z, Sz, rhs, rtol=inner_rtol, factor=inner_factor,
                                   max_steps=inner_max)
-        Kz = l1.apply(z)
-        # v = u + a (Kz − u);  x = v + λ;  λ ← clip(x, ±c/ρ);  u ← x − λ
-        x = np.subtract(Kz, u, out=spare)
+        x = l1.apply(z, out=spare)  # K z, overwritten by the update below
+        Kz_sq = _dot(x, x)
+        feasible = z.min() >= 0
+        if feasible:
+            value = 0.5 * (_dot(z, Sz) - rho * Kz_sq) - 2.0 * _dot(b, z) + const + l1.value(x)
+        # between polishes the residuals decide nothing: skip them (and the vectors they need)
+        need_r = best is None or not polish or k <= adapt_iters
+        need_s = not polish or k <= adapt_iters
+        Kz = x.copy() if need_s else None  # with the dual residual, u_prev is kept too
+        # v = u + a (Kz − u);  x = v + λ;  λ ← clip(x, ±c/ρ) = sign(x) min(|x|, c/ρ);  u ← x − λ
+        x -= u
         x *= relax
         x += u
         x += lam
-        np.clip(x, -threshold, threshold, out=lam)
+        np.abs(x, out=lam)
+        np.minimum(lam, threshold, out=lam)
+        np.copysign(lam, x, out=lam)
         x -= lam
         u, spare = x, u
-        Kz_sq = _dot(Kz, Kz)
-        # between polishes the residuals decide nothing: skip their dot products
-        if best is None or not polish or k <= adapt_iters:
+        if need_r:
+            if Kz is None:
+                Kz = l1.apply(z, out=spare)  # the previous u is not needed: recompute K z in its place
             u_sq = _dot(u, u)
             r_norm = np.sqrt(max(Kz_sq - 2.0 * _dot(Kz, u) + u_sq, 0.0)) / max(np.sqrt(max(Kz_sq, u_sq)), 1e-300)
-        if not polish or k <= adapt_iters:
+            Kz = None
+        if need_s:
             spare -= u  # u_prev − u
             s_norm = np.sqrt(_dot(spare, spare) / max(_dot(lam, lam), 1e-300))
-        if z.min() >= 0:
-            value = 0.5 * (_dot(z, Sz) - rho * Kz_sq) - 2.0 * _dot(b, z) + const + l1.value(Kz)
+        if feasible:
             recorder(k, z, inner=inner_total, value=value)
         else:
             recorder(k, np.maximum(z, 0.0), inner=inner_total)
@@ -506,7 +520,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
             factor = 2.0 if r_norm > s_norm else 0.5
             rho *= factor
             lam /= factor
-            threshold = c / rho
+            threshold /= factor
             S = _combine(2.0, A0, rho, KtK)
             Sz = S @ z
             if hierarchy is not None:
@@ -528,15 +542,6 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
         else:
             message += "; no active-set polish lowered F"
     return _output(z, k, converged, message, recorder)
-
-
-def _components(n, first, second):
-    """Connected components of the graph on ``n`` nodes with edges ``first[i]–second[i]``; ``(labels, count)``."""
-    from scipy.sparse.csgraph import connected_components
-
-    graph = sp.csr_matrix((np.ones(first.size), (first, second)), shape=(n, n))
-    count, labels = connected_components(graph, directed=False)
-    return labels, count
 
 
 def _merge(M, labels, count):
@@ -591,11 +596,10 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
     """
     from .linear import _dot
 
-    rows, first, second, _ = l1.pixel_pairs()
-    n = A.shape[0]
-    signs = np.sign(u)
-    tied = signs[rows] == 0
-    labels, count = _components(n, first[tied], second[tied])
+    signs = np.zeros(u.shape, dtype=np.int8)  # sign(u) in 1/8 of the memory
+    signs[u > 0] = 1
+    signs[u < 0] = -1
+    labels, count = l1.tied_components(signs == 0)
     reduced = _merge(A, labels, count)
     if not np.all(reduced.diagonal() > 0):
         return None  # a component without quadratic coupling: the model is not strictly convex
@@ -604,12 +608,18 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
     rounds = max(int(rounds), 1)
     for round_ in range(1, rounds + 1):
         sizes = np.bincount(labels, minlength=count)
-        rhs = np.bincount(labels, weights=b - 0.5 * l1.adjoint(l1.weights * signs), minlength=count)
+        pull = l1.adjoint(l1.weighted(signs))
+        pull *= -0.5
+        pull += b
+        rhs = np.bincount(labels, weights=pull, minlength=count)
+        del pull
         y0 = np.bincount(labels, weights=z_start, minlength=count) / sizes
         y, n_steps, _, _ = pcg(reduced, rhs, x0=y0, M=make_preconditioner(reduced, preconditioner), rtol=rtol,
                                maxiter=5000)
         steps += n_steps
-        z = np.maximum(y[labels], 0.0)
+        z = y[labels]
+        np.maximum(z, 0.0, out=z)
+        del y
         Kz = l1.apply(z)
         F = _dot(z, A @ z) - 2.0 * _dot(b, z) + const + l1.value(Kz)
         if F >= best_F:
@@ -617,13 +627,15 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
         best_F, best_z, best_count = F, z, count
         if round_ == rounds:
             break
-        t = Kz[rows]
-        s = signs[rows]
-        wrong = (s != 0) & (t * s <= 0)
+        # a fixed sign that the polished difference contradicts (rows that are not pairs have sign 0)
+        wrong = ((signs > 0) & (Kz <= 0)) | ((signs < 0) & (Kz >= 0))
+        del Kz
         if not wrong.any():
             break
-        signs[rows[wrong]] = 0.0
-        merged, count = _components(count, labels[first[wrong]], labels[second[wrong]])
+        signs[wrong] = 0
+        first, second = l1.pairs_where(wrong)
+        del wrong
+        merged, count = _graph_components(count, labels[first], labels[second])
         reduced = _merge(reduced, merged, count)
         labels = merged[labels]
         z_start = z

@@ -50,6 +50,43 @@ def test_matrix_free_operators_are_accepted():
     np.testing.assert_allclose(l1.apply(z), gradient(shape) @ z, atol=1e-14)
 
 
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (6, 1), (5, 8)])
+def test_grid_gradient_pairs_gram_and_value_match_the_matrix(shape):
+    """The grid fast paths (no CSR matrix) against quantities read from the CSR gradient itself."""
+    from sparsedepth.operators import gradient_stencil
+    from sparsedepth.stencil import stencil_to_csr
+
+    rng = np.random.default_rng(4)
+    l1 = StackedL1(_objective_with(shape, gradient_stencil(shape), rng))
+    assert l1.grid_gradient and l1._matrix is None
+    G = gradient(shape).tocsr()
+    rows, first, second, exact = l1.pixel_pairs()
+    assert exact
+    counts = np.diff(G.indptr)
+    expected_rows = np.flatnonzero(counts == 2)
+    np.testing.assert_array_equal(np.sort(rows), expected_rows)
+    order = np.argsort(rows)
+    np.testing.assert_array_equal(first[order], G.indices[G.indptr[expected_rows]])
+    np.testing.assert_array_equal(second[order], G.indices[G.indptr[expected_rows] + 1])
+    assert l1._matrix is None  # none of the above built the matrix
+    np.testing.assert_allclose(l1.gram().toarray(), (G.T @ G).toarray(), atol=0)
+    z = rng.standard_normal(G.shape[1])
+    assert l1.value(l1.apply(z)) == pytest.approx(np.sum(l1.weights * np.abs(G @ z)), rel=1e-13)
+    # in another matrix's full in-grid pattern: the same indptr / indices
+    offsets = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+    pattern = stencil_to_csr(offsets, np.ones((9,) + shape))
+    L = l1.gram(offsets)
+    np.testing.assert_array_equal(L.indptr, pattern.indptr)
+    np.testing.assert_array_equal(L.indices, pattern.indices)
+    np.testing.assert_allclose(L.toarray(), (G.T @ G).toarray(), atol=0)
+    np.testing.assert_allclose(l1.gram([(0, 0), (0, 1)]).toarray(), (G.T @ G).toarray(), atol=0)  # joined
+    out = np.full(2 * G.shape[1], np.nan)
+    assert l1.apply(z, out=out) is out
+    np.testing.assert_allclose(out, G @ z, atol=1e-14)
+    np.testing.assert_allclose(l1.matrix.toarray(), G.toarray())
+
+
 def test_grid_gradient_recognised_only_when_equal():
     shape = (4, 5)
     G = gradient(shape)
@@ -85,7 +122,7 @@ def _kkt_gap_bound(obj, z):
     """
     A, b, const = obj.normal_equations()
     term = obj.term("edge")
-    K = sp.csr_matrix(term.operator)
+    K = sp.csr_matrix(term.operator if sp.issparse(term.operator) else term.operator.tocsr())
     c = term.scaled_row_weights()
     t = K @ z
     free = np.abs(t) <= 1e-9 * max(1.0, np.abs(z).max())
