@@ -135,6 +135,24 @@ class StackedL1:
                 yield slice(start + lo, start + hi), w, (None if r is None else r[lo:hi])
             start += m
 
+    def max_weight(self) -> float:
+        """``max_k c_k`` (0 for an empty ``K``)."""
+        return max((w * (1.0 if r is None else float(np.max(r, initial=0.0))) for w, r, m in self._row_weights if m),
+                   default=0.0)
+
+    def clip_to_weights(self, v, scale):
+        """``v ← min(v, scale · c)`` in place, chunk by chunk (``c`` is not formed); returns ``v``."""
+        work = np.empty(min(_CHUNK, v.shape[0]))
+        for rows, w, r in self._weight_chunks():
+            part = v[rows]
+            if r is None:
+                np.minimum(part, scale * w, out=part)
+            else:
+                bound = work[:part.shape[0]]
+                np.multiply(r, scale * w, out=bound)
+                np.minimum(part, bound, out=part)
+        return v
+
     def weighted(self, v):
         """``c ⊙ v`` as a new float64 array (without forming ``c``)."""
         out = np.empty(v.shape[0])
@@ -264,6 +282,36 @@ class StackedL1:
         labels = image[::2, ::2].reshape(-1)
         labels -= 1
         return labels, int(count)
+
+    def gram_entries(self, block, rows):
+        """Values of ``KᵀK`` (the grid gradient's 5-point Laplacian) at the stored entries of ``block``.
+
+        Parameters
+        ----------
+        block : scipy.sparse CSR matrix, shape (len(rows), N)
+            Rows ``rows`` of a matrix on the grid (e.g. ``S[rows]``).
+        rows : ndarray of int
+            Their pixel indices.
+
+        Returns
+        -------
+        ndarray, shape (block.nnz,)
+            ``−1`` where the column is a 4-neighbour of the row's pixel, the
+            pixel's number of in-grid neighbours on the diagonal, 0 elsewhere
+            (decided from grid coordinates, for any stencil radius and width).
+        """
+        if not self.grid_gradient:
+            raise ValueError("gram_entries needs the grid gradient")
+        H, W = self.shape
+        counts = np.diff(block.indptr)
+        row_y, row_x = np.divmod(np.repeat(np.asarray(rows, dtype=np.int64), counts), W)
+        col_y, col_x = np.divmod(block.indices.astype(np.int64), W)
+        distance = np.abs(row_y - col_y) + np.abs(row_x - col_x)
+        out = -(distance == 1).astype(np.float64)
+        diagonal = distance == 0
+        y, x = row_y[diagonal], row_x[diagonal]
+        out[diagonal] = (x > 0).astype(np.float64) + (x < W - 1) + (y > 0) + (y < H - 1)
+        return out
 
     def pairs_where(self, mask):
         """The two pixels of each pixel-pair row where ``mask`` (bool, shape (m,)) is True: ``(first, second)``."""

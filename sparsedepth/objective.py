@@ -342,6 +342,15 @@ class Objective:
             self._normal = (A, b, c)
         return self._normal
 
+    def clear_cache(self):
+        """Forget the cached :meth:`normal_equations` (it is re-assembled on the next call).
+
+        Solvers that keep only a matrix derived from ``A`` (ADMM's ``2A + ρKᵀK``)
+        call this so that ``A`` is not held twice: about 60 bytes per pixel
+        for the 5-point system, 200 for the 13-point one.
+        """
+        self._normal = None
+
     def normal_stencil(self):
         """Stencil of the quadratic part's matrix ``A`` (see :mod:`sparsedepth.stencil`).
 

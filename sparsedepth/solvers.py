@@ -257,7 +257,7 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
 # ---------------------------------------------------------------------------
 # L1 problem: ADMM / split Bregman with a constant system matrix
 # ---------------------------------------------------------------------------
-def _default_rho(objective, weights, depth_scale):
+def _default_rho(objective, max_weight, depth_scale):
     """ADMM penalty ``ρ = 1.5 max(α, 300 max_k c_k / s)``.
 
     ``α`` is the weight of the ``data`` term (1 without one), ``c`` the L1
@@ -277,7 +277,7 @@ def _default_rho(objective, weights, depth_scale):
     for term in objective.quadratic_terms:
         if term.name == "data":
             alpha = float(term.weight)
-    return 1.5 * max(alpha, 300.0 * float(np.max(weights)) / depth_scale)
+    return 1.5 * max(alpha, 300.0 * float(max_weight) / depth_scale)
 
 
 def _combine(a, A, b, B):
@@ -411,7 +411,6 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
         recorder(1, z, inner=n)
         return _output(z, 1, ok, f"quadratic problem: relative residual {rel:.1e}", recorder)
     l1 = StackedL1(objective)
-    threshold = l1.weights  # c, divided by rho below (c itself is not kept: 2N floats)
     relax = float(options.get("relaxation", 1.9))
     inner_rtol = float(options.get("inner_rtol", 1e-10))
     inner_factor = float(options.get("inner_factor", 0.1))
@@ -425,13 +424,18 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     positive = z[z > 0]
     depth_scale = float(np.median(positive)) if positive.size else 1.0
     del positive
-    rho = float(options["rho"]) if "rho" in options else _default_rho(objective, threshold, depth_scale)
-    threshold /= rho
+    rho = float(options["rho"]) if "rho" in options else _default_rho(objective, l1.max_weight(), depth_scale)
     # KᵀK in A0's own pattern when A0 is a full in-grid stencil matrix: S then shares A0's index arrays
     KtK = l1.gram(full_pattern_offsets(A0, objective.shape) if l1.grid_gradient else None)
     S = _combine(2.0, A0, rho, KtK)
     if adapt_iters <= 0:
-        del KtK  # only needed to rebuild S for a new rho
+        # S carries all the solver needs of A0: zᵀA0z = (zᵀSz − ρ‖Kz‖²)/2, and the polish reduces S
+        # (penalty=rho); without rho adaptation neither A0 nor KᵀK is needed again
+        del KtK, A0
+        objective.clear_cache()
+        quad, penalty = S, rho
+    else:
+        quad, penalty = A0, None
     if kind == "grid":
         hierarchy = GridMultigrid(S, objective.shape, interpolation="auto")
         precondition = hierarchy.vcycle
@@ -475,7 +479,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
         x += u
         x += lam
         np.abs(x, out=lam)
-        np.minimum(lam, threshold, out=lam)
+        l1.clip_to_weights(lam, 1.0 / rho)
         np.copysign(lam, x, out=lam)
         x -= lam
         u, spare = x, u
@@ -498,7 +502,8 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
             break
         if polish and (k == next_polish or (next_polish is None and r_norm <= tol)):
             F_prev = None if best is None else best[0]
-            polished = _polish_active_set(A0, b, const, l1, u, z0=z if best is None else best[1], **polish_args)
+            polished = _polish_active_set(quad, b, const, l1, u, z0=z if best is None else best[1],
+                                          penalty=penalty, **polish_args)
             if polished is None:  # the reduced model is singular: plain ADMM
                 polish = False
                 continue
@@ -520,7 +525,6 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
             factor = 2.0 if r_norm > s_norm else 0.5
             rho *= factor
             lam /= factor
-            threshold /= factor
             S = _combine(2.0, A0, rho, KtK)
             Sz = S @ z
             if hierarchy is not None:
@@ -529,7 +533,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
                 precondition = make_preconditioner(S, kind, shape=objective.shape).matvec
     z = np.maximum(z, 0.0)
     if polish and best is None:
-        polished = _polish_active_set(A0, b, const, l1, u, z0=z, **polish_args)
+        polished = _polish_active_set(quad, b, const, l1, u, z0=z, penalty=penalty, **polish_args)
         if polished is not None:
             polish_steps += polished[3]
             best = (polished[1], polished[0], polished[2])
@@ -544,23 +548,74 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     return _output(z, k, converged, message, recorder)
 
 
-def _merge(M, labels, count):
+def _merge(M, labels, count, *, entries=None, chunk=1 << 16):
     """``Cᵀ M C`` for the indicator ``C`` of ``labels``: the entries of ``M`` summed per pair of labels.
 
-    ``M C`` only relabels the column indices of ``M`` (repeated labels in a
-    row are summed by the product that follows); ``Cᵀ (M C)`` is one sparse
-    product with the label-sorted indicator.
+    The pixels are taken in label order, a range of labels with about
+    ``chunk`` pixels at a time: their rows of ``M`` with the columns
+    relabelled are summed per label by one sparse product, and the blocks of
+    rows are stacked.  The work memory is that of one block, not of a copy of
+    ``M``'s indices.
+
+    Parameters
+    ----------
+    M : scipy.sparse matrix, shape (N, N)
+    labels : ndarray of int, shape (N,)
+        Values ``0 .. count-1``.
+    count : int
+    entries : callable, optional
+        ``entries(block, rows) -> data``: the values to merge in place of the
+        block's own (``block`` is ``M[rows]``, CSR); lets the caller merge a
+        matrix derived from ``M`` entry by entry without forming it.
+    chunk : int
+        Pixels per block.
     """
     M = sp.csr_matrix(M)
     n = M.shape[0]
-    right = sp.csr_matrix((M.data, labels[M.indices], M.indptr), shape=(n, count))
+    labels = np.asarray(labels)
     members = np.argsort(labels, kind="stable")
-    starts = np.concatenate([[0], np.cumsum(np.bincount(labels, minlength=count))])
-    left = sp.csr_matrix((np.ones(n), members, starts), shape=(count, n))
-    return (left @ right).tocsr()
+    starts = np.zeros(count + 1, dtype=np.int64)
+    np.cumsum(np.bincount(labels, minlength=count), out=starts[1:])
+    edges = np.unique(np.searchsorted(starts, np.arange(0, n, max(int(chunk), 1)), side="right") - 1)
+    edges = np.append(edges[edges < count], count)
+    blocks = []
+    for c0, c1 in zip(edges[:-1], edges[1:]):
+        p0, p1 = starts[c0], starts[c1]
+        rows = members[p0:p1]
+        block = M[rows]
+        data = block.data if entries is None else entries(block, rows)
+        right = sp.csr_matrix((data, labels[block.indices], block.indptr), shape=(p1 - p0, count))
+        left = sp.csr_matrix((np.ones(p1 - p0), np.arange(p1 - p0), starts[c0:c1 + 1] - p0), shape=(c1 - c0, p1 - p0))
+        blocks.append((left @ right).tocsr())
+        del block, data, right, left
+    return _stack_rows(blocks, count)
 
 
-def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, preconditioner="jacobi"):
+def _stack_rows(blocks, n_cols):
+    """Vertical stack of CSR blocks, each freed once copied (the result is never held twice)."""
+    if len(blocks) == 1:
+        return blocks.pop()
+    nnz = sum(b.nnz for b in blocks)
+    n_rows = sum(b.shape[0] for b in blocks)
+    index_dtype = np.int32 if max(nnz, n_cols) < np.iinfo(np.int32).max else np.int64
+    data = np.empty(nnz)
+    indices = np.empty(nnz, dtype=index_dtype)
+    indptr = np.empty(n_rows + 1, dtype=index_dtype)
+    indptr[0] = 0
+    row = pos = 0
+    blocks.reverse()
+    while blocks:
+        b = blocks.pop()
+        m, k = b.shape[0], b.nnz
+        data[pos:pos + k] = b.data
+        indices[pos:pos + k] = b.indices
+        indptr[row + 1:row + m + 1] = b.indptr[1:] + pos
+        row, pos = row + m, pos + k
+        del b
+    return sp.csr_matrix((data, indices, indptr), shape=(n_rows, n_cols))
+
+
+def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, preconditioner="jacobi", penalty=None):
     r"""Active-set polish: the quadratic model with the edges where ``u == 0`` tied and the other signs fixed.
 
     Pixels joined by a tied row of ``K`` (every row must be a difference of
@@ -582,6 +637,12 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
     most ``rounds`` solves, stopping when no sign is wrong or ``F`` stops
     decreasing.
 
+    With ``penalty = ρ``, ``A`` is ADMM's ``S = 2A + ρKᵀK`` instead (the
+    solver then keeps no copy of the quadratic part's matrix): the reduced
+    matrix is ``Cᵀ(S − ρKᵀK)C / 2``, the entries of ``KᵀK`` computed block
+    by block inside :func:`_merge` (:meth:`StackedL1.gram_entries`), and
+    ``zᵀAz = (zᵀSz − ρ‖Kz‖²) / 2``.
+
     Returns
     -------
     None, or the tuple:
@@ -600,7 +661,13 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
     signs[u > 0] = 1
     signs[u < 0] = -1
     labels, count = l1.tied_components(signs == 0)
-    reduced = _merge(A, labels, count)
+    if penalty is None:
+        reduced = _merge(A, labels, count)
+    elif l1.grid_gradient:  # A = (S − ρKᵀK)/2 entry by entry, block by block: never formed whole
+        reduced = _merge(A, labels, count,
+                         entries=lambda block, rows: 0.5 * (block.data - penalty * l1.gram_entries(block, rows)))
+    else:
+        reduced = _merge(((A - penalty * l1.gram()) * 0.5).tocsr(), labels, count)
     if not np.all(reduced.diagonal() > 0):
         return None  # a component without quadratic coupling: the model is not strictly convex
     best_F, best_z, best_count, steps = np.inf, None, 0, 0
@@ -621,7 +688,8 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
         np.maximum(z, 0.0, out=z)
         del y
         Kz = l1.apply(z)
-        F = _dot(z, A @ z) - 2.0 * _dot(b, z) + const + l1.value(Kz)
+        zAz = _dot(z, A @ z) if penalty is None else 0.5 * (_dot(z, A @ z) - penalty * _dot(Kz, Kz))
+        F = zAz - 2.0 * _dot(b, z) + const + l1.value(Kz)
         if F >= best_F:
             break
         best_F, best_z, best_count = F, z, count

@@ -236,6 +236,73 @@ def test_merge_sums_entries_per_pair_of_components():
     labels[:7] = np.arange(7)  # every label used
     C = sp.csr_matrix((np.ones(30), (np.arange(30), labels)), shape=(30, 7))
     np.testing.assert_allclose(_merge(M, labels, 7).toarray(), (C.T @ M @ C).toarray(), atol=1e-14)
+    # in blocks of a few pixels (stacked), and with entries replaced by a function of the block
+    expected = (C.T @ M @ C).toarray()
+    for chunk in (1, 4, 13):
+        np.testing.assert_allclose(_merge(M, labels, 7, chunk=chunk).toarray(), expected, atol=1e-14)
+    doubled = _merge(M, labels, 7, chunk=5, entries=lambda block, rows: 2.0 * block.data + rows[0] * 0)
+    np.testing.assert_allclose(doubled.toarray(), 2.0 * expected, atol=1e-14)
+
+
+@pytest.mark.parametrize("shape", [(1, 6), (5, 1), (2, 2), (3, 3), (6, 7)])
+def test_gram_entries_are_the_laplacian_on_a_wider_pattern(shape):
+    from sparsedepth.operators import gradient_stencil
+    from sparsedepth.stencil import stencil_to_csr
+
+    rng = np.random.default_rng(5)
+    l1 = StackedL1(_objective_with(shape, gradient_stencil(shape), rng))
+    offsets = sorted({(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3) if abs(dy) + abs(dx) <= 2})
+    pattern = sp.csr_matrix(stencil_to_csr(offsets, rng.random((len(offsets),) + shape)))  # 13-point, all stored
+    G = gradient(shape)
+    laplacian = (G.T @ G).toarray()
+    rows = np.array([0, shape[0] * shape[1] - 1, (shape[0] * shape[1]) // 2])
+    block = pattern[rows]
+    got = np.zeros((rows.size, pattern.shape[1]))
+    for i in range(rows.size):
+        cols = block.indices[block.indptr[i]:block.indptr[i + 1]]
+        got[i, cols] = l1.gram_entries(block, rows)[block.indptr[i]:block.indptr[i + 1]]
+    np.testing.assert_array_equal(got, laplacian[rows])
+
+
+def test_clip_to_weights_and_stack_rows():
+    from sparsedepth import _l1
+    from sparsedepth.solvers import _stack_rows
+
+    rng = np.random.default_rng(6)
+    shape = (7, 9)
+    l1 = StackedL1(_objective_with(shape, gradient(shape), rng))
+    v = rng.random(l1.rows)
+    expected = np.minimum(v, 0.3 * l1.weights)
+    old_chunk, _l1._CHUNK = _l1._CHUNK, 10  # several chunks
+    try:
+        np.testing.assert_array_equal(l1.clip_to_weights(v.copy(), 0.3), expected)
+        assert l1.max_weight() == pytest.approx(np.max(l1.weights), rel=1e-15)
+        Kz = l1.apply(rng.standard_normal(shape[0] * shape[1]))
+        assert l1.value(Kz) == pytest.approx(np.sum(l1.weights * np.abs(Kz)), rel=1e-13)
+    finally:
+        _l1._CHUNK = old_chunk
+    blocks = [sp.random(m, 11, density=0.3, random_state=m, format="csr") for m in (3, 1, 4)]
+    expected = sp.vstack(blocks).toarray()
+    np.testing.assert_array_equal(_stack_rows(list(blocks), 11).toarray(), expected)
+
+
+def test_polish_with_the_admm_matrix_equals_the_polish_with_A(optimal_signs):
+    """penalty=ρ: the polish reduces S = 2A + ρKᵀK block by block and must find the same point."""
+    from sparsedepth.solvers import _combine
+
+    obj, coarse, ref, (A, b, const), l1, u = optimal_signs
+    rho = 2.5
+    S = _combine(2.0, A, rho, (gradient(obj.shape).T @ gradient(obj.shape)).tocsr())
+    spoiled = u.copy()
+    rows = l1.pixel_pairs()[0]
+    spoiled[rows[u[rows] == 0][::3]] = 1.0  # two rounds
+    for sign_source in (u, spoiled):
+        z_a, F_a, n_a, _ = _polish_active_set(A, b, const, l1, sign_source, z0=coarse.ravel(), rtol=1e-12)
+        z_s, F_s, n_s, _ = _polish_active_set(S, b, const, l1, sign_source, z0=coarse.ravel(), rtol=1e-12,
+                                              penalty=rho)
+        assert n_a == n_s
+        assert F_s == pytest.approx(F_a, rel=1e-11)
+        np.testing.assert_allclose(z_s, z_a, atol=1e-8)
 
 
 def test_combine_same_and_different_patterns():
