@@ -7,8 +7,9 @@ equal a weighted average of its 3x3 neighbours, the weights coming from the
 grey image, and known pixels are pulled towards their measured depth.  This
 module builds exactly the same linear system, but vectorised (no per-pixel
 Python loop), and solves it with an exact block elimination of the unknown
-pixels plus a short, provably convergent Krylov iteration on the known ones,
-instead of a general sparse LU of the whole system.
+pixels (and of the known pixels most coupled to them) plus a short, provably
+convergent Krylov iteration on the other known ones, instead of a general
+sparse LU of the whole system.
 
 Public functions
 ----------------
@@ -53,6 +54,14 @@ and are what :mod:`bench.naive_colorization` and this module both use.
 _VARIANCE_FACTOR = 0.6
 _LOG_100 = math.log(100.0)  # -log(0.01)
 _MIN_CSIG = 2e-6
+
+# The solver's set-up (see colorization_fill, Notes): known pixels with at
+# least this many holes in their window are eliminated with the holes; the
+# preconditioner sees the eliminated pixels within this many window steps of
+# the iterated ones; and it has this many terms of a Neumann series.
+_LAYER_MIN_UNKNOWN = 2
+_STRIP_WIDTH = 2
+_NEUMANN_TERMS = 4
 
 
 # ----------------------------------------------------------------------------
@@ -426,7 +435,7 @@ def _combine(c, V):
 _REORTHOGONALISE = 0.01
 
 
-def _gmres(apply, lift, b, x0, precond, atol, maxiter, restart=30):
+def _gmres(apply, lift, b, x0, precond, atol, maxiter, restart=30, lift_x0=None):
     """Right-preconditioned restarted GMRES, stopping on ``||b - A x||_inf <= atol``.
 
     The operator is ``A x = apply(x, lift(x))``: ``lift`` is the expensive
@@ -435,9 +444,13 @@ def _gmres(apply, lift, b, x0, precond, atol, maxiter, restart=30):
     kept, so the lift of the iterate is their combination and the residual
     ``b - apply(x, lift(x))`` at the end of a cycle costs no extra solve.
     ``lift`` may be None (then ``apply(x, None)`` is the whole operator).
+    ``lift_x0``, if given, replaces ``lift(x0)`` for the initial guess: the
+    caller's lift may be affine, ``x -> lift(x) + c``, with ``lift`` applied
+    to the Krylov directions being its linear part.
 
-    ``precond`` must be linear (it is applied to the combination of the Krylov
-    vectors instead of storing their images).  The max-norm of the residual is
+    The preconditioned images of the Krylov vectors are kept too (as in
+    flexible GMRES), so the update of ``x`` at the end of a cycle costs no
+    further application of ``precond``.  The max-norm of the residual is
     evaluated from the Arnoldi relation ``r_k = V_{k+1} (beta e_1 - H_k y_k)``
     once the 2-norm estimate makes it possible, and confirmed at the end of
     every cycle with the residual ``b - A x`` recomputed from ``x`` and its
@@ -448,7 +461,10 @@ def _gmres(apply, lift, b, x0, precond, atol, maxiter, restart=30):
     GMRES estimate after every iteration.
     """
     x = x0.copy()
-    lift_x = None if lift is None else lift(x)
+    if lift is None:
+        lift_x = None
+    else:
+        lift_x = lift(x) if lift_x0 is None else lift_x0.copy()
     r = b - apply(x, lift_x)
     res_inf = float(np.max(np.abs(r)))
     beta = _norm(r)
@@ -459,6 +475,7 @@ def _gmres(apply, lift, b, x0, precond, atol, maxiter, restart=30):
     restart = max(1, min(restart, n, maxiter))
     while res_inf > atol and n_iter < maxiter:
         V = np.empty((restart + 1, n))
+        Z = np.empty((restart, n))  # preconditioned V
         lifted = None if lift is None else np.empty((restart, lift_x.size))
         Hm = np.zeros((restart + 1, restart))
         cs = np.zeros(restart)
@@ -468,7 +485,7 @@ def _gmres(apply, lift, b, x0, precond, atol, maxiter, restart=30):
         np.divide(r, beta, out=V[0])
         k = 0
         while k < restart and n_iter < maxiter:
-            w = precond(V[k])
+            w = Z[k] = precond(V[k])
             if lift is None:
                 v = apply(w, None)
             else:
@@ -510,7 +527,7 @@ def _gmres(apply, lift, b, x0, precond, atol, maxiter, restart=30):
                 if abs(g[k]) * float(np.max(np.abs(_combine(u, V[: k + 1])))) <= atol:
                     break
         y = scipy.linalg.solve_triangular(Hm[:k, :k], g[:k])
-        x += precond(_combine(y, V[:k]))
+        x += _combine(y, Z[:k])
         if lift is not None:
             lift_x += _combine(y, lifted[:k])
         r = b - apply(x, lift_x)
@@ -550,7 +567,7 @@ def colorization_fill(image, depth, *, mask=None, alpha=1.0, rtol=1e-8, window_r
     window_radius : int, optional
         Window radius; the toolbox uses 1 (3x3 window).
     maxiter : int, optional
-        Maximum number of Krylov iterations (typically 10-20 are needed).
+        Maximum number of Krylov iterations (typically 4-10 are needed).
 
     Returns
     -------
@@ -585,26 +602,35 @@ def colorization_fill(image, depth, *, mask=None, alpha=1.0, rtol=1e-8, window_r
     where the neighbourhood average agrees with it, or as ``alpha -> inf``.
     The system is a non-symmetric, non-singular M-matrix.
 
-    *Solution.*  Order the unknown pixels ``U`` before the known ones ``K``::
+    *Solution.*  Let ``E`` be the unknown pixels together with the known
+    pixels that have at least two unknown pixels in their window (the known
+    pixels most strongly coupled to the holes, e.g. between thin holes), and
+    ``K`` the other known pixels.  Ordering ``E`` first::
 
-        [A_UU  A_UK] [x_U]   [    0    ]
-        [A_KU  A_KK] [x_K] = [alpha d_K]
+        [A_EE  A_EK] [x_E]   [b_E]
+        [A_KE  A_KK] [x_K] = [b_K],        b = alpha M d,
 
-    ``A_UU = I - W_UU`` is factored exactly once (SuperLU, in a cached
-    nested-dissection order of the pixel grid; ``A_UU^T`` is column
-    diagonally dominant, so no pivoting is needed), and the Schur complement
+    ``A_EE`` is factored exactly once (SuperLU, in a cached nested-dissection
+    order of the pixel grid; ``A_EE`` is row diagonally dominant, so its
+    transpose is factored without pivoting), and the Schur complement
     system::
 
-        S x_K = alpha d_K,      S = A_KK - A_KU A_UU^{-1} A_UK,
+        S x_K = b_K - A_KE A_EE^{-1} b_E,      S = A_KK - A_KE A_EE^{-1} A_EK,
 
-    is solved by right-preconditioned GMRES (the first two terms of the
-    Neumann series of ``A_KK^{-1}`` as preconditioner, ``x_K = d_K`` as
-    starting guess).  Every product with ``S`` computes ``x_U = -A_UU^{-1}
-    A_UK x_K`` for its Krylov direction (one pair of triangular solves);
-    those are kept, so the final ``x_U`` is their combination and costs no
-    further solve.  ``S`` is an M-matrix with every row sum equal to
-    ``alpha``, so ``||S^{-1}||_inf = 1/alpha``, and ``-A_UU^{-1} A_UK`` is
-    non-negative with unit row sums.  Hence stopping when the residual
+    is solved by right-preconditioned GMRES from ``x_K = d_K``.  Every
+    product with ``S`` computes ``x_E = -A_EE^{-1} A_EK x_K`` for its Krylov
+    direction (one pair of triangular solves); those are kept, so the final
+    ``x_E`` is their combination plus the (affine) lift of the starting
+    guess, and costs no further solve.  The preconditioner is the Neumann
+    series, four terms, of the inverse of the Schur complement of the *strip*
+    ``s`` of ``E`` within two window steps of ``K`` only, ``A_KK - A_Ks
+    A_ss^{-1} A_sK`` (``A_ss`` is small and thin, cheap to factor and solve):
+    it captures the strong coupling of ``K`` to itself through the near
+    holes, which a preconditioner built from ``A_KK`` alone misses.
+    ``A_EE^{-1}`` and ``-A_EE^{-1} A_EK`` are non-negative, the latter with
+    row sums at most 1, so ``S`` is an M-matrix with every row sum at least
+    ``alpha``: ``||S^{-1}||_inf <= 1/alpha``, and the error of ``x_E`` is at
+    most the largest error of ``x_K``.  Hence stopping when the residual
     satisfies ``||r||_inf <= alpha * rtol`` guarantees ``max |x - x_exact|
     <= rtol``.
 
@@ -617,12 +643,14 @@ def colorization_fill(image, depth, *, mask=None, alpha=1.0, rtol=1e-8, window_r
     interpolation) as GMRES preconditioner of the whole system is still 2.5
     cm off after 100 iterations on a 640x480 NYU frame.  The exact
     elimination removes that difficulty, leaving a known block whose Jacobi
-    iteration contracts by ``1/(1 + alpha)`` per step; GMRES needs about 9
-    iterations for ``rtol = 1e-8`` on NYU frames.  On a 640x480 NYU frame
-    with 27 % holes the factorisation takes about 30 % of the time, the ten
-    triangular solves 25 %, the rest of GMRES (two sparse products and
-    Gram-Schmidt per iteration) 20 % and the assembly of the weights and the
-    matrix 20 %.
+    iteration contracts by ``1/(1 + alpha)`` per step.  With the two-term
+    Neumann series of ``A_KK^{-1}`` and only the unknown pixels eliminated,
+    GMRES needs 9 iterations for ``rtol = 1e-8`` on a 640x480 NYU frame with
+    27 % holes (rate 0.15, set by the known pixels next to the holes); with
+    the preconditioner above it needs 4 (rate 0.016).  There, the
+    factorisation takes about 40 % of the time, the five triangular solves
+    12 %, the rest of GMRES (mostly the sparse products of the
+    preconditioner) 20 % and the assembly of the weights and the matrix 25 %.
 
     References
     ----------
@@ -655,16 +683,20 @@ def colorization_fill(image, depth, *, mask=None, alpha=1.0, rtol=1e-8, window_r
     if scale == 0.0:
         return np.zeros(grey.shape)
     known_flat = m.ravel()
+    elim, strip, rim = _eliminated_sets(m, radius)
     nd_order = _nested_dissection_order(*grey.shape)
-    unknown = nd_order[~known_flat[nd_order]]  # in a fill-reducing order
-    known = np.flatnonzero(known_flat)
+    unknown = nd_order[elim.ravel()[nd_order]]  # in a fill-reducing order
+    known = np.flatnonzero(~elim)
     order = np.concatenate((unknown, known))
 
     planes, steps = _window_weights(grey, radius)
     A = _window_csr(planes, steps, 1.0 + alpha * known_flat, -1, order=order)
-    d_K = d.ravel()[known] / scale
-    x, _ = _solve_schur(A, unknown.size, alpha * d_K, x0=d_K, atol=alpha * rtol, maxiter=maxiter,
-                        diag_K=1.0 + alpha)
+    b = d.ravel()[order]  # 0 at the holes
+    b *= alpha / scale
+    x0 = d.ravel()[known] / scale
+    x, _ = _solve_schur(A, unknown.size, b, x0=x0, atol=alpha * rtol, maxiter=maxiter,
+                        diag_K=1.0 + alpha, strip=np.flatnonzero(strip.ravel()[unknown]),
+                        rim=np.flatnonzero(rim.ravel()[known]))
     out = np.empty(grey.size)
     out[order] = x * scale
     return out.reshape(grey.shape)
@@ -693,62 +725,152 @@ def _csr_split_columns(A, split):
     )
 
 
-def _solve_schur(A, n_unknown, b_K, *, x0, atol, maxiter, diag_K):
-    """Solve ``A x = [0; b_K]`` by exact elimination of the first ``n_unknown`` unknowns.
+def _box_count(mask, radius):
+    """Number of True pixels of ``mask`` in the (clipped) window of radius ``radius`` of every pixel."""
+    count = mask.astype(np.int32)
+    rows = count.copy()
+    for d in range(1, radius + 1):  # separable: along the rows, then the columns
+        rows[d:] += count[:-d]
+        rows[:-d] += count[d:]
+    out = rows.copy()
+    for d in range(1, radius + 1):
+        out[:, d:] += rows[:, :-d]
+        out[:, :-d] += rows[:, d:]
+    return out
 
-    ``A`` (CSR) is the system with the unknown pixels first, in a
-    fill-reducing order, and the known ones last; ``diag_K`` is the
-    (constant) diagonal of its known rows.  GMRES runs on the Schur
-    complement of the unknown block (see :func:`colorization_fill`),
-    preconditioned by the first two terms of the Neumann series of
-    ``A_KK^{-1}``.  Returns ``(x, residual_history)`` with ``x`` in the order
-    of ``A``.
+
+def _eliminated_sets(known, radius):
+    """The pixels eliminated exactly, and the strip of them seen by the preconditioner.
+
+    Returns three boolean (H, W) masks.  ``elim`` holds the holes and the
+    known pixels with at least ``_LAYER_MIN_UNKNOWN`` holes in their window
+    (the known pixels most strongly coupled to the holes, notably those
+    between thin holes); the others form the iterated set ``K``.  ``strip``
+    holds the pixels of ``elim`` within ``_STRIP_WIDTH`` window steps of
+    ``K``, and ``rim`` the pixels of ``K`` with a pixel of ``elim`` in their
+    window.
+    """
+    hole = ~known
+    elim = hole | (known & (_box_count(hole, radius) >= _LAYER_MIN_UNKNOWN))
+    strip = elim & (_box_count(~elim, _STRIP_WIDTH * radius) > 0)
+    rim = ~elim & (_box_count(elim, radius) > 0)
+    return elim, strip, rim
+
+
+def _csr_submatrix(A, rows, column_map, n_columns):
+    """Rows ``rows`` of the CSR matrix ``A``, keeping column ``j`` as ``column_map[j]`` if it is >= 0."""
+    start = A.indptr[rows]
+    seg, t = _segments(A.indptr[rows + 1] - start)
+    entries = start[seg] + t
+    columns = column_map[A.indices[entries]]
+    keep = columns >= 0
+    indptr = np.zeros(rows.size + 1, dtype=A.indptr.dtype)
+    np.cumsum(np.bincount(seg[keep], minlength=rows.size), out=indptr[1:])
+    return scipy.sparse.csr_matrix((A.data[entries[keep]], columns[keep], indptr),
+                                   shape=(rows.size, n_columns))
+
+
+def _factor_rows(B):
+    """SuperLU factorisation of the CSR matrix ``B``; ``lu.solve(v, trans="T")`` solves ``B y = v``.
+
+    The CSR arrays of ``B`` (sorted here) are the CSC arrays of ``B^T``.
+    ``B`` is a principal submatrix of the system, row diagonally dominant, so
+    ``B^T`` is column diagonally dominant: it is factored in the given order,
+    without pivoting.
+    """
+    B.sort_indices()
+    Bt = scipy.sparse.csc_matrix((B.data, B.indices, B.indptr), shape=B.shape)
+    # no relaxed supernodes and panels of one column: 15-20 % faster than
+    # SuperLU's defaults (relax 10, panel 20) on the small supernodes of a
+    # nested-dissection order of a 2-D grid, and the transposed solve is 1.5
+    # times faster than the solve with a factorisation of B (measured on NYU
+    # frames).  Large values are unsafe: relax=100, panel_size=40 segfaults
+    # (SciPy 1.17).
+    return scipy.sparse.linalg.splu(
+        Bt, permc_spec="NATURAL", diag_pivot_thresh=0.0, relax=1, panel_size=1,
+        options={"SymmetricMode": True},
+    )
+
+
+def _solve_schur(A, n_unknown, b, *, x0, atol, maxiter, diag_K, strip=None, rim=None):
+    """Solve ``A x = b`` by exact elimination of the first ``n_unknown`` unknowns ``E``.
+
+    ``A`` (CSR) is the system with the eliminated pixels ``E`` first, in a
+    fill-reducing order, and the others ``K`` (all known) last; ``diag_K`` is
+    the (constant) diagonal of the rows of ``K``; ``x0`` the initial guess of
+    ``x_K``.  GMRES runs on the Schur complement of ``A_EE`` (see
+    :func:`colorization_fill`), preconditioned by ``_NEUMANN_TERMS`` terms of
+    the Neumann series of the inverse of ``A_KK - A_Ks A_ss^{-1} A_sK``, the
+    Schur complement of the pixels ``strip`` of ``E`` only (indices into
+    ``E``; None or empty: ``A_KK`` alone).  ``rim`` (indices into ``K``) must
+    hold every row of ``K`` with an entry in the columns of ``strip``.
+    Returns ``(x, residual_history)`` with ``x`` in the order of ``A``.
     """
     n = A.shape[0]
-    n_u = n_unknown
-    A_K = _csr_rows(A, n_u, n)  # known rows, all columns
+    n_e = n_unknown
+    n_k = n - n_e
+    if n_k == 0:  # everything eliminated: a direct solve
+        return _factor_rows(A).solve(b, trans="T"), np.zeros(0)
+    A_K = _csr_rows(A, n_e, n)  # rows of K, all columns
+    b_K = b[n_e:]
 
-    def apply(x_K, x_U):
-        # S x_K = A_KK x_K + A_KU x_U with x_U = lift(x_K) = -A_UU^{-1} A_UK x_K
-        return A_K @ (x_K if x_U is None else np.concatenate((x_U, x_K)))
+    def apply(x_K, x_E):
+        # S x_K = A_KK x_K + A_KE x_E with x_E = lift(x_K)
+        return A_K @ (x_K if x_E is None else np.concatenate((x_E, x_K)))
 
-    lift = None
-    if n_u:
-        A_UU, A_UK = _csr_split_columns(_csr_rows(A, 0, n_u), n_u)
-        A_UU.sort_indices()
-        # the CSR arrays of A_UU are the CSC arrays of A_UU^T, which is column
-        # diagonally dominant: factor it in the given order, without pivoting
-        A_UUt = scipy.sparse.csc_matrix((A_UU.data, A_UU.indices, A_UU.indptr), shape=A_UU.shape)
-        # no relaxed supernodes and panels of one column: 15-20 % faster than
-        # SuperLU's defaults (relax 10, panel 20) on the small supernodes of a
-        # nested-dissection order of a 2-D grid (measured on NYU frames).
-        # Large values are unsafe: relax=100, panel_size=40 segfaults (SciPy 1.17).
-        lu = scipy.sparse.linalg.splu(
-            A_UUt, permc_spec="NATURAL", diag_pivot_thresh=0.0, relax=1, panel_size=1,
-            options={"SymmetricMode": True},
-        )
+    # A_KK z computed as A_K [0; z] (as fast as a separate A_KK, whose
+    # extraction would cost more than it saves)
+    y = np.zeros(n)
+    y_K = y[n_e:]
+
+    def apply_KK(z):
+        y_K[:] = z
+        return A_K @ y
+
+    lift = lift_x0 = None
+    apply_M = apply_KK
+    if n_e:
+        A_EE, A_EK = _csr_split_columns(_csr_rows(A, 0, n_e), n_e)
+        lu = _factor_rows(A_EE)
 
         def lift(x_K):
-            x_U = lu.solve(A_UK @ x_K, trans="T")
-            return np.negative(x_U, out=x_U)
+            # x_E = -A_EE^{-1} A_EK x_K, the linear part of the lift
+            x_E = lu.solve(A_EK @ x_K, trans="T")
+            return np.negative(x_E, out=x_E)
 
-    # first two terms of the Neumann series of A_KK^{-1} = (D - P_KK)^{-1},
-    # (2 v - A_KK v / D) / D = 2 y - A_KK y / D with y = v / D, and A_KK y
-    # computed as A_K [0; y]
-    y = np.zeros(n)
-    y_K = y[n_u:]
+        # the lift of the initial guess is affine: A_EE^{-1} (b_E - A_EK x0)
+        lift_x0 = lu.solve(b[:n_e] - A_EK @ x0, trans="T")
 
+        if strip is not None and strip.size:
+            itype = A.indices.dtype
+            strip_map = np.full(n, -1, dtype=itype)
+            strip_map[strip] = np.arange(strip.size, dtype=itype)
+            A_sK = _csr_submatrix(A_EK, strip, np.arange(n_k, dtype=itype), n_k)
+            A_Ks = _csr_submatrix(A_K, rim, strip_map, strip.size)
+            lu_s = _factor_rows(_csr_submatrix(A_EE, strip, strip_map, strip.size))
+
+            def apply_M(z):
+                t = apply_KK(z)
+                t[rim] -= A_Ks @ lu_s.solve(A_sK @ z, trans="T")
+                return t
+
+    # Neumann series of the approximate Schur complement M = D - P with P >= 0
+    # (D = diag_K): z_{j+1} = z_j + (v - M z_j) / D from z_1 = v / D
     def apply_precond(v):
-        np.divide(v, diag_K, out=y_K)
-        t = A_K @ y
-        np.subtract(y_K, t / diag_K, out=t)
-        t += y_K
-        return t
+        z0 = v / diag_K
+        z = z0.copy()
+        for _ in range(_NEUMANN_TERMS - 1):
+            t = apply_M(z)
+            t /= diag_K
+            z -= t
+            z += z0
+        return z
 
-    x_K, x_U, history, res_inf, converged = _gmres(apply, lift, b_K, x0, apply_precond, atol, maxiter)
+    x_K, x_E, history, res_inf, converged = _gmres(apply, lift, b_K, x0, apply_precond, atol, maxiter,
+                                                   lift_x0=lift_x0)
     if not converged:
         raise RuntimeError(
             f"colorization_fill: GMRES did not reach the tolerance {atol:.3g} in {maxiter} "
             f"iterations (max-norm residual {res_inf:.3g}); increase maxiter or rtol"
         )
-    return (x_K if x_U is None else np.concatenate((x_U, x_K))), history
+    return (x_K if x_E is None else np.concatenate((x_E, x_K))), history

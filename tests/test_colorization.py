@@ -186,3 +186,57 @@ def test_large_alpha_matches_direct_solve(naive):
     expected = _direct_solution(naive, grey, depth, known, alpha=1e4)
     got = colorization_fill(grey, np.where(known, depth, 0.0), alpha=1e4, rtol=1e-13)
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10)
+
+
+def _window_count(mask, radius):
+    """Brute force: number of True pixels of ``mask`` in every pixel's (clipped) window."""
+    padded = np.pad(mask.astype(int), radius)
+    H, W = mask.shape
+    return sum(padded[radius + di : radius + di + H, radius + dj : radius + dj + W]
+               for di in range(-radius, radius + 1) for dj in range(-radius, radius + 1))
+
+
+@pytest.mark.parametrize("window_radius", [1, 2])
+def test_eliminated_sets_definition(window_radius):
+    from sparsedepth.colorization import _LAYER_MIN_UNKNOWN, _STRIP_WIDTH, _eliminated_sets
+
+    _, _, known = _hand_made_frame()
+    elim, strip, rim = _eliminated_sets(known, window_radius)
+    hole = ~known
+    expected_elim = hole | (known & (_window_count(hole, window_radius) >= _LAYER_MIN_UNKNOWN))
+    np.testing.assert_array_equal(elim, expected_elim)
+    assert (elim & known).any()  # the hand-made frame has known pixels between holes
+    np.testing.assert_array_equal(strip, elim & (_window_count(~elim, _STRIP_WIDTH * window_radius) > 0))
+    np.testing.assert_array_equal(rim, ~elim & (_window_count(elim, window_radius) > 0))
+
+
+@pytest.mark.parametrize("use_strip", [True, False])
+@pytest.mark.parametrize("window_radius", [1, 2])
+def test_schur_solve_matches_spsolve(use_strip, window_radius):
+    # the elimination of E = holes + coupled known pixels, with and without the strip
+    # preconditioner, against a sparse LU of the same system built from colorization_weights
+    from sparsedepth.colorization import _eliminated_sets, _nested_dissection_order, _solve_schur
+
+    grey, depth, known = _hand_made_frame()
+    alpha = 0.7
+    n = grey.size
+    system = (scipy.sparse.identity(n) - colorization_weights(grey, window_radius=window_radius)
+              + scipy.sparse.diags(alpha * known.ravel().astype(float))).tocsr()
+    rhs = alpha * np.where(known, depth, 0.0).ravel()
+    expected = scipy.sparse.linalg.spsolve(system.tocsc(), rhs)
+
+    elim, strip, rim = _eliminated_sets(known, window_radius)
+    nd = _nested_dissection_order(*grey.shape)
+    unknown = nd[elim.ravel()[nd]]
+    rest = np.flatnonzero(~elim.ravel())
+    order = np.concatenate((unknown, rest))
+    A = system[order][:, order].tocsr()
+    x, history = _solve_schur(
+        A, unknown.size, rhs[order], x0=depth.ravel()[rest], atol=1e-13, maxiter=200, diag_K=1.0 + alpha,
+        strip=np.flatnonzero(strip.ravel()[unknown]) if use_strip else None,
+        rim=np.flatnonzero(rim.ravel()[rest]) if use_strip else None,
+    )
+    got = np.empty(n)
+    got[order] = x
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-11)
+    assert len(history) > 1  # GMRES ran
