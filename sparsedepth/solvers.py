@@ -670,12 +670,19 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
     signs[u < 0] = -1
     labels, count = l1.tied_components(signs == 0)
     if penalty is None:
-        reduced = _merge(A, labels, count)
+        def reduce(labels, count):
+            return _merge(A, labels, count)
     elif l1.grid_gradient:  # A = (S − ρKᵀK)/2 entry by entry, block by block: never formed whole
-        reduced = _merge(A, labels, count,
-                         entries=lambda block, rows: 0.5 * (block.data - penalty * l1.gram_entries(block, rows)))
+        def reduce(labels, count):
+            return _merge(A, labels, count,
+                          entries=lambda block, rows: 0.5 * (block.data - penalty * l1.gram_entries(block, rows)))
     else:
-        reduced = _merge(((A - penalty * l1.gram()) * 0.5).tocsr(), labels, count)
+        A = ((A - penalty * l1.gram()) * 0.5).tocsr()
+        penalty = None
+
+        def reduce(labels, count):
+            return _merge(A, labels, count)
+    reduced = reduce(labels, count)
     if not np.all(reduced.diagonal() > 0):
         return None  # a component without quadratic coupling: the model is not strictly convex
     best_F, best_z, best_count, steps = np.inf, None, 0, 0
@@ -712,8 +719,9 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
         first, second = l1.pairs_where(wrong)
         del wrong
         merged, count = _graph_components(count, labels[first], labels[second])
-        reduced = _merge(reduced, merged, count)
         labels = merged[labels]
+        del merged, reduced  # reduced again from A: the previous reduced matrix is not held alongside the new one
+        reduced = reduce(labels, count)
         z_start = z
     return best_z, best_F, best_count, steps
 
