@@ -114,6 +114,7 @@ class StackedL1:
         self.shape = tuple(objective.shape)
         # c is not stored (2N floats): per term its weight and the term's own row weights
         self._row_weights = [(float(t.weight), t.row_weights, t.operator.shape[0]) for t in terms]
+        # (weight, r, m): r of shape (m,), or (m / k,) repeated k times (AbsTerm's shared block weights)
         self.grid_gradient = len(terms) == 1 and _is_gradient_operator(terms[0].operator, self.shape)
         # the grid gradient is applied by slicing: its CSR matrix (~88 bytes per pixel) is built only on request
         self._operators = [t.operator for t in terms]
@@ -124,15 +125,18 @@ class StackedL1:
     @property
     def weights(self):
         """``c >= 0``, shape (m,): a new array on every access (kept by nobody between calls)."""
-        return np.concatenate([w * (np.ones(m) if r is None else r) for w, r, m in self._row_weights])
+        return np.concatenate([w * (np.ones(m) if r is None else np.tile(r, m // r.shape[0]))
+                               for w, r, m in self._row_weights])
 
     def _weight_chunks(self):
         """``(rows, weight, r[rows])`` in chunks of at most ``_CHUNK`` rows (``r`` None for ones)."""
         start = 0
         for w, r, m in self._row_weights:
-            for lo in range(0, m, _CHUNK):
-                hi = min(lo + _CHUNK, m)
-                yield slice(start + lo, start + hi), w, (None if r is None else r[lo:hi])
+            period = m if r is None else r.shape[0]  # r repeats every `period` rows
+            for block in range(0, m, max(period, 1)):
+                for lo in range(0, min(period, m - block), _CHUNK):
+                    hi = min(lo + _CHUNK, period, m - block)
+                    yield slice(start + block + lo, start + block + hi), w, (None if r is None else r[lo:hi])
             start += m
 
     def max_weight(self) -> float:

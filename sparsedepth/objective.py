@@ -175,7 +175,11 @@ class AbsTerm:
         :func:`~sparsedepth.operators.gradient_stencil`; the L1 solvers
         recognise it (:class:`~sparsedepth._l1.StackedL1`) and apply it by
         slicing.
-    row_weights : ndarray of shape (m,), or None
+    row_weights : ndarray of shape (m,) or (N,), or None
+        ``r``; shape ``(N,)`` (with ``m`` a multiple of ``N``, e.g. the two
+        blocks of the gradient) means the same weights for every block of
+        ``N`` rows, stored once (``build_objective`` passes the edge weights
+        of the pixels so: half the memory of the stacked ``r``).
     """
 
     name: str
@@ -183,11 +187,26 @@ class AbsTerm:
     operator: object
     row_weights: Optional[np.ndarray] = None
 
+    def __post_init__(self):
+        if self.row_weights is not None:
+            m, n = self.operator.shape
+            size = np.shape(self.row_weights)[0] if np.ndim(self.row_weights) == 1 else -1
+            if size != m and not (size == n and n > 0 and m % n == 0):
+                raise ValueError(f"row_weights of term {self.name!r} must have shape ({m},) or ({n},) "
+                                 f"(shared by the {m // max(n, 1)} blocks), got {np.shape(self.row_weights)}")
+
+    def row_weight_blocks(self) -> int:
+        """How many times the stored ``row_weights`` repeat along the rows (1 when of shape (m,))."""
+        if self.row_weights is None:
+            return 1
+        return self.operator.shape[0] // np.shape(self.row_weights)[0]
+
     def scaled_row_weights(self):
-        """``weight · r`` as an array."""
+        """``weight · r`` as an array of shape (m,)."""
         m = self.operator.shape[0]
-        r = np.ones(m) if self.row_weights is None else self.row_weights
-        return self.weight * r
+        if self.row_weights is None:
+            return np.full(m, float(self.weight))
+        return self.weight * np.tile(np.asarray(self.row_weights, dtype=np.float64), self.row_weight_blocks())
 
     def value(self, z) -> float:
         if self.weight == 0:
@@ -527,7 +546,6 @@ def build_objective(
     n = depth.size
     coarse = nearest_fill(depth, observed)
     w = edge_weights(img, weights.kappa).ravel() if weights.gamma > 0 else None
-    ww = None if w is None else np.concatenate([w, w])
     pair = pair_edge_weights(img, weights.kappa) if (weights.beta_image > 0 or weights.beta_second_image > 0) else None
     G = gradient_stencil(shape)
     hessian = hessian_stencil(shape) if (weights.beta_second > 0 or weights.beta_second_image > 0) else None
@@ -535,7 +553,7 @@ def build_objective(
     terms = [
         QuadraticTerm("data", weights.alpha, None, observed.reshape(-1), depth.ravel()),  # bool weights: 1/8 memory
         QuadraticTerm("smooth", weights.beta, G),
-        AbsTerm("edge", weights.gamma, G, ww),
+        AbsTerm("edge", weights.gamma, G, w),  # one weight per pixel, shared by its x and y edge
         QuadraticTerm("prior", weights.delta, None, None, coarse.ravel()),
         QuadraticTerm("smooth_image", weights.beta_image, G, pair),
         QuadraticTerm("second_order", weights.beta_second, hessian),

@@ -323,3 +323,34 @@ def test_admm_options_reach_the_same_optimum(options):
     res = complete_depth(image, sparse, mask, weights=L1, solver="admm", options=options)
     assert res.depth.min() > 0
     assert _kkt_gap_bound(obj, res.depth.ravel()) <= 1e-7 * res.objective, res.message
+
+
+def test_weights_shared_by_the_gradient_blocks_equal_the_stacked_ones():
+    """AbsTerm row weights of shape (N,) stand for the same weights on the x and the y edges."""
+    from sparsedepth import _l1
+    from sparsedepth.operators import gradient_stencil
+
+    rng = np.random.default_rng(7)
+    shape = (6, 5)
+    n = shape[0] * shape[1]
+    G = gradient_stencil(shape)
+    w = rng.random(n)
+    prior = QuadraticTerm("prior", 1.0, None, None, rng.random(n))
+    shared = Objective(shape, [prior, AbsTerm("edge", 0.7, G, w)])
+    stacked = Objective(shape, [prior, AbsTerm("edge", 0.7, G, np.concatenate([w, w]))])
+    np.testing.assert_array_equal(shared.term("edge").scaled_row_weights(), 0.7 * np.concatenate([w, w]))
+    z = rng.standard_normal(n)
+    assert shared.value(z) == pytest.approx(stacked.value(z), rel=1e-14)
+    a, b = StackedL1(shared), StackedL1(stacked)
+    np.testing.assert_array_equal(a.weights, b.weights)
+    v = rng.standard_normal(2 * n)
+    old_chunk, _l1._CHUNK = _l1._CHUNK, 7  # chunks that do not divide a block
+    try:
+        np.testing.assert_allclose(a.weighted(v), b.weights * v, rtol=1e-15)
+        np.testing.assert_allclose(a.clip_to_weights(np.abs(v), 0.5), np.minimum(np.abs(v), 0.5 * b.weights))
+        assert a.value(v) == pytest.approx(np.sum(b.weights * np.abs(v)), rel=1e-14)
+        assert a.max_weight() == pytest.approx(0.7 * w.max(), rel=1e-15)
+    finally:
+        _l1._CHUNK = old_chunk
+    with pytest.raises(ValueError, match="row_weights"):
+        AbsTerm("edge", 0.7, G, rng.random(n + 1))
