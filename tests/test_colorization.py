@@ -105,9 +105,20 @@ def test_extreme_masks_match_direct_solve(naive, case):
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10)
 
 
+def _flat_bright_grey():
+    # near-white flat image with one-level (1/255) steps and two isolated outliers: tiny window
+    # variances under a large mean, where a one-pass variance would cancel catastrophically
+    rng = np.random.default_rng(1)
+    grey = 0.96 + np.round(rng.random((24, 30)) * 0.6 - 0.3) / 255.0
+    grey[5, 7] -= 40 / 255.0
+    grey[12, 20] -= 3 / 255.0
+    return grey
+
+
+@pytest.mark.parametrize("frame", ["hand made", "flat bright"])
 @pytest.mark.parametrize("window_radius", [1, 2])
-def test_weights_are_the_naive_matrix(naive, window_radius):
-    grey, _, _ = _hand_made_frame()
+def test_weights_are_the_naive_matrix(naive, window_radius, frame):
+    grey = _hand_made_frame()[0] if frame == "hand made" else _flat_bright_grey()
     W = colorization_weights(grey, window_radius=window_radius)
     A = naive.naive_colorization_matrix(grey, window_radius)
     np.testing.assert_allclose(W.toarray(), np.eye(grey.size) - A.toarray(), rtol=0, atol=1e-15)
