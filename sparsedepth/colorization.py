@@ -190,14 +190,7 @@ def _window_weights(grey, radius):
     # deviations, so (mu_p - g_p)^2 <= (n - 1) v_p: the subtraction loses at
     # most a factor n = (2r+1)^2 in relative accuracy (a few ulps, against
     # the toolbox's two-pass variance), unlike the textbook one-pass formula.
-    rows_sum = grey.copy()
-    for d in range(1, radius + 1):
-        rows_sum[d:] += grey[:-d]
-        rows_sum[:-d] += grey[d:]
-    total = rows_sum.copy()
-    for d in range(1, radius + 1):
-        total[:, d:] += rows_sum[:, :-d]
-        total[:, :-d] += rows_sum[:, d:]
+    total = _box_sum(grey, radius)
     mean = total / count
     var = planes.sum(axis=0)
     var /= count
@@ -753,11 +746,15 @@ def _csr_split_columns(A, split):
 
 def _box_count(mask, radius):
     """Number of True pixels of ``mask`` in the (clipped) window of radius ``radius`` of every pixel."""
-    count = mask.astype(np.int32)
-    rows = count.copy()
-    for d in range(1, radius + 1):  # separable: along the rows, then the columns
-        rows[d:] += count[:-d]
-        rows[:-d] += count[d:]
+    return _box_sum(mask.astype(np.int32), radius)
+
+
+def _box_sum(image, radius):
+    """Sum of ``image`` over the (clipped) ``(2 radius + 1)²`` window of every pixel (separable, new array)."""
+    rows = image.copy()
+    for d in range(1, radius + 1):  # separable: over axis 0 first, then over axis 1
+        rows[d:] += image[:-d]
+        rows[:-d] += image[d:]
     out = rows.copy()
     for d in range(1, radius + 1):
         out[:, d:] += rows[:, :-d]
