@@ -391,8 +391,8 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     reduced matrix are computed from ``S``); for the grid gradient ``K`` is
     never stored, the weights ``c`` are read chunk by chunk from the L1
     term's row weights, and the ADMM vectors are ``u``, ``λ`` and one work
-    vector of ``2N`` entries each (about 360 bytes per pixel in all on
-    the ``bench/perf.py`` frame, measured with ``tracemalloc``).
+    vector of ``2N`` entries each (the peak of a whole 8-megapixel run is
+    in ``docs/performance.md``, measured by ``bench/perf.py``).
 
     Options: ``rho``, ``relaxation`` (1.9), ``inner_rtol``, ``inner_factor``,
     ``inner_max_iter``, ``adapt_iters``, ``preconditioner``, ``polish``,
