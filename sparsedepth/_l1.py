@@ -332,6 +332,11 @@ class StackedL1:
         y_first = np.flatnonzero(mask[n:n + (H - 1) * W])  # the last row's rows are empty
         return np.concatenate([x_first, y_first]), np.concatenate([x_first + 1, y_first + W])
 
+    @property
+    def exact_pairs(self) -> bool:
+        """:meth:`pixel_pairs`' ``exact`` flag, without forming the pairs for the grid gradient."""
+        return True if self.grid_gradient else self.pixel_pairs()[3]
+
     def pixel_pairs(self):
         """Rows of ``K`` that are differences of two pixels.
 

@@ -365,8 +365,8 @@ class Objective:
         """Forget the cached :meth:`normal_equations` (it is re-assembled on the next call).
 
         Solvers that keep only a matrix derived from ``A`` (ADMM's ``2A + ρKᵀK``)
-        call this so that ``A`` is not held twice: about 60 bytes per pixel
-        for the 5-point system, 200 for the 13-point one.
+        call this so that ``A`` is not held twice (12 bytes per stored entry:
+        5 or 13 entries per pixel for the 5- or 13-point system).
         """
         self._normal = None
 

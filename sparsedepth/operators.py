@@ -201,7 +201,7 @@ class StencilOperator:
     (zero first and last line).  The stacked operator has shape
     ``(n_blocks * H * W, H * W)`` and equals :meth:`tocsr`, but is applied by
     array slicing, stores nothing per pixel, and yields the stencil of
-    :math:`K^\top \operatorname{diag}(r) K` directly (:meth:`normal_stencil`),
+    :math:`K^\top \operatorname{diag}(r) K` directly (:meth:`add_normal_stencil`),
     so the normal equations are assembled without sparse matrix products.
 
     Parameters

@@ -424,7 +424,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     inner_factor = float(options.get("inner_factor", 0.1))
     inner_max = int(options.get("inner_max_iter", 1))
     adapt_iters = int(options.get("adapt_iters", 0))
-    polish = bool(options.get("polish", True)) and l1.pixel_pairs()[3]
+    polish = bool(options.get("polish", True)) and l1.exact_pairs
     polish_args = dict(rounds=int(options.get("polish_rounds", 2)), rtol=float(options.get("polish_rtol", 1e-7)),
                        preconditioner=options.get("polish_preconditioner", "jacobi"))
     check_every = int(options.get("check_every", 3))
@@ -641,8 +641,9 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
     A pixel-difference row whose polished value ``t_k`` has ``t_k s_k <= 0``
     contradicts its fixed sign (the minimiser of the model would cross the
     kink of ``|t_k|``); such rows are tied in the next round, whose
-    components and reduced matrix are merged from the previous ones, for at
-    most ``rounds`` solves, stopping when no sign is wrong or ``F`` stops
+    components are merged from the previous ones and whose reduced matrix is
+    summed from ``A`` again (never two reduced matrices at once), for at most
+    ``rounds`` solves, stopping when no sign is wrong or ``F`` stops
     decreasing.
 
     With ``penalty = ρ``, ``A`` is ADMM's ``S = 2A + ρKᵀK`` instead (the
@@ -669,20 +670,14 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
     signs[u > 0] = 1
     signs[u < 0] = -1
     labels, count = l1.tied_components(signs == 0)
-    if penalty is None:
-        def reduce(labels, count):
-            return _merge(A, labels, count)
-    elif l1.grid_gradient:  # A = (S − ρKᵀK)/2 entry by entry, block by block: never formed whole
-        def reduce(labels, count):
-            return _merge(A, labels, count,
-                          entries=lambda block, rows: 0.5 * (block.data - penalty * l1.gram_entries(block, rows)))
-    else:
+    entries = None  # the entries of A merged by _merge: A's own
+    if penalty is not None and l1.grid_gradient:  # A = (S − ρKᵀK)/2 entry by entry, block by block
+        def entries(block, rows):
+            return 0.5 * (block.data - penalty * l1.gram_entries(block, rows))
+    elif penalty is not None:  # a general K: form A once
         A = ((A - penalty * l1.gram()) * 0.5).tocsr()
         penalty = None
-
-        def reduce(labels, count):
-            return _merge(A, labels, count)
-    reduced = reduce(labels, count)
+    reduced = _merge(A, labels, count, entries=entries)
     if not np.all(reduced.diagonal() > 0):
         return None  # a component without quadratic coupling: the model is not strictly convex
     best_F, best_z, best_count, steps = np.inf, None, 0, 0
@@ -721,7 +716,7 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
         merged, count = _graph_components(count, labels[first], labels[second])
         labels = merged[labels]
         del merged, reduced  # reduced again from A: the previous reduced matrix is not held alongside the new one
-        reduced = reduce(labels, count)
+        reduced = _merge(A, labels, count, entries=entries)
         z_start = z
     return best_z, best_F, best_count, steps
 

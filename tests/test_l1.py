@@ -62,7 +62,7 @@ def test_grid_gradient_pairs_gram_and_value_match_the_matrix(shape):
     assert l1.grid_gradient and l1._matrix is None
     G = gradient(shape).tocsr()
     rows, first, second, exact = l1.pixel_pairs()
-    assert exact
+    assert exact and l1.exact_pairs
     counts = np.diff(G.indptr)
     expected_rows = np.flatnonzero(counts == 2)
     np.testing.assert_array_equal(np.sort(rows), expected_rows)
@@ -110,6 +110,7 @@ def test_other_operators_use_sparse_products():
     np.testing.assert_allclose(l1.adjoint(v), H.T @ v)
     rows, first, second, exact = l1.pixel_pairs()
     assert not exact  # second differences are not pixel pairs: no polish
+    assert not l1.exact_pairs
     assert StackedL1(_objective_with(shape, gradient(shape), rng)).pixel_pairs()[3]
 
 
