@@ -40,9 +40,10 @@ Problems (frame ``nyu_metric3d/00000``, 5 % of the valid pixels observed,
    ``bench/naive_colorization.py`` (loop assembly + spsolve).
 4. *Scaling*: image and depth resized to 2× and 4× per side (4× and 16×
    pixels); the quadratic solve of 1. (set-up + solve) and the whole
-   ``complete_depth`` call; the L1 solve of 2. at 2× per side; peak memory of a whole ``complete_depth`` call
-   on an 8-MP frame (3264x2448) measured in a fresh process started before
-   the others (``VmHWM``, image decoding included).
+   ``complete_depth`` call; the L1 solve of 2. at 2× per side; peak
+   memory of a whole ``complete_depth`` call on an 8-MP frame (3264x2448)
+   measured in a fresh process started before the others (``VmHWM``, image
+   decoding included).
 """
 
 from __future__ import annotations
@@ -438,9 +439,9 @@ def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
     L.append("- *Hole filling*: `colorization_fill` factorises the block of the hole pixels and of the known pixels "
              "with at least two holes in their window exactly (SuperLU, nested-dissection order) and runs GMRES on the "
              "Schur system of the other known pixels, preconditioned with the Schur complement of a thin strip of "
-             "hole pixels; the factorisation is its largest cost (module docstring). Its ratio moves with the "
-             "machine's load, mostly through the naive port's time, by several units between runs of this script, so "
-             "a result near 50× is not a margin.")
+             "hole pixels; the factorisation is its largest cost (module docstring). Both times move with the "
+             "machine's load, so the ratio differs widely between runs of this script; a single run near 50× is "
+             "no margin.")
     l1_mem = next((m for m in mem if m.get("mode") == "l1" and "peak_mb" in m), None)
     L.append("- *Memory*: the quadratic 8-MP run keeps the 13-point `A` (CSR, ~1.2 GB), the objective's weight images "
              "and a hierarchy whose coarse levels are float32 (`coarse_precision='auto'`); the stencil is assembled "
