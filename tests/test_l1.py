@@ -265,6 +265,20 @@ def test_gram_entries_are_the_laplacian_on_a_wider_pattern(shape):
     np.testing.assert_array_equal(got, laplacian[rows])
 
 
+@pytest.mark.parametrize("shape", [(1, 5), (4, 1), (2, 2), (3, 4)])
+def test_gram_entries_on_a_dense_block(shape):
+    # every column stored, including the pixels one index away across an image row's end
+    rng = np.random.default_rng(6)
+    l1 = StackedL1(_objective_with(shape, gradient(shape), rng))
+    n = shape[0] * shape[1]
+    dense = sp.csr_matrix(np.ones((n, n)))
+    rows = rng.permutation(n)[: max(n - 1, 1)]
+    G = gradient(shape)
+    laplacian = (G.T @ G).toarray()
+    got = l1.gram_entries(dense[rows], rows).reshape(rows.size, n)
+    np.testing.assert_array_equal(got, laplacian[rows])
+
+
 def test_clip_to_weights_and_stack_rows():
     from sparsedepth import _l1
     from sparsedepth.solvers import _stack_rows
@@ -324,6 +338,21 @@ def test_admm_options_reach_the_same_optimum(options):
     res = complete_depth(image, sparse, mask, weights=L1, solver="admm", options=options)
     assert res.depth.min() > 0
     assert _kkt_gap_bound(obj, res.depth.ravel()) <= 1e-7 * res.objective, res.message
+
+
+def test_admm_keeping_only_s_reaches_the_same_point(monkeypatch):
+    """Large frames keep S = 2A + ρKᵀK only (the polish reduces S); forced here on a small frame."""
+    from sparsedepth import solvers
+
+    image, sparse, mask, _ = make_problem((24, 30))
+    obj, _, _ = build_objective(image, sparse, mask, weights=L1)
+    with_a = complete_depth(image, sparse, mask, weights=L1, solver="admm")
+    monkeypatch.setattr(solvers, "_ADMM_KEEP_A_PIXELS", 0)
+    s_only = complete_depth(image, sparse, mask, weights=L1, solver="admm")
+    assert s_only.iterations == with_a.iterations
+    assert s_only.objective == pytest.approx(with_a.objective, rel=1e-10)
+    np.testing.assert_allclose(s_only.depth, with_a.depth, atol=1e-8)
+    assert _kkt_gap_bound(obj, s_only.depth.ravel()) <= 1e-7 * s_only.objective
 
 
 def test_weights_shared_by_the_gradient_blocks_equal_the_stacked_ones():
