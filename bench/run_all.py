@@ -37,13 +37,17 @@ GROUPS = (("sparsity", "baselines"), ("ablation",), ("solvers", "protocol"))
 
 
 def run_group(names, sub, plot_dir):
-    """Run the scripts ``names`` in order in this process; ``[(name, markdown, seconds)]``."""
+    """Run the scripts ``names`` in order in this process; ``[(name, markdown, seconds)]``.
+
+    ``plot_dir`` None: the solver script draws no figures.
+    """
     H.PROGRESS = True
     out = []
     for name in names:
         t = time.perf_counter()
         if name == "solvers":
-            text, _ = solvers.run(sub, plot_dir=plot_dir)
+            text, _ = (solvers.run(sub, plot_dir=plot_dir) if plot_dir is not None
+                       else solvers.run(sub + ["--no-plot"]))
         else:
             text, _ = SCRIPTS[name].run(sub)
         out.append((name, text, time.perf_counter() - t))
@@ -63,7 +67,17 @@ def main(argv=None) -> int:
     p.add_argument("--assemble", nargs="+", type=Path, default=None,
                    help="run nothing: write --out from the sections of files made by earlier runs (--only ... "
                         "--out part.md); a later file's section replaces an earlier one with the same title")
+    p.add_argument("--no-plot", action="store_true",
+                   help="no solver figures (they need matplotlib, the 'plot' extra)")
     args = p.parse_args(argv)
+    if "solvers" in args.only and not args.no_plot and not args.assemble:
+        import importlib.util
+
+        if importlib.util.find_spec("matplotlib") is None:  # fail now, not after the other groups' 15 minutes
+            print("run_all: the solver figures need matplotlib (pip install 'sparsedepth[plot]'); "
+                  "install it or pass --no-plot", file=sys.stderr)
+            return 2
+    plot_dir = None if args.no_plot else args.out.parent
     t0 = time.perf_counter()
     H.PROGRESS = True
     sections = []
@@ -83,9 +97,9 @@ def main(argv=None) -> int:
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-            done = list(pool.map(run_group, groups, [sub] * len(groups), [args.out.parent] * len(groups)))
+            done = list(pool.map(run_group, groups, [sub] * len(groups), [plot_dir] * len(groups)))
     else:
-        done = [run_group(g, sub, args.out.parent) for g in groups]
+        done = [run_group(g, sub, plot_dir) for g in groups]
     texts = {name: text for group in done for name, text, _ in group}
     sections += [texts[n] for n in SCRIPTS if n in texts]
     elapsed = time.perf_counter() - t0
