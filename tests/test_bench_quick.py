@@ -117,10 +117,39 @@ def test_protocol_quick_crop_and_counts():
 
 
 def test_run_all_quick_writes_every_section(tmp_path):
-    pytest.importorskip("matplotlib")
     run_all = load("run_all")
     out = tmp_path / "results.md"
-    assert run_all.main(["--quick", "--jobs", "1", "--out", str(out)]) == 0
+    have_matplotlib = importlib.util.find_spec("matplotlib") is not None
+    extra = [] if have_matplotlib else ["--no-plot"]
+    assert run_all.main(["--quick", "--jobs", "1", "--out", str(out), *extra]) == 0
     text = out.read_text()
     assert text.count("\n## ") == 6 and text.count("\nHeadline") == 5 and "Command: `python bench/sparsity.py --quick`" in text
-    assert (tmp_path / "solver_objective_vs_iter.png").exists()
+    assert (tmp_path / "solver_objective_vs_iter.png").exists() == have_matplotlib
+
+
+def test_run_all_without_matplotlib_stops_before_running_anything(monkeypatch, tmp_path, capsys):
+    run_all = load("run_all")
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "matplotlib" else real(name, *a))
+    out = tmp_path / "results.md"
+    assert run_all.main(["--quick", "--jobs", "1", "--out", str(out)]) == 2
+    assert not out.exists()
+    assert "--no-plot" in capsys.readouterr().err
+
+
+def test_committed_results_were_made_with_the_current_defaults():
+    """docs/results.md records the default weights of its run: they must be today's defaults.
+
+    A run started before a change of the defaults and committed after it once left the README's figures
+    without a source; this catches that (regenerate with ``python bench/run_all.py``).
+    """
+    import re
+
+    import sparsedepth as sd
+
+    harness = load("run_all").H  # the formatting run_all writes with
+    text = (REPO / "docs" / "results.md").read_text()
+    recorded = re.findall(r"[Dd]efault weights at run time: (.*?)\.\n", text)
+    recorded += re.findall(r"defaults at run time: (.*?)\):", text)
+    assert len(recorded) >= 2, "docs/results.md no longer records its default weights"
+    assert set(recorded) == {harness.weights_markdown(sd.DEFAULT_WEIGHTS)}
