@@ -61,6 +61,11 @@ _SMOOTHERS = ("gauss_seidel", "jacobi")
 _PRECONDITIONERS = ("grid", "amg", "sa", "jacobi", "none")
 #: fine grids from this many pixels keep their coarse levels in float32 (coarse_precision="auto")
 _SINGLE_COARSE_PIXELS = 1 << 21
+# Below this many fine pixels every level's stencil is kept as one (K, H, W)
+# array during the set-up (fine: read from the CSR once; coarse: the Galerkin
+# result itself) instead of being read back from the CSR one parity class at a
+# time, which keeps the 8-MP set-up's memory low but reads most classes twice.
+_KEEP_STENCIL_PIXELS = 1 << 21
 
 
 # --------------------------------------------------------------------------
@@ -290,7 +295,8 @@ class _StencilSource:
         """Stencil images on the pixels ``(py::2, px::2)``, shape ``(K, ny, nx)``."""
         if self.array is not None:
             return np.ascontiguousarray(self.array[:, py::2, px::2])
-        _, part = csr_to_stencil(self.csr, self.shape, offsets=self.csr_offsets, parity=(py, px))
+        parity = None if py is None else (py, px)  # None: the whole grid
+        _, part = csr_to_stencil(self.csr, self.shape, offsets=self.csr_offsets, parity=parity)
         if self.csr_offsets == self.offsets:
             return part
         out = np.zeros((len(self.offsets),) + part.shape[1:])
@@ -298,6 +304,13 @@ class _StencilSource:
         for k, o in enumerate(self.csr_offsets):
             out[slot[o]] = part[k]
         return out
+
+    def read_whole(self):
+        """Read a CSR source into one array now (the set-up asks for most classes twice)."""
+        if self.array is None:
+            self.array = self.parity_class(None, None)
+            self.csr = None
+        return self
 
 
 def _pattern_offsets(A, shape, radius=None):
@@ -916,6 +929,9 @@ class GridMultigrid:
         Galerkin product.
         """
         source = box.pop()
+        keep = self.shape[0] * self.shape[1] < _KEEP_STENCIL_PIXELS
+        if keep:
+            source.read_whole()
         levels = self.levels
         for li in range(len(levels) - 1):
             fine, coarse = levels[li], levels[li + 1]
@@ -932,7 +948,9 @@ class GridMultigrid:
             S = _galerkin(fine.offsets, source, interp, fine.shape, coarse.offsets)
             del source
             coarse.A = stencil_to_csr(coarse.offsets, S, dtype=self.coarse_dtype)
-            if full_pattern_offsets(coarse.A, coarse.shape) == coarse.offsets:
+            if keep:
+                source = _StencilSource(coarse.offsets, coarse.shape, array=S)
+            elif full_pattern_offsets(coarse.A, coarse.shape) == coarse.offsets:
                 # read back class by class: the coarse stencil array can go
                 source = _StencilSource(coarse.offsets, coarse.shape, csr=coarse.A, csr_offsets=coarse.offsets)
             else:

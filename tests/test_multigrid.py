@@ -100,9 +100,19 @@ def test_bilinear_prolongation_is_kron_of_1d_interpolation(shape):
     np.testing.assert_allclose(mg.levels[0].P.T @ r, expected.T @ r, atol=1e-13)
 
 
+@pytest.fixture(params=["kept", "read back"])
+def stencil_path(request, monkeypatch):
+    """Both set-up paths: stencils kept as arrays (small grids) or read back from the CSR class by class (large)."""
+    import sparsedepth.multigrid as multigrid
+
+    if request.param == "read back":
+        monkeypatch.setattr(multigrid, "_KEEP_STENCIL_PIXELS", 0)
+    return request.param
+
+
 @pytest.mark.parametrize("interpolation", ["bilinear", "operator"])
 @pytest.mark.parametrize("shape", [(7, 9), (8, 10), (1, 12), (12, 1), (2, 2), (33, 47)])
-def test_galerkin_equals_scipy_triple_product(shape, interpolation):
+def test_galerkin_equals_scipy_triple_product(shape, interpolation, stencil_path):
     rng = np.random.default_rng(1)
     A = random_system(shape, rng, jump=True)
     mg = GridMultigrid(A, shape, max_coarse=1, interpolation=interpolation)
@@ -117,7 +127,7 @@ def test_galerkin_equals_scipy_triple_product(shape, interpolation):
 
 
 @pytest.mark.parametrize("shape", [(9, 11), (10, 12)])
-def test_galerkin_of_13_point_operator(shape):
+def test_galerkin_of_13_point_operator(shape, stencil_path):
     A = biharmonic_system(shape, np.random.default_rng(2))
     mg = GridMultigrid(A, shape, max_coarse=1)
     for fine, coarse in zip(mg.levels[:-1], mg.levels[1:]):
