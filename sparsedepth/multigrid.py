@@ -281,7 +281,8 @@ class _StencilSource:
     stencil had to be extracted diagonal by diagonal) or a CSR matrix in the
     full in-grid pattern of :func:`~sparsedepth.stencil.stencil_to_csr`, read
     class by class so that the fine stencil is never held whole (8 MP,
-    13-point: 210 MB per class instead of 830 MB).
+    13-point: 210 MB per class instead of 830 MB).  Grids below
+    ``_KEEP_STENCIL_PIXELS`` read it whole once (:meth:`read_whole`).
     """
 
     def __init__(self, offsets, shape, *, array=None, csr=None, csr_offsets=None):
@@ -292,7 +293,7 @@ class _StencilSource:
         self.csr_offsets = None if csr_offsets is None else list(csr_offsets)
 
     def parity_class(self, py, px):
-        """Stencil images on the pixels ``(py::2, px::2)``, shape ``(K, ny, nx)``."""
+        """Stencil images on the pixels ``(py::2, px::2)``, shape ``(K, ny, nx)`` (``py = None``: all pixels)."""
         if self.array is not None:
             return np.ascontiguousarray(self.array[:, py::2, px::2])
         parity = None if py is None else (py, px)  # None: the whole grid
