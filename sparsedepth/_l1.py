@@ -17,7 +17,7 @@ from scipy import ndimage
 from scipy.sparse.csgraph import connected_components
 
 from .operators import StencilOperator, gradient, gradient_stencil
-from .stencil import stencil_to_csr
+from .stencil import _index_dtype, stencil_to_csr
 
 __all__ = ["StackedL1", "is_grid_gradient"]
 
@@ -63,7 +63,7 @@ def _grid_gradient_pairs(shape):
     """:meth:`StackedL1.pixel_pairs` of the grid gradient, by index arithmetic (int32 when it fits)."""
     H, W = shape
     n = H * W
-    dtype = np.int32 if 2 * n < np.iinfo(np.int32).max else np.int64
+    dtype = _index_dtype(2 * n)
     pixels = np.arange(n, dtype=dtype).reshape(H, W)
     x_first = pixels[:, :-1].reshape(-1)  # rows 0 .. n-1: pixel p and p + 1 (not in the last column)
     y_first = pixels[:-1].reshape(-1)     # rows n .. 2n-1: pixel p and p + W (not in the last row)

@@ -197,6 +197,11 @@ def grid_stencil(A, shape, *, radius=None):
     if offsets is None:
         return _stencil_of(A, shape, radius)
     _, S = csr_to_stencil(A, shape, offsets=offsets)
+    return _without_empty_offsets(offsets, S)
+
+
+def _without_empty_offsets(offsets, S):
+    """``offsets`` and ``S`` without the offsets whose image is all zero (the centre is always kept)."""
     keep = [k for k, o in enumerate(offsets) if o == (0, 0) or np.any(S[k])]
     return [offsets[k] for k in keep], (S if len(keep) == len(offsets) else S[keep])
 
@@ -244,8 +249,7 @@ def _stencil_of(A, shape, radius=None):
         S = np.empty((5,) + tuple(shape))
         if sum(int(np.count_nonzero(_offset_image(A, shape, dy, dx, S[k])))
                for k, (dy, dx) in enumerate(five)) == total:
-            keep = [k for k, o in enumerate(five) if o == (0, 0) or np.any(S[k])]
-            return [five[k] for k in keep], (S if len(keep) == 5 else S[keep])
+            return _without_empty_offsets(five, S)
         del S
     work = np.empty(shape)
     present, seen, counted = [], set(), 0

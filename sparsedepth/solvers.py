@@ -39,7 +39,7 @@ from scipy.sparse.linalg import spsolve
 from ._l1 import StackedL1, _graph_components
 from .linear import make_preconditioner, pcg
 from .multigrid import GridMultigrid
-from .stencil import full_pattern_offsets
+from .stencil import _index_dtype, full_pattern_offsets
 from .result import IterationRecord, SolverState
 
 __all__ = ["SolverOutput", "SOLVERS", "DEFAULT_TOL", "solve"]
@@ -614,7 +614,7 @@ def _stack_rows(blocks, n_cols):
         return blocks.pop()
     nnz = sum(b.nnz for b in blocks)
     n_rows = sum(b.shape[0] for b in blocks)
-    index_dtype = np.int32 if max(nnz, n_cols) < np.iinfo(np.int32).max else np.int64
+    index_dtype = _index_dtype(nnz, n_cols)
     data = np.empty(nnz)
     indices = np.empty(nnz, dtype=index_dtype)
     indptr = np.empty(n_rows + 1, dtype=index_dtype)
