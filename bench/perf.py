@@ -1,6 +1,6 @@
 """Performance benchmark of issue 5: same-run ratios on a real 640x480 NYU frame.
 
-Command (about 10 minutes on 2 busy cores; ``--quick`` about 3)::
+Command (about 25 minutes on 2 cores, 8 of them the 8-MP L1 run; ``--quick`` less)::
 
     python bench/perf.py            # full run, rewrites docs/performance.md
     python bench/perf.py --quick    # shorter reference runs, no 8-MP L1 run,
