@@ -301,14 +301,16 @@ def _inner_pcg(S, precondition, z, Sz, rhs, *, rtol, factor, max_steps):
     along ``d = M⁻¹(rhs − Sz)``.  With more: CG steps until ``‖rhs − S z‖ <=
     max(rtol ‖rhs‖, factor ‖rhs − S z_start‖)`` or ``max_steps``.  The
     residual is ``rhs − Sz`` with ``Sz`` updated alongside ``z`` (one product
-    with ``S`` per step).  Returns the number of steps.
+    with ``S`` per step).  ``rhs`` is overwritten (its buffer holds the
+    residual).  Returns the number of steps.
     """
     from .linear import _dot
 
-    r = rhs - Sz
+    rhs_sq = _dot(rhs, rhs) if max_steps > 1 else None
+    r = np.subtract(rhs, Sz, out=rhs)
     if max_steps > 1:
         rr = _dot(r, r)
-        target = max(rtol * rtol * _dot(rhs, rhs), factor * factor * rr)
+        target = max(rtol * rtol * rhs_sq, factor * factor * rr)
         if rr <= target:
             return 0
     d = precondition(r)
@@ -320,10 +322,14 @@ def _inner_pcg(S, precondition, z, Sz, rhs, *, rtol, factor, max_steps):
         if not pq > 0:
             return step - 1
         alpha = rd / pq
+        if step == max_steps:  # p and q are not needed again: scale them in place
+            p *= alpha
+            z += p
+            q *= alpha
+            Sz += q
+            return step
         z += alpha * p
         Sz += alpha * q
-        if step == max_steps:
-            return step
         r -= alpha * q
         if _dot(r, r) <= target:
             return step
@@ -481,34 +487,21 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
             Sz = S @ z  # drop the rounding drift of the carried product
         inner_total += _inner_pcg(S, precondition, z, Sz, rhs, rtol=inner_rtol, factor=inner_factor,
                                   max_steps=inner_max)
-        x = l1.apply(z, out=spare)  # K z, overwritten by the update below
-        Kz_sq = _dot(x, x)
-        feasible = z.min() >= 0
-        if feasible:
-            value = 0.5 * (_dot(z, Sz) - rho * Kz_sq) - 2.0 * _dot(b, z) + const + l1.value(x)
-        # between polishes the residuals decide nothing: skip them (and the vectors they need)
+        x = l1.apply(z, out=spare)  # K z, overwritten by the new u below
+        # between polishes the residuals decide nothing: skip them
         need_r = best is None or not polish or k <= adapt_iters
         need_s = not polish or k <= adapt_iters
-        Kz = x.copy() if need_s else None  # with the dual residual, u_prev is kept too
-        # v = u + a (Kz − u);  x = v + λ;  λ ← clip(x, ±c/ρ) = sign(x) min(|x|, c/ρ);  u ← x − λ
-        x -= u
-        x *= relax
-        x += u
-        x += lam
-        np.abs(x, out=lam)
-        l1.clip_to_weights(lam, 1.0 / rho)
-        np.copysign(lam, x, out=lam)
-        x -= lam
+        # v = u + a (Kz − u);  λ ← clip(v + λ, ±c/ρ);  u ← v + λ − λ_new: one chunked pass over the edges
+        step = l1.admm_step(x, u, lam, relax=relax, scale=1.0 / rho, primal=need_r, dual=need_s)
         u, spare = x, u
+        Kz_sq = step["Kz_sq"]
+        feasible = z.min() >= 0
+        if feasible:
+            value = 0.5 * (_dot(z, Sz) - rho * Kz_sq) - 2.0 * _dot(b, z) + const + step["value"]
         if need_r:
-            if Kz is None:
-                Kz = l1.apply(z, out=spare)  # the previous u is not needed: recompute K z in its place
-            u_sq = _dot(u, u)
-            r_norm = np.sqrt(max(Kz_sq - 2.0 * _dot(Kz, u) + u_sq, 0.0)) / max(np.sqrt(max(Kz_sq, u_sq)), 1e-300)
-            Kz = None
+            r_norm = np.sqrt(step["r_sq"]) / max(np.sqrt(max(Kz_sq, step["u_sq"])), 1e-300)
         if need_s:
-            spare -= u  # u_prev − u
-            s_norm = np.sqrt(_dot(spare, spare) / max(_dot(lam, lam), 1e-300))
+            s_norm = np.sqrt(step["s_sq"] / max(step["lam_sq"], 1e-300))
         if feasible:
             recorder(k, z, inner=inner_total, value=value)
         else:

@@ -279,18 +279,15 @@ def test_gram_entries_on_a_dense_block(shape):
     np.testing.assert_array_equal(got, laplacian[rows])
 
 
-def test_clip_to_weights_and_stack_rows():
+def test_weight_chunks_and_stack_rows():
     from sparsedepth import _l1
     from sparsedepth.solvers import _stack_rows
 
     rng = np.random.default_rng(6)
     shape = (7, 9)
     l1 = StackedL1(_objective_with(shape, gradient(shape), rng))
-    v = rng.random(l1.rows)
-    expected = np.minimum(v, 0.3 * l1.weights)
     old_chunk, _l1._CHUNK = _l1._CHUNK, 10  # several chunks
     try:
-        np.testing.assert_array_equal(l1.clip_to_weights(v.copy(), 0.3), expected)
         assert l1.max_weight() == pytest.approx(np.max(l1.weights), rel=1e-15)
         Kz = l1.apply(rng.standard_normal(shape[0] * shape[1]))
         assert l1.value(Kz) == pytest.approx(np.sum(l1.weights * np.abs(Kz)), rel=1e-13)
@@ -377,10 +374,57 @@ def test_weights_shared_by_the_gradient_blocks_equal_the_stacked_ones():
     old_chunk, _l1._CHUNK = _l1._CHUNK, 7  # chunks that do not divide a block
     try:
         np.testing.assert_allclose(a.weighted(v), b.weights * v, rtol=1e-15)
-        np.testing.assert_allclose(a.clip_to_weights(np.abs(v), 0.5), np.minimum(np.abs(v), 0.5 * b.weights))
         assert a.value(v) == pytest.approx(np.sum(b.weights * np.abs(v)), rel=1e-14)
         assert a.max_weight() == pytest.approx(0.7 * w.max(), rel=1e-15)
     finally:
         _l1._CHUNK = old_chunk
     with pytest.raises(ValueError, match="row_weights"):
         AbsTerm("edge", 0.7, G, rng.random(n + 1))
+
+
+def _admm_step_by_formula(Kz, u, lam, c, relax, scale):
+    """The ADMM edge update of ``StackedL1.admm_step`` written out on whole vectors, with ``c`` formed."""
+    x = relax * Kz + (1 - relax) * u + lam
+    lam_new = np.sign(x) * np.minimum(np.abs(x), scale * c)
+    u_new = x - lam_new
+    sums = dict(Kz_sq=Kz @ Kz, value=np.sum(c * np.abs(Kz)), r_sq=np.sum((Kz - u_new) ** 2), u_sq=u_new @ u_new,
+                s_sq=np.sum((u - u_new) ** 2), lam_sq=lam_new @ lam_new)
+    return u_new, lam_new, sums
+
+
+@pytest.mark.parametrize("chunk", [5, 7, 1 << 13])
+@pytest.mark.parametrize("weights", ["shared", "stacked", "none"])
+def test_admm_step_equals_the_update_written_out(monkeypatch, chunk, weights):
+    """The fused chunked edge step against the textbook update (shrinkage, clipped multiplier, sums)."""
+    from sparsedepth import _l1
+    from sparsedepth.operators import gradient_stencil
+
+    monkeypatch.setattr(_l1, "_STEP_CHUNK", chunk)  # 5 and 7 do not divide the blocks of 2 * 30 rows
+    rng = np.random.default_rng(8)
+    shape = (6, 5)
+    n = shape[0] * shape[1]
+    G = gradient_stencil(shape)
+    row_weights = {"shared": rng.random(n), "stacked": rng.random(2 * n), "none": None}[weights]
+    if weights == "shared":
+        row_weights[3] = 0.0  # a zero weight: that edge's multiplier is clipped to 0
+    obj = Objective(shape, [QuadraticTerm("prior", 1.0, None, None, rng.random(n)),
+                            AbsTerm("edge", 0.7, G, row_weights)])
+    l1 = StackedL1(obj)
+    c = l1.weights
+    Kz = l1.apply(rng.standard_normal(n))
+    u = rng.standard_normal(2 * n) * 0.5
+    lam = rng.standard_normal(2 * n) * 0.3
+    u_exp, lam_exp, sums_exp = _admm_step_by_formula(Kz, u, lam, c, 1.9, 0.4)
+    out, lam_out = Kz.copy(), lam.copy()
+    sums = l1.admm_step(out, u, lam_out, relax=1.9, scale=0.4, primal=True, dual=True)
+    np.testing.assert_allclose(out, u_exp, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(lam_out, lam_exp, rtol=1e-13, atol=1e-15)
+    assert np.all(np.abs(lam_out) <= 0.4 * c * (1 + 1e-15))
+    assert sums.keys() == sums_exp.keys()
+    for key, expected in sums_exp.items():
+        assert sums[key] == pytest.approx(expected, rel=1e-12, abs=1e-15), key
+    # without the residual sums: the same update, only the two sums the objective needs
+    out2, lam2 = Kz.copy(), lam.copy()
+    assert set(l1.admm_step(out2, u, lam2, relax=1.9, scale=0.4)) == {"Kz_sq", "value"}
+    np.testing.assert_array_equal(out2, out)
+    np.testing.assert_array_equal(lam2, lam_out)
