@@ -635,7 +635,14 @@ def _galerkin(offsets, source, interp, shape, coarse_offsets):
 
     where the floor and the parity :math:`(p+d) \bmod 2` select the class and
     shift of the neighbour :math:`j = i + o`.  All pixels of one parity class
-    are processed at once, so the cost is a few dozen whole-array operations.
+    are processed at once.  The sum is taken in two steps: first, per offset
+    :math:`E = \lfloor (p+d)/2 \rfloor + f` of a parent of :math:`j`
+    relative to :math:`(Y, X)`, the row of :math:`AP`,
+    :math:`(AP)_E(i) = \sum_{o, f} S_o(i) W_f(i+o)`; then
+    :math:`A^c_{E-e}[Y+e_y, X+e_x] \mathrel{+}= W_e(i) (AP)_E(i)` for every
+    parent :math:`e` of :math:`i`.  That is one product per (offset, parent
+    of the neighbour) and one per (E, own parent), instead of one per
+    (offset, both parents), and one work image per class at a time.
     """
     h, w = shape
     hc, wc = (h + 1) // 2, (w + 1) // 2
@@ -653,38 +660,42 @@ def _galerkin(offsets, source, interp, shape, coarse_offsets):
         for px in (0, 1):
             if py >= h or px >= w:
                 continue
-            Ssub = source.parity_class(py, px)
-            ny, nx = Ssub.shape[1:]
-            a = np.empty((ny, nx))
-            tmp = np.empty((ny, nx))
-            # parent (0, 0) of a class-(0, 0) pixel is the pixel itself: weight 1
-            own = {(ey, ex): (None if py == px == 0 else interp.cls(ey, ex, py, px))
-                   for ey in range(py + 1) for ex in range(px + 1)}
+            # the (offset, parent of the neighbour) pairs of each parent offset E of this class's rows of AP
+            terms = {}
             for k, (dy, dx) in enumerate(offsets):
                 qy, ry = divmod(py + dy, 2)
                 qx, rx = divmod(px + dx, 2)
                 if (ry, rx) not in padded:
                     continue  # the neighbour class is empty: S_k is zero here
-                Pj = padded[ry, rx]
-                for (ey, ex), we in own.items():
-                    if we is None:
-                        a = Ssub[k]
+                for fy in range(ry + 1):
+                    for fx in range(rx + 1):
+                        terms.setdefault((qy + fy, qx + fx), []).append((k, ry, rx, qy, qx, fy, fx))
+            Ssub = source.parity_class(py, px)
+            ny, nx = Ssub.shape[1:]
+            ap = np.empty((ny, nx))
+            tmp = np.empty((ny, nx))
+            # parent (0, 0) of a class-(0, 0) pixel is the pixel itself: weight 1
+            own = {(ey, ex): (None if py == px == 0 else interp.cls(ey, ex, py, px))
+                   for ey in range(py + 1) for ex in range(px + 1)}
+            for (Ey, Ex), pairs in terms.items():
+                for n_term, (k, ry, rx, qy, qx, fy, fx) in enumerate(pairs):
+                    out = ap if n_term == 0 else tmp
+                    if separable:  # (ny, 1) and (1, nx) factors: no dense weight images
+                        wfy, wfx = padded[ry, rx]
+                        np.multiply(Ssub[k], wfy[fy, pad + qy: pad + qy + ny, None], out=out)
+                        out *= wfx[fx, None, pad + qx: pad + qx + nx]
                     else:
-                        np.multiply(we, Ssub[k], out=a)
-                    for fy in range(ry + 1):
-                        for fx in range(rx + 1):
-                            if separable:  # (ny, 1) and (1, nx) factors: no dense weight images
-                                wfy, wfx = Pj
-                                np.multiply(a, wfy[fy, pad + qy: pad + qy + ny, None], out=tmp)
-                                tmp *= wfx[fx, None, pad + qx: pad + qx + nx]
-                            else:
-                                wf = Pj[fy, fx, pad + qy: pad + qy + ny, pad + qx: pad + qx + nx]
-                                np.multiply(a, wf, out=tmp)
-                            view = acc[slot[(qy + fy - ey, qx + fx - ex)],
-                                       ey: ey + ny, ex: ex + nx]
-                            np.add(view, tmp, out=view)
+                        wf = padded[ry, rx][fy, fx, pad + qy: pad + qy + ny, pad + qx: pad + qx + nx]
+                        np.multiply(Ssub[k], wf, out=out)
+                    if n_term:
+                        ap += tmp
+                for (ey, ex), we in own.items():
+                    view = acc[slot[(Ey - ey, Ex - ex)], ey: ey + ny, ex: ex + nx]
                     if we is None:
-                        a = np.empty((ny, nx))
+                        view += ap
+                    else:
+                        np.multiply(we, ap, out=tmp)
+                        view += tmp
     return acc[:, :hc, :wc]
 
 
