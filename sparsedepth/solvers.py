@@ -644,7 +644,8 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
     contradicts its fixed sign (the minimiser of the model would cross the
     kink of ``|t_k|``); such rows are tied in the next round, whose
     components are merged from the previous ones and whose reduced matrix is
-    summed from ``A`` again (never two reduced matrices at once), for at most
+    summed from the previous reduced matrix below ``_ADMM_KEEP_A_PIXELS``
+    pixels, from ``A`` again above (never two reduced matrices at once), for at most
     ``rounds`` solves, stopping when no sign is wrong or ``F`` stops
     decreasing.
 
@@ -717,8 +718,12 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
         del wrong
         merged, count = _graph_components(count, labels[first], labels[second])
         labels = merged[labels]
-        del merged, reduced  # reduced again from A: the previous reduced matrix is not held alongside the new one
-        reduced = _merge(A, labels, count, entries=entries)
+        if A.shape[0] < _ADMM_KEEP_A_PIXELS:  # merge the previous components: a smaller matrix than A
+            reduced = _merge(reduced, merged, count)
+            del merged
+        else:  # reduced again from A: the previous reduced matrix is not held alongside the new one (8-MP peak)
+            del merged, reduced
+            reduced = _merge(A, labels, count, entries=entries)
         z_start = z
     return best_z, best_F, best_count, steps
 
