@@ -98,6 +98,8 @@ def test_bilinear_prolongation_is_kron_of_1d_interpolation(shape):
     r = rng.standard_normal(expected.shape[0])
     np.testing.assert_allclose(mg.levels[0].P @ x, expected @ x, atol=1e-14)
     np.testing.assert_allclose(mg.levels[0].P.T @ r, expected.T @ r, atol=1e-13)
+    # the V-cycle's in-place form: out += P x, by slicing
+    np.testing.assert_allclose(mg.levels[0].P.add_prolonged(r.copy(), x), r + expected @ x, atol=1e-14)
 
 
 @pytest.fixture(params=["kept", "read back"])
@@ -490,3 +492,19 @@ def test_single_precision_coarse_levels_round_the_double_ones_and_converge():
     assert np.linalg.norm(rhs - A @ x) <= 1e-10 * np.linalg.norm(rhs)
     with pytest.raises(ValueError, match="coarse_precision"):
         GridMultigrid(A, shape, coarse_precision="half")
+
+
+@pytest.mark.parametrize("shape", [(7, 9), (8, 10), (1, 6), (6, 1)])
+def test_separable_prolongation_with_other_weights_uses_the_1d_matrices(shape):
+    """Weights other than the linear ones are applied by the 1-D matrices, as kron(P_y, P_x)."""
+    from sparsedepth.multigrid import _Interp, _interp_matrix_1d, _SeparableProlongation
+
+    rng = np.random.default_rng(4)
+    wy, wx = rng.random((2, shape[0])), rng.random((2, shape[1]))
+    P = _SeparableProlongation(_Interp(wy=wy, wx=wx))
+    expected = np.kron(_interp_matrix_1d(wy).toarray(), _interp_matrix_1d(wx).toarray())
+    x = rng.standard_normal(expected.shape[1])
+    out = rng.standard_normal(expected.shape[0])
+    np.testing.assert_allclose(P @ x, expected @ x, atol=1e-14)
+    np.testing.assert_allclose(P.add_prolonged(out.copy(), x), out + expected @ x, atol=1e-14)
+    np.testing.assert_allclose(P.T @ out, expected.T @ out, atol=1e-13)
