@@ -101,7 +101,7 @@ def main():
     def aux_operator():
         L = (G.T @ sp.diags(pair) @ G + sp.diags(1e-6 + mask.ravel())).tocsr()
         aux = GridMultigrid(L, shape, interpolation="operator", coarse_precision="double")
-        return _galerkin_solver(A, shape, [lvl.P for lvl in aux.levels[:-1]])
+        return _galerkin_solver(A, shape, [lvl.P.tocsr() for lvl in aux.levels[:-1]])
 
     def filtered_operator():
         # Dendy's interpolation from the radius-1 couplings of A itself: its negative off-diagonals between
@@ -115,7 +115,7 @@ def main():
         diagonal = np.maximum(np.asarray(A.sum(axis=1)).ravel(), 1e-12) - np.asarray(off.sum(axis=1)).ravel()
         aux = GridMultigrid((off + sp.diags(diagonal)).tocsr(), shape, interpolation="operator",
                             coarse_precision="double")
-        return _galerkin_solver(A, shape, [lvl.P for lvl in aux.levels[:-1]])
+        return _galerkin_solver(A, shape, [lvl.P.tocsr() for lvl in aux.levels[:-1]])
 
     variants = [
         ("V(1,1), bilinear (the default)", grid, "V"),

@@ -400,11 +400,6 @@ class _Interp:
             return wy, wx
         return wy[:, None, :, None] * wx[None, :, None, :]
 
-    def dense(self, shape):
-        if self.full is not None:
-            return self.full
-        return self.wy[:, None, :, None] * self.wx[None, :, None, :]
-
 
 def _linear_weights_1d(n):
     """1-D linear interpolation from points ``0, 2, 4, ...`` (Neumann end)."""
@@ -507,6 +502,105 @@ class _SeparableProlongation:
     def tocsr(self):
         """The same ``P`` as a CSR matrix (``kron(P_y, P_x)``)."""
         return sp.kron(self.Py, self.Px, format="csr")
+
+    def toarray(self):
+        return self.tocsr().toarray()
+
+
+class _ClassProlongation:
+    r"""Operator-dependent prolongation stored as weight images per parity class, applied by slicing.
+
+    A fine pixel :math:`(2Y+p_y, 2X+p_x)` has the parents :math:`(Y+e_y,
+    X+e_x)`, :math:`e \le p`; class ``(0, 0)`` copies its parent (weight 1),
+    the others keep their 2 or 4 weights as images of the class's shape
+    (``w01``: (2, ny0, nx1), ``w10``: (2, ny1, nx0), ``w11``: (2, 2, ny1,
+    nx1)), a parent outside the coarse grid with weight 0.  That is 2
+    numbers per pixel in the coarse levels' precision and no index array,
+    where a CSR ``P`` holds 2.25 values, 2.25 column indices and a row
+    pointer per pixel; ``P x`` and ``Pᵀ r`` are a few array operations per
+    class instead of sparse products.
+    """
+
+    def __init__(self, full, dtype):
+        h, w = full.shape[2:]
+        self.fine_shape, self.coarse_shape = (h, w), ((h + 1) // 2, (w + 1) // 2)
+        self.shape = (h * w, self.coarse_shape[0] * self.coarse_shape[1])
+        self.dtype = np.dtype(dtype)
+        self.set_weights(full)
+
+    def set_weights(self, full):
+        """Take the weights ``full[ey, ex, y, x]`` (shape (2, 2, H, W)) of :func:`_operator_interp`."""
+        self.w01 = np.ascontiguousarray(full[0, :, 0::2, 1::2], dtype=self.dtype)
+        self.w10 = np.ascontiguousarray(full[:, 0, 1::2, 0::2], dtype=self.dtype)
+        self.w11 = np.ascontiguousarray(full[:, :, 1::2, 1::2], dtype=self.dtype)
+
+    def _padded(self, x):
+        hc, wc = self.coarse_shape
+        X = np.zeros((hc + 1, wc + 1), dtype=np.result_type(x, self.dtype))
+        X[:hc, :wc] = np.asarray(x).reshape(hc, wc)
+        return X
+
+    def add_prolonged(self, out, x):
+        """``out += P @ x`` (``out`` C-contiguous, float64)."""
+        (h, w), (hc, wc) = self.fine_shape, self.coarse_shape
+        ny, nx = h // 2, w // 2  # odd rows / columns
+        X = self._padded(x)
+        O = out.reshape(h, w)
+        O[0::2, 0::2] += X[:hc, :wc]
+        if nx:
+            O[0::2, 1::2] += self.w01[0] * X[:hc, :nx] + self.w01[1] * X[:hc, 1:nx + 1]
+        if ny:
+            O[1::2, 0::2] += self.w10[0] * X[:ny, :wc] + self.w10[1] * X[1:ny + 1, :wc]
+        if nx and ny:
+            w11 = self.w11
+            O[1::2, 1::2] += (w11[0, 0] * X[:ny, :nx] + w11[0, 1] * X[:ny, 1:nx + 1]
+                              + w11[1, 0] * X[1:ny + 1, :nx] + w11[1, 1] * X[1:ny + 1, 1:nx + 1])
+        return out
+
+    def __matmul__(self, x):
+        return self.add_prolonged(np.zeros(self.shape[0]), x)
+
+    def rmatvec(self, r):
+        """``Pᵀ r`` as a new float64 array."""
+        (h, w), (hc, wc) = self.fine_shape, self.coarse_shape
+        ny, nx = h // 2, w // 2
+        R = np.asarray(r, dtype=np.float64).reshape(h, w)
+        C = np.zeros((hc + 1, wc + 1))
+        C[:hc, :wc] = R[0::2, 0::2]
+        if nx:
+            part = R[0::2, 1::2]
+            C[:hc, :nx] += self.w01[0] * part
+            C[:hc, 1:nx + 1] += self.w01[1] * part
+        if ny:
+            part = R[1::2, 0::2]
+            C[:ny, :wc] += self.w10[0] * part
+            C[1:ny + 1, :wc] += self.w10[1] * part
+        if nx and ny:
+            part = R[1::2, 1::2]
+            for ey in (0, 1):
+                for ex in (0, 1):
+                    C[ey:ey + ny, ex:ex + nx] += self.w11[ey, ex] * part
+        return np.ascontiguousarray(C[:hc, :wc]).reshape(-1)
+
+    @property
+    def T(self):
+        return _Transposed(self)
+
+    def dense_weights(self):
+        """The weights as ``(2, 2, H, W)`` images (float64), as :func:`_operator_interp` gave them."""
+        h, w = self.fine_shape
+        full = np.zeros((2, 2, h, w))
+        full[0, 0, 0::2, 0::2] = 1.0
+        full[0, :, 0::2, 1::2] = self.w01
+        full[:, 0, 1::2, 0::2] = self.w10
+        full[:, :, 1::2, 1::2] = self.w11
+        return full
+
+    def tocsr(self):
+        """The same ``P`` as a CSR matrix (values in the stored precision)."""
+        indptr, indices, gather = _prolongation_pattern(self.fine_shape)
+        data = np.take(self.dense_weights().reshape(-1), gather).astype(self.dtype)
+        return sp.csr_array((data, indices, indptr), shape=self.shape)
 
     def toarray(self):
         return self.tocsr().toarray()
@@ -747,15 +841,13 @@ def _gs_backward(A, x, b, sweeps):
 class _Level:
     """One level of the hierarchy: operator, prolongation to it from below, smoother."""
 
-    __slots__ = ("shape", "A", "offsets", "P", "p_gather", "diag_inv",
-                 "omega")
+    __slots__ = ("shape", "A", "offsets", "P", "diag_inv", "omega")
 
     def __init__(self, shape):
         self.shape = shape
         self.A = None
         self.offsets = None
         self.P = None  # prolongation from the next coarser level
-        self.p_gather = None  # weights -> CSR data of P
         self.diag_inv = None
         self.omega = None
 
@@ -949,19 +1041,10 @@ class GridMultigrid:
                 lvl.A = A
             levels.append(lvl)
         # structure: offsets of the coarse operators (their CSR form is made by
-        # stencil_to_csr in _numeric), patterns of P
+        # stencil_to_csr in _numeric); P is made there too
         levels[0].offsets = offsets
         for li in range(1, len(levels)):
-            lvl = levels[li]
-            lvl.offsets = _galerkin_offsets(levels[li - 1].offsets)
-            n = lvl.shape[0] * lvl.shape[1]
-            fine = levels[li - 1]
-            if self.interpolation == "operator":
-                p_indptr, p_indices, p_gather = _prolongation_pattern(fine.shape)
-                fine.p_gather = p_gather  # used once by _numeric, then dropped (update() recomputes it)
-                fine.P = sp.csr_array(
-                    (np.zeros(p_indices.shape[0], dtype=self.coarse_dtype), p_indices, p_indptr),
-                    shape=(fine.shape[0] * fine.shape[1], n))
+            levels[li].offsets = _galerkin_offsets(levels[li - 1].offsets)
         self.levels = levels
         box = [source]
         del source  # _numeric drops the fine stencil as soon as the first Galerkin product is done
@@ -983,10 +1066,10 @@ class GridMultigrid:
             fine, coarse = levels[li], levels[li + 1]
             if self.interpolation == "operator":
                 interp = _operator_interp(fine.offsets, source, fine.shape)
-                gather = fine.p_gather if fine.p_gather is not None else _prolongation_pattern(fine.shape)[2]
-                fine.p_gather = None  # an index per entry of P: not kept (8-MP memory)
-                fine.P.data[...] = np.take(interp.dense(fine.shape).reshape(-1), gather)
-                del gather
+                if isinstance(fine.P, _ClassProlongation):
+                    fine.P.set_weights(interp.full)
+                else:
+                    fine.P = _ClassProlongation(interp.full, self.coarse_dtype)
             else:
                 interp = _bilinear_interp(fine.shape)
                 if refill_p:
@@ -1064,7 +1147,7 @@ class GridMultigrid:
         Interpolation weights (for ``interpolation="operator"``), Galerkin
         coarse operators, smoother data and the coarsest factorisation are
         recomputed into the existing sparsity patterns; the grid hierarchy,
-        the patterns and the bilinear prolongation are reused.  If the stencil
+        the coarse operators' patterns and the bilinear prolongation are reused.  If the stencil
         gained offsets, the structure is rebuilt.
         """
         A, _ = _check_matrix(A, self.shape)
@@ -1119,10 +1202,7 @@ class GridMultigrid:
             del r  # work vectors go as soon as possible: peak memory of 8-MP frames
         x = self._coarse_solve(b.astype(np.float64, copy=False)).astype(self.coarse_dtype, copy=False)
         for lvl, xf, bf in zip(levels[-2::-1], xs[::-1], bs[::-1]):
-            if isinstance(lvl.P, _SeparableProlongation):
-                lvl.P.add_prolonged(xf, x)
-            else:
-                xf += lvl.P @ x
+            lvl.P.add_prolonged(xf, x)
             if lvl.diag_inv is None:
                 _gs_backward(lvl.A, xf, bf, nu)
             else:

@@ -508,3 +508,35 @@ def test_separable_prolongation_with_other_weights_uses_the_1d_matrices(shape):
     np.testing.assert_allclose(P @ x, expected @ x, atol=1e-14)
     np.testing.assert_allclose(P.add_prolonged(out.copy(), x), out + expected @ x, atol=1e-14)
     np.testing.assert_allclose(P.T @ out, expected.T @ out, atol=1e-13)
+
+
+@pytest.mark.parametrize("shape", [(7, 9), (8, 10), (1, 6), (6, 1), (2, 2), (5, 4)])
+def test_operator_prolongation_by_classes_equals_its_dense_matrix(shape):
+    """P x, out += P x and Pᵀ r of the class-wise operator-dependent P, against a matrix built pixel by pixel."""
+    rng = np.random.default_rng(5)
+    A = random_system(shape, rng, jump=True)
+    mg = GridMultigrid(A, shape, max_coarse=1, interpolation="operator")
+    for fine in mg.levels[:-1]:
+        P = fine.P
+        (h, w), (hc, wc) = P.fine_shape, P.coarse_shape
+        weights = P.dense_weights()
+        dense = np.zeros(P.shape)
+        for y in range(h):  # P[(y, x), (y//2 + ey, x//2 + ex)] = weights[ey, ex, y, x]
+            for x in range(w):
+                for ey in range(2):
+                    for ex in range(2):
+                        Y, X = y // 2 + ey, x // 2 + ex
+                        if weights[ey, ex, y, x] != 0:
+                            assert Y < hc and X < wc  # no weight on a parent outside the coarse grid
+                            dense[y * w + x, Y * wc + X] = weights[ey, ex, y, x]
+        for y in range(0, h, 2):  # a pixel at a coarse point copies it
+            for x in range(0, w, 2):
+                expected_row = np.zeros(P.shape[1])
+                expected_row[(y // 2) * wc + x // 2] = 1.0
+                np.testing.assert_array_equal(dense[y * w + x], expected_row)
+        x = rng.standard_normal(P.shape[1])
+        out = rng.standard_normal(P.shape[0])
+        np.testing.assert_allclose(P @ x, dense @ x, atol=1e-14)
+        np.testing.assert_allclose(P.add_prolonged(out.copy(), x), out + dense @ x, atol=1e-14)
+        np.testing.assert_allclose(P.T @ out, dense.T @ out, atol=1e-13)
+        np.testing.assert_array_equal(P.toarray(), dense)
