@@ -143,6 +143,15 @@ def bench_quadratic(image, sparse, mask, weights, label, rows, *, run_spsolve=Tr
     row = dict(problem=label, n=obj.size, nnz=A.nnz, build=t_build, assemble=t_asm, ours=t_ours,
                ours_iters=out.iterations, ours_rel=rel, pyamg=t_pyamg, pyamg_iters=out_amg.iterations,
                F_ours=obj.value(out.z))
+    # the parts of one solve: set-up, one V-cycle, one product with A (best of 5 each); the 0.3 s goal
+    # leaves (0.3 - set-up) / (V-cycle + product) PCG iterations
+    from sparsedepth.multigrid import GridMultigrid
+
+    row["setup"] = min(timed(GridMultigrid, A, obj.shape, interpolation="auto")[1] for _ in range(3))
+    mg = GridMultigrid(A, obj.shape, interpolation="auto")
+    row["vcycle"] = min(timed(mg.vcycle, b)[1] for _ in range(5))
+    row["matvec"] = min(timed(A.__matmul__, b)[1] for _ in range(5))
+    del mg
     if run_spsolve:
         z_sp, t_sp = timed(spla.spsolve, A.tocsc(), b)
         if t_sp < 10:  # best of 2 where affordable, as ours is best of 3
@@ -313,6 +322,28 @@ def fmt(x, spec=".3g"):
     return "—" if x is None else format(x, spec)
 
 
+def _fit_note(quad):
+    """The notes' sentence on how many PCG iterations the 0.3 s goal leaves (from the measured parts)."""
+    q = quad[0]
+    if "vcycle" not in q:
+        return ""
+    per_it = q["vcycle"] + q["matvec"]
+    fit = max((0.3 - q["setup"]) / per_it, 0.0)
+    text = (f" One PCG iteration of the default system (a V-cycle and a product with `A`) costs {1e3 * per_it:.0f} ms "
+            f"here and the set-up {q['setup']:.2f} s, so the 0.3 s goal leaves {fit:.1f} iterations")
+    if fit < 8:
+        text += (", where even a textbook multigrid contraction of 0.1 per cycle needs 8 for a relative residual "
+                 "of 1e-8: for this 13-point system the goal is out of reach of any V-cycle count on this machine, "
+                 "and the remaining lever would be cheaper passes over the matrix, not fewer iterations.")
+    else:
+        text += f" against the {q['ours_iters']} measured."
+    if len(quad) > 1:
+        q2 = quad[1]
+        text += (f" The paper's 5-point system took {q2['ours']:.3f} s, "
+                 f"{'below' if q2['ours'] < 0.3 else 'above'} the 0.3 s goal in this run.")
+    return text
+
+
 def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
     L = []
     q = quad[0]
@@ -371,6 +402,17 @@ def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
                  f"{r['pyamg']:.2f} ({r['pyamg_iters']}) | {fmt(r.get('ratio'), '.1f')} | "
                  f"{r['ours_rel']:.1e} | {fmt(r.get('maxdiff'), '.1e')} |")
     L.append("")
+    if all("vcycle" in r for r in quad):
+        L.append("The parts of one solve (best of 3 / 5 / 5): GridMultigrid set-up, one V-cycle, one product with "
+                 "`A`; a PCG iteration is one V-cycle and one product, so the 0.3 s goal leaves "
+                 "(0.3 s − set-up) / (V-cycle + product) iterations.\n")
+        L.append("| system | set-up s | V-cycle ms | A·x ms | PCG its measured | its that fit in 0.3 s |")
+        L.append("|---|---|---|---|---|---|")
+        for r in quad:
+            fit = (0.3 - r["setup"]) / (r["vcycle"] + r["matvec"])
+            L.append(f"| {r['problem']} | {r['setup']:.3f} | {1e3 * r['vcycle']:.1f} | {1e3 * r['matvec']:.1f} | "
+                     f"{r['ours_iters']} | {max(fit, 0):.1f} |")
+        L.append("")
     L.append("## 2. L1 problem (γ > 0)\n")
     L.append(f"Weights `{L1_WEIGHTS}`. Best value F* = {l1['F_best']:.12g}; terms at the reference: "
              + ", ".join(f"{k} {v:.4g}" for k, v in l1["terms"].items() if v) + ".\n")
@@ -429,14 +471,15 @@ def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
              "(16 Ritz values below 0.2, the smallest 0.03), not a few outliers that a handful of deflation vectors "
              "could remove; the slowest error of the V-cycle iteration lies almost entirely (98 %) on the pixels "
              "without valid depth (27 % of this frame, mostly the Kinect border), yet the frame cropped to its valid "
-             "box still needs 27 iterations. The paper's 5-point system is solved in about 0.3 s, which "
-             "is where the machine's load decides whether it is just below or just above the 0.3 s goal.")
+             "box still needs 27 iterations." + _fit_note(quad))
     L.append("- *L1*: ADMM (`solve_admm`) with the constant matrix `2A + ρKᵀK` (ONE multigrid hierarchy), gradient "
              "products by array slicing, one V-cycle-preconditioned CG step per iteration; once the primal residual is "
              "<= 1.5e-3 the iterate is *polished* (edges with `u = 0` tied into components, the other signs fixed, the "
              "reduced quadratic solved by Jacobi-PCG, wrong-sign edges re-tied once), then polished again 3, 6, 12 "
              "iterations later until the best polished F settles; below 2²¹ pixels the solver also keeps `A`, so "
-             "the polish merges `A` itself; the solver's docstring has the details. "
+             "the polish merges `A` itself and its second round merges the first round's reduced matrix; the edge "
+             "update (relaxation, multiplier clip, shrinkage) and the sums the objective needs are one chunked pass "
+             "(`StackedL1.admm_step`); the solver's docstring has the details. "
              f"Here {l1['ours_iters']} iterations. L-BFGS-B on the smoothed objective stops at its own optimum, above F*, "
              "so its time to F*(1+1e-6) is infinite and the ratio is a lower bound (its whole run time / ours). "
              f"The L1 cost is not linear in the pixels: at 4× the pixels ADMM needs {l1_scaling[-1]['iters']} "
@@ -454,8 +497,10 @@ def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
     l1_mem = next((m for m in mem if m.get("mode") == "l1" and "peak_mb" in m), None)
     L.append("- *Memory*: the quadratic 8-MP run keeps the 13-point `A` (CSR, ~1.2 GB), the objective's weight images "
              "and a hierarchy whose coarse levels are float32 (`coarse_precision='auto'`); the stencil is assembled "
-             "without sparse products and read back one parity class at a time, prolongation is separable. The 8-MP L1 "
-             "run keeps `S = 2A + ρKᵀK` instead of `A` (the polish reduces `(S − ρKᵀK)/2` block by block), no matrix "
+             "without sparse products and read back one parity class at a time, the bilinear prolongation is "
+             "separable (applied by slicing). The 8-MP L1 run keeps `S = 2A + ρKᵀK` instead of `A` (the polish "
+             "reduces `(S − ρKᵀK)/2` block by block), its hierarchy's operator-dependent prolongation as two weights "
+             "per pixel (no index arrays), no matrix "
              "for `K` (slicing) and no copy of its weights, the ADMM vectors `u`, `λ` and one work vector (2N each), "
              "and the polish's reduced system"
              + ("" if l1_mem is None else f"; its peak is {l1_mem['peak_mb']:.0f} MB") + ".")
@@ -504,12 +549,14 @@ def main(argv=None):
     print("l1 scaling:", l1_scaling, flush=True)
     results = dict(quad=quad, l1=l1, col=col, scaling=scaling, l1_scaling=l1_scaling, mem=mem, info=info,
                    command=command)
+    write = args.write or not args.quick
+    if write:  # the raw results first: a failing report can be redone with --render
+        (REPO / "docs").mkdir(exist_ok=True)
+        RESULTS.write_text(json.dumps(results, indent=1, default=float) + "\n")
     text = report(**results)
     print(text)
-    if args.write or not args.quick:
-        (REPO / "docs").mkdir(exist_ok=True)
+    if write:
         (REPO / "docs" / "performance.md").write_text(text + "\n")
-        RESULTS.write_text(json.dumps(results, indent=1, default=float) + "\n")
     return 0
 
 
