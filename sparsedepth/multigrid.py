@@ -20,7 +20,9 @@ coefficient image per neighbour offset, so that
 * the prolongation :math:`P` comes from 1-D interpolation along each axis
   (``interpolation="bilinear"``, fixed per grid shape) or from the matrix
   entries themselves (``interpolation="operator"``, Dendy's black-box
-  multigrid, for jumping coefficients);
+  multigrid, for jumping coefficients); either is stored as weight arrays
+  (1-D, or two images per parity class) and applied by array slicing, never
+  as an :math:`N`-row sparse matrix;
 * the Galerkin operators :math:`A^c = P^\top A P` are computed by vectorised
   stencil arithmetic on the four parity classes of fine pixels, never by a
   general sparse matrix product, and land in a sparsity pattern that is fixed
@@ -1299,7 +1301,8 @@ class GridMultigrid:
         Returns
         -------
         ml : pyamg.multilevel.MultilevelSolver
-            Shares the operators and prolongations (no copies); use its
+            Shares the operators (no copies); the prolongations are converted
+            to CSR matrices.  Use its
             ``solve(b, accel='cg')``, ``aspreconditioner()``, ``cycle_complexity``.
         """
         from pyamg.multilevel import MultilevelSolver
