@@ -451,9 +451,12 @@ class _SeparableProlongation:
     r"""Bilinear prolongation :math:`P = P_y \otimes P_x`, applied one axis at a time.
 
     ``P @ x`` is :math:`\operatorname{vec}(P_y X P_x^\top)` and ``P.T @ r`` is
-    :math:`\operatorname{vec}(P_y^\top R P_x)`, with the 1-D interpolation
-    matrices only (a few hundred rows): no ``N``-row matrix is stored (8 MP:
-    ~300 MB saved over a CSR ``P``).
+    :math:`\operatorname{vec}(P_y^\top R P_x)`: no ``N``-row matrix is stored
+    (8 MP: ~300 MB saved over a CSR ``P``).  ``P @ x`` (and the V-cycle's
+    ``out += P @ x``) interpolates rows, then columns, by array slicing for
+    the linear weights of :func:`_linear_weights_1d`, and by the 1-D
+    interpolation matrices (a few hundred rows) otherwise; ``P.T @ r`` always
+    uses the 1-D matrices.
     """
 
     def __init__(self, interp):
