@@ -453,24 +453,21 @@ class _SeparableProlongation:
     ``P @ x`` is :math:`\operatorname{vec}(P_y X P_x^\top)` and ``P.T @ r`` is
     :math:`\operatorname{vec}(P_y^\top R P_x)`: no ``N``-row matrix is stored
     (8 MP: ~300 MB saved over a CSR ``P``).  ``P @ x`` (and the V-cycle's
-    ``out += P @ x``) interpolates rows, then columns, by array slicing for
-    the linear weights of :func:`_linear_weights_1d`, and by the 1-D
-    interpolation matrices (a few hundred rows) otherwise; ``P.T @ r`` always
-    uses the 1-D matrices.
+    ``out += P @ x``) interpolates rows, then columns, by array slicing (a
+    sparse product with a transposed intermediate was measured 8x slower on
+    a 640x480 grid); ``P.T @ r`` uses the 1-D interpolation matrices of
+    :func:`_linear_weights_1d` (a few hundred rows).
     """
 
-    def __init__(self, interp):
-        self.Py = _interp_matrix_1d(interp.wy)
-        self.Px = _interp_matrix_1d(interp.wx)
+    def __init__(self, shape):
+        h, w = shape
+        self.Py = _interp_matrix_1d(_linear_weights_1d(h))
+        self.Px = _interp_matrix_1d(_linear_weights_1d(w))
         self.PyT = self.Py.T.tocsr()
         self.PxT = self.Px.T.tocsr()
-        (h, hc), (w, wc) = self.Py.shape, self.Px.shape
+        hc, wc = self.Py.shape[1], self.Px.shape[1]
         self.fine_shape, self.coarse_shape = (h, w), (hc, wc)
         self.shape = (h * w, hc * wc)
-        # the weights of _linear_weights_1d: P is applied by slicing (a sparse product with the
-        # transposed intermediate was measured 8x slower on a 640x480 grid)
-        self._linear = (np.array_equal(interp.wy, _linear_weights_1d(h))
-                        and np.array_equal(interp.wx, _linear_weights_1d(w)))
 
     def __matmul__(self, x):
         return self.add_prolonged(np.zeros(self.shape[0]), x)
@@ -479,10 +476,6 @@ class _SeparableProlongation:
         """``out += P @ x`` without an ``N``-long temporary (``out`` is C-contiguous)."""
         X = np.asarray(x, dtype=np.float64).reshape(self.coarse_shape)
         O = out.reshape(self.fine_shape)
-        if not self._linear:
-            T = (self.Py @ X).T  # (wc, h)
-            O[...] += (self.Px @ T).T
-            return out
         (h, w), (hc, wc) = self.fine_shape, self.coarse_shape
         T = _interpolate_linear_rows(X, h)  # (h, wc)
         O[:, 0::2] += T  # columns at coarse points
@@ -531,10 +524,7 @@ class _ClassProlongation:
         self.fine_shape, self.coarse_shape = (h, w), ((h + 1) // 2, (w + 1) // 2)
         self.shape = (h * w, self.coarse_shape[0] * self.coarse_shape[1])
         self.dtype = np.dtype(dtype)
-        self.set_weights(full)
-
-    def set_weights(self, full):
-        """Take the weights ``full[ey, ex, y, x]`` (shape (2, 2, H, W)) of :func:`_operator_interp`."""
+        # the weights full[ey, ex, y, x] (shape (2, 2, H, W)) of _operator_interp, class by class
         self.w01 = np.ascontiguousarray(full[0, :, 0::2, 1::2], dtype=self.dtype)
         self.w10 = np.ascontiguousarray(full[:, 0, 1::2, 0::2], dtype=self.dtype)
         self.w11 = np.ascontiguousarray(full[:, :, 1::2, 1::2], dtype=self.dtype)
@@ -1071,14 +1061,11 @@ class GridMultigrid:
             fine, coarse = levels[li], levels[li + 1]
             if self.interpolation == "operator":
                 interp = _operator_interp(fine.offsets, source, fine.shape)
-                if isinstance(fine.P, _ClassProlongation):
-                    fine.P.set_weights(interp.full)
-                else:
-                    fine.P = _ClassProlongation(interp.full, self.coarse_dtype)
+                fine.P = _ClassProlongation(interp.full, self.coarse_dtype)
             else:
                 interp = _bilinear_interp(fine.shape)
                 if refill_p:
-                    fine.P = _SeparableProlongation(interp)
+                    fine.P = _SeparableProlongation(fine.shape)
             S = _galerkin(fine.offsets, source, interp, fine.shape, coarse.offsets)
             del source
             coarse.A = stencil_to_csr(coarse.offsets, S, dtype=self.coarse_dtype)

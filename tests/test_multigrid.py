@@ -494,22 +494,6 @@ def test_single_precision_coarse_levels_round_the_double_ones_and_converge():
         GridMultigrid(A, shape, coarse_precision="half")
 
 
-@pytest.mark.parametrize("shape", [(7, 9), (8, 10), (1, 6), (6, 1)])
-def test_separable_prolongation_with_other_weights_uses_the_1d_matrices(shape):
-    """Weights other than the linear ones are applied by the 1-D matrices, as kron(P_y, P_x)."""
-    from sparsedepth.multigrid import _Interp, _interp_matrix_1d, _SeparableProlongation
-
-    rng = np.random.default_rng(4)
-    wy, wx = rng.random((2, shape[0])), rng.random((2, shape[1]))
-    P = _SeparableProlongation(_Interp(wy=wy, wx=wx))
-    expected = np.kron(_interp_matrix_1d(wy).toarray(), _interp_matrix_1d(wx).toarray())
-    x = rng.standard_normal(expected.shape[1])
-    out = rng.standard_normal(expected.shape[0])
-    np.testing.assert_allclose(P @ x, expected @ x, atol=1e-14)
-    np.testing.assert_allclose(P.add_prolonged(out.copy(), x), out + expected @ x, atol=1e-14)
-    np.testing.assert_allclose(P.T @ out, expected.T @ out, atol=1e-13)
-
-
 @pytest.mark.parametrize("shape", [(7, 9), (8, 10), (1, 6), (6, 1), (2, 2), (5, 4)])
 def test_operator_prolongation_by_classes_equals_its_dense_matrix(shape):
     """P x, out += P x and Pᵀ r of the class-wise operator-dependent P, against a matrix built pixel by pixel."""
