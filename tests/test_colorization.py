@@ -243,7 +243,7 @@ def test_schur_solve_matches_spsolve(use_strip, window_radius):
     order = np.concatenate((unknown, rest))
     A = system[order][:, order].tocsr()
     x, history = _solve_schur(
-        A, unknown.size, rhs[order], x0=depth.ravel()[rest], atol=1e-13, maxiter=200, diag_K=1.0 + alpha,
+        A[: unknown.size], A[unknown.size :], rhs[order], x0=depth.ravel()[rest], atol=1e-13, maxiter=200, diag_K=1.0 + alpha,
         strip=np.flatnonzero(strip.ravel()[unknown]) if use_strip else None,
         rim=np.flatnonzero(rim.ravel()[rest]) if use_strip else None,
     )
