@@ -493,11 +493,14 @@ def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
     L.append("- *Hole filling*: `colorization_fill` factorises the block of the hole pixels and of the known pixels "
              "with at least two holes in their window exactly (SuperLU, nested-dissection order) and runs GMRES on the "
              "Schur system of the other known pixels, preconditioned with the Schur complement of a thin strip of "
-             "hole pixels; the factorisation is its largest cost (module docstring). Both times move with the "
+             "hole pixels; the factorisation is its largest cost (module docstring). It runs in a worker thread "
+             "while the main thread assembles the known pixels' rows and factorises the strip (SuperLU releases the "
+             "GIL), so the fill uses both cores; the naive port uses one. Both times move with the "
              "machine's load, so the ratio differs widely between runs of this script; a single run near 50× is "
              "no margin. In development experiments (not part of this script) a float32 preconditioner, other "
-             "fill-reducing orders, banded LAPACK for the border ring and threads gained too little to keep: "
-             "SuperLU's time follows the number of non-zeros of its factors more than their flops.")
+             "fill-reducing orders, banded LAPACK for the border ring, wider strips and more Neumann terms gained "
+             "too little to keep: SuperLU's time follows the number of non-zeros of its factors more than their "
+             "flops, and GMRES needs 4 iterations with any strip width from 2 to 4.")
     l1_mem = next((m for m in mem if m.get("mode") == "l1" and "peak_mb" in m), None)
     L.append("- *Memory*: the quadratic 8-MP run keeps the 13-point `A` (CSR, ~1.2 GB), the objective's weight images "
              "and a hierarchy whose coarse levels are float32 (`coarse_precision='auto'`); the stencil is assembled "
