@@ -27,6 +27,7 @@ import concurrent.futures
 import functools
 import math
 import numbers
+import os
 
 import numpy as np
 import scipy.linalg
@@ -222,6 +223,38 @@ def _window_weights(grey, radius):
     planes /= total
     steps = np.array([di * W + dj for di, dj in offsets], dtype=np.int64)
     return planes, steps
+
+
+def _window_weights_two_threads(grey, radius):
+    """:func:`_window_weights` computed for the top and the bottom half in two threads.
+
+    Each half is given ``radius`` rows of the other as a halo, so every
+    pixel sees the same window as in one pass: the planes are identical
+    (they are per-pixel results).  NumPy releases the GIL in its loops, so on
+    a multi-core machine this takes about 60 % of one pass (measured on a
+    640x480 frame: 49 ms instead of 77 ms, with the copy into one array).
+    Small images and single-CPU processes use one pass.
+    """
+    H = grey.shape[0]
+    if H < 16 * (radius + 1) or _available_cpus() < 2:
+        return _window_weights(grey, radius)
+    half = H // 2
+    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as worker:
+        top = worker.submit(_window_weights, grey[: half + radius], radius)
+        bottom, steps = _window_weights(grey[half - radius :], radius)
+        top = top.result()[0]
+    planes = np.empty((top.shape[0],) + grey.shape)
+    planes[:, :half] = top[:, :half]
+    planes[:, half:] = bottom[:, radius:]
+    return planes, steps
+
+
+def _available_cpus():
+    """CPUs this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
 
 
 def _window_csr(planes, steps, diagonal, sign, order=None):
@@ -695,7 +728,10 @@ def colorization_fill(image, depth, *, mask=None, alpha=1.0, rtol=1e-8, window_r
     of ``K``, the strip's blocks and factorises ``A_ss``.  On that frame
     this hid about 50 ms of the 0.2-0.3 s factorisation: 0.493 s instead of
     0.521 s best of 15 interleaved calls, 0.565 s instead of 0.654 s
-    median.  The result is the same bit for bit.
+    median.  The window weights are computed for the two halves of the
+    image in two threads as well (:func:`_window_weights_two_threads`):
+    with both, 0.454 s instead of 0.503 s best of 15, 0.593 s instead of
+    0.647 s median.  The result is the same bit for bit.
 
     *Not used: mixed precision.*  Factoring ``A_EE`` in float32 (SuperLU)
     saves only 18 % of its factorisation (0.26 s -> 0.22 s; with one-column
@@ -745,7 +781,7 @@ def colorization_fill(image, depth, *, mask=None, alpha=1.0, rtol=1e-8, window_r
     known = np.flatnonzero(~elim)
     order = np.concatenate((unknown, known))
 
-    planes, steps = _window_weights(grey, radius)
+    planes, steps = _window_weights_two_threads(grey, radius)
     flat, pixels, position = _window_entries(planes, 1.0 + alpha * known_flat, -1, order)
     n_e = unknown.size
     b = d.ravel()[order]  # 0 at the holes

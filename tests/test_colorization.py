@@ -251,3 +251,17 @@ def test_schur_solve_matches_spsolve(use_strip, window_radius):
     got[order] = x
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-11)
     assert len(history) > 1  # GMRES ran
+
+
+@pytest.mark.parametrize("window_radius", [1, 2])
+@pytest.mark.parametrize("height", [48, 61])
+def test_weights_in_two_threads_equal_one_pass(window_radius, height, monkeypatch):
+    # the halves carry a halo of window_radius rows: every plane equals the one-pass result exactly
+    from sparsedepth import colorization
+
+    monkeypatch.setattr(colorization, "_available_cpus", lambda: 2)
+    grey = np.random.default_rng(3).random((height, 37))
+    one, steps_one = colorization._window_weights(grey, window_radius)
+    two, steps_two = colorization._window_weights_two_threads(grey, window_radius)
+    np.testing.assert_array_equal(two, one)
+    np.testing.assert_array_equal(steps_two, steps_one)
