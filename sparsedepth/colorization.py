@@ -797,15 +797,6 @@ def colorization_fill(image, depth, *, mask=None, alpha=1.0, rtol=1e-8, window_r
     return out.reshape(grey.shape)
 
 
-def _csr_rows(A, start, stop):
-    """Rows ``start:stop`` of the CSR matrix ``A`` as a CSR matrix sharing its data and indices."""
-    lo, hi = A.indptr[start], A.indptr[stop]
-    return scipy.sparse.csr_matrix(
-        (A.data[lo:hi], A.indices[lo:hi], A.indptr[start : stop + 1] - lo),
-        shape=(stop - start, A.shape[1]),
-    )
-
-
 def _csr_split_columns(A, split):
     """``(A[:, :split], A[:, split:])`` of a CSR matrix, in one pass over its entries."""
     left = A.indices < split
