@@ -37,7 +37,9 @@ Problems (frame ``nyu_metric3d/00000``, 5 % of the valid pixels observed,
    ``budget / ours``.
 3. *Hole filling*: the raw depth of the same frame (holes = NaN → 0) with
    :func:`sparsedepth.colorization.colorization_fill` vs the per-pixel port
-   ``bench/naive_colorization.py`` (loop assembly + spsolve).
+   ``bench/naive_colorization.py`` (loop assembly + spsolve); best of 7
+   fills against best of 2 naive runs, interleaved (the fill uses two
+   threads, the naive port one).
 4. *Scaling*: image and depth resized to 2× and 4× per side (4× and 16×
    pixels); the quadratic solve of 1. (set-up + solve) and the whole
    ``complete_depth`` call; the L1 solve of 2. at 2× per side; peak
