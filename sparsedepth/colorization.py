@@ -257,20 +257,19 @@ def _available_cpus():
         return os.cpu_count() or 1
 
 
-def _window_csr(planes, steps, diagonal, sign, order=None):
-    """CSR matrix with ``sign * w`` off the diagonal and ``diagonal`` on it.
+def _window_csr(planes, steps, diagonal, sign):
+    """CSR matrix with ``sign * w`` off the diagonal and ``diagonal`` on it, pixels in C order.
 
     Every row is first given all ``K`` window entries; the entries outside
-    the image, whose weight is exactly 0, are then removed.  Without
-    ``order`` the pixels are numbered in C order and the column indices of
-    every row are ascending (the offsets are in row-major order).  With
-    ``order`` (a permutation of the pixels) the matrix is ``P A P^T``: row and
-    column ``i`` belong to pixel ``order[i]``, and the column indices of a row
-    are in window order, not sorted.  ``planes`` is overwritten.
+    the image, whose weight is exactly 0, are then removed.  The column
+    indices of every row are ascending (the offsets are in row-major order).
+    ``planes`` is overwritten.  (:func:`colorization_fill` builds its
+    permuted rows block by block with :func:`_window_entries` and
+    :func:`_window_rows` instead.)
     """
-    flat, pixels, position = _window_entries(planes, diagonal, sign, order)
+    flat, pixels, position = _window_entries(planes, diagonal, sign)
     mat = _window_rows(flat, steps, pixels, position)
-    mat.has_sorted_indices = order is None
+    mat.has_sorted_indices = True
     return mat
 
 
@@ -902,8 +901,9 @@ def _solve_schur(A_E, A_K, b, *, x0, atol, maxiter, diag_K, strip=None, rim=None
     """
     n_e, n = A_E.shape
     n_k = n - n_e
-    factorisation = None
-    if n_e and n_k:
+    if n_k == 0:  # everything eliminated: a direct solve
+        return _factor_rows(A_E).solve(b, trans="T"), np.zeros(0)
+    if n_e:
         A_EE, A_EK = _csr_split_columns(A_E, n_e)
         A_EE.sort_indices()  # here, not in the worker: this thread reads A_EE meanwhile
 
@@ -917,8 +917,6 @@ def _solve_schur(A_E, A_K, b, *, x0, atol, maxiter, diag_K, strip=None, rim=None
         worker.shutdown(wait=False)
     if callable(A_K):
         A_K = A_K()
-    if n_k == 0:  # everything eliminated: a direct solve
-        return _factor_rows(A_E).solve(b, trans="T"), np.zeros(0)
     b_K = b[n_e:]
 
     def apply(x_K, x_E):
