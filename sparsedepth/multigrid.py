@@ -32,7 +32,10 @@ coefficient image per neighbour offset, so that
 
 The cycle is a symmetric V-cycle (forward Gauss--Seidel before, backward
 Gauss--Seidel after the coarse-grid correction, using pyamg's compiled
-kernels), so it is a valid preconditioner for conjugate gradients.
+kernels), so it is a valid preconditioner for conjugate gradients.  Below
+``2**21`` pixels it runs in float32 (on a float32 copy of the fine operator's
+values), which moves fewer bytes per sweep; the callers' residuals stay
+float64, so a solve's accuracy does not depend on it.
 :func:`solve_spd` runs preconditioned CG with a choice of preconditioners and
 returns an honest residual history.
 """
@@ -61,7 +64,9 @@ __all__ = [
 _INTERPOLATIONS = ("bilinear", "operator", "auto")
 _SMOOTHERS = ("gauss_seidel", "jacobi")
 _PRECONDITIONERS = ("grid", "amg", "sa", "jacobi", "none")
-#: fine grids from this many pixels keep their coarse levels in float32 (coarse_precision="auto")
+#: fine grids below this many pixels run the whole V-cycle in float32 (fine_precision="auto"), keeping
+#: a float32 copy of the fine operator's values; larger ones keep only their coarse levels in float32
+#: (coarse_precision="auto"), as the copy would cost 4 bytes per non-zero of the largest matrix
 _SINGLE_COARSE_PIXELS = 1 << 21
 # Below this many fine pixels every level's stencil is kept as one (K, H, W)
 # array during the set-up (fine: read from the CSR once; coarse: the Galerkin
@@ -436,7 +441,7 @@ def _interp_matrix_1d(weights):
 def _interpolate_linear_rows(X, h):
     """Rows of ``X`` (``hc`` rows) interpolated to ``h`` rows by :func:`_linear_weights_1d`, a new array."""
     hc = X.shape[0]
-    T = np.empty((h,) + X.shape[1:])
+    T = np.empty((h,) + X.shape[1:], dtype=X.dtype)
     T[0::2] = X
     mid = hc - 1
     if mid:
@@ -465,6 +470,8 @@ class _SeparableProlongation:
         self.Px = _interp_matrix_1d(_linear_weights_1d(w))
         self.PyT = self.Py.T.tocsr()
         self.PxT = self.Px.T.tocsr()
+        # the same (weights 1 and 1/2: exact in float32) for restricting float32 residuals in float32
+        self._single = (self.PyT.astype(np.float32), self.PxT.astype(np.float32))
         hc, wc = self.Py.shape[1], self.Px.shape[1]
         self.fine_shape, self.coarse_shape = (h, w), (hc, wc)
         self.shape = (h * w, hc * wc)
@@ -473,8 +480,8 @@ class _SeparableProlongation:
         return self.add_prolonged(np.zeros(self.shape[0]), x)
 
     def add_prolonged(self, out, x):
-        """``out += P @ x`` without an ``N``-long temporary (``out`` is C-contiguous)."""
-        X = np.asarray(x, dtype=np.float64).reshape(self.coarse_shape)
+        """``out += P @ x`` without an ``N``-long temporary (``out`` is C-contiguous), in ``out``'s precision."""
+        X = np.asarray(x, dtype=out.dtype).reshape(self.coarse_shape)
         O = out.reshape(self.fine_shape)
         (h, w), (hc, wc) = self.fine_shape, self.coarse_shape
         T = _interpolate_linear_rows(X, h)  # (h, wc)
@@ -489,9 +496,15 @@ class _SeparableProlongation:
         return out
 
     def rmatvec(self, r):
-        R = np.asarray(r, dtype=np.float64).reshape(self.fine_shape)
-        T = (self.PyT @ R).T  # (w, hc)
-        return np.ascontiguousarray((self.PxT @ T).T).reshape(-1)
+        """``Pᵀ r`` as a new array, float32 for a float32 ``r``, else float64."""
+        R = np.asarray(r)
+        if R.dtype == np.float32:
+            PyT, PxT = self._single
+        else:
+            PyT, PxT = self.PyT, self.PxT
+            R = R.astype(np.float64, copy=False)
+        T = (PyT @ R.reshape(self.fine_shape)).T  # (w, hc)
+        return np.ascontiguousarray((PxT @ T).T).reshape(-1)
 
     @property
     def T(self):
@@ -536,7 +549,7 @@ class _ClassProlongation:
         return X
 
     def add_prolonged(self, out, x):
-        """``out += P @ x`` (``out`` C-contiguous, float64)."""
+        """``out += P @ x`` (``out`` C-contiguous, float32 or float64)."""
         (h, w), (hc, wc) = self.fine_shape, self.coarse_shape
         ny, nx = h // 2, w // 2  # odd rows / columns
         X = self._padded(x)
@@ -556,11 +569,13 @@ class _ClassProlongation:
         return self.add_prolonged(np.zeros(self.shape[0]), x)
 
     def rmatvec(self, r):
-        """``Pᵀ r`` as a new float64 array."""
+        """``Pᵀ r`` as a new array, float32 for a float32 ``r``, else float64."""
         (h, w), (hc, wc) = self.fine_shape, self.coarse_shape
         ny, nx = h // 2, w // 2
-        R = np.asarray(r, dtype=np.float64).reshape(h, w)
-        C = np.zeros((hc + 1, wc + 1))
+        R = np.asarray(r)
+        dtype = np.float32 if R.dtype == np.float32 else np.float64
+        R = R.astype(dtype, copy=False).reshape(h, w)
+        C = np.zeros((hc + 1, wc + 1), dtype=dtype)
         C[:hc, :wc] = R[0::2, 0::2]
         if nx:
             part = R[0::2, 1::2]
@@ -888,11 +903,20 @@ class GridMultigrid:
     max_levels : int, optional
         Upper bound on the number of levels.
     coarse_precision : {"auto", "double", "single"}, default "auto"
-        Storage and smoothing precision of the coarse levels (level 1 on;
-        the fine level is always float64, so the PCG residuals are exact).
+        Storage and smoothing precision of the coarse levels (level 1 on).
         ``"single"`` halves the coarse operators' values (8 MP, 13-point:
         ~200 MB) and perturbs the preconditioner by float32 rounding only;
-        ``"auto"`` takes it for fine grids of at least ``2**21`` pixels.
+        ``"auto"`` takes it when the fine level is smoothed in single
+        precision or the fine grid has at least ``2**21`` pixels.
+    fine_precision : {"auto", "double", "single"}, default "auto"
+        Precision of the V-cycle's work on the fine level (smoothing, the
+        residual, the transfers).  ``"single"`` keeps a float32 copy of the
+        fine operator's values (sharing its index arrays: 4 bytes per
+        non-zero), so each sweep moves fewer bytes; the operator `A` itself
+        is kept as given, so the residuals of :meth:`solve` and of PCG stay
+        float64 and the accuracy of a solve is unchanged (the V-cycle is
+        only a preconditioner).  ``"auto"`` takes it below ``2**21`` fine
+        pixels, where the copy is small.
 
     Attributes
     ----------
@@ -902,6 +926,9 @@ class GridMultigrid:
         coarsest).
     shape : tuple of int
         Fine grid shape.
+    fine_dtype, coarse_dtype : numpy.dtype
+        Precision of the V-cycle on the fine level and on the coarse levels
+        (see `fine_precision` and `coarse_precision`).
 
     Raises
     ------
@@ -969,11 +996,10 @@ class GridMultigrid:
 
     def __init__(self, A, shape, *, interpolation="bilinear",
                  smoother="gauss_seidel", sweeps=1, max_coarse=1024,
-                 max_levels=None, coarse_precision="auto"):
-        if coarse_precision not in ("auto", "double", "single"):
-            raise ValueError(
-                f"`coarse_precision` must be 'auto', 'double' or 'single', got {coarse_precision!r}."
-            )
+                 max_levels=None, coarse_precision="auto", fine_precision="auto"):
+        for name, value in (("coarse_precision", coarse_precision), ("fine_precision", fine_precision)):
+            if value not in ("auto", "double", "single"):
+                raise ValueError(f"`{name}` must be 'auto', 'double' or 'single', got {value!r}.")
         if interpolation not in _INTERPOLATIONS:
             raise ValueError(
                 f"unknown interpolation {interpolation!r}; "
@@ -1001,9 +1027,11 @@ class GridMultigrid:
         self.max_levels = None if max_levels is None else int(max_levels)
         A, shape = _check_matrix(A, shape)
         self.shape = shape
-        single = coarse_precision == "single" or (
-            coarse_precision == "auto" and shape[0] * shape[1] >= _SINGLE_COARSE_PIXELS)
-        self.coarse_dtype = np.dtype(np.float32 if single else np.float64)
+        large = shape[0] * shape[1] >= _SINGLE_COARSE_PIXELS
+        fine_single = fine_precision == "single" or (fine_precision == "auto" and not large)
+        coarse_single = coarse_precision == "single" or (coarse_precision == "auto" and (large or fine_single))
+        self.fine_dtype = np.dtype(np.float32 if fine_single else np.float64)
+        self.coarse_dtype = np.dtype(np.float32 if coarse_single else np.float64)
         self._build(A)
 
     # ---- construction -------------------------------------------------------
@@ -1078,6 +1106,10 @@ class GridMultigrid:
                 source = _StencilSource(coarse.offsets, coarse.shape, array=S)
             del S
         del source
+        A = levels[0].A
+        # the fine level's operator in the cycle's precision: a float32 copy of the values, same index arrays
+        self._fine_cycle_A = A if self.fine_dtype == A.dtype else sp.csr_matrix(
+            (A.data.astype(self.fine_dtype), A.indices, A.indptr), shape=A.shape)
         for lvl in levels[:-1]:
             self._setup_smoother(lvl)
         self._factor_coarsest()
@@ -1175,17 +1207,17 @@ class GridMultigrid:
         -------
         x : ndarray, shape (N,)
         """
-        b = np.ascontiguousarray(b, dtype=np.float64).reshape(-1)
+        b = np.ascontiguousarray(b, dtype=self.fine_dtype).reshape(-1)
         levels = self.levels
         nu = self.sweeps
         xs, bs = [], []
-        for lvl in levels[:-1]:
-            A = lvl.A
+        for li, lvl in enumerate(levels[:-1]):
+            A = self._fine_cycle_A if li == 0 else lvl.A
             x = np.zeros_like(b)
             if lvl.diag_inv is None:
                 _gs_forward(A, x, b, nu)
             else:
-                self._jacobi(lvl, x, b)
+                self._jacobi(lvl, x, b, A)
             r = A @ x
             np.subtract(b, r, out=r)
             xs.append(x)
@@ -1193,18 +1225,20 @@ class GridMultigrid:
             b = (lvl.P.T @ r).astype(self.coarse_dtype, copy=False)
             del r  # work vectors go as soon as possible: peak memory of 8-MP frames
         x = self._coarse_solve(b.astype(np.float64, copy=False)).astype(self.coarse_dtype, copy=False)
-        for lvl, xf, bf in zip(levels[-2::-1], xs[::-1], bs[::-1]):
+        for li in range(len(levels) - 2, -1, -1):
+            lvl, xf, bf = levels[li], xs[li], bs[li]
             lvl.P.add_prolonged(xf, x)
             if lvl.diag_inv is None:
-                _gs_backward(lvl.A, xf, bf, nu)
+                _gs_backward(self._fine_cycle_A if li == 0 else lvl.A, xf, bf, nu)
             else:
-                self._jacobi(lvl, xf, bf)
+                self._jacobi(lvl, xf, bf, self._fine_cycle_A if li == 0 else lvl.A)
             x = xf
-        return x
+        return x.astype(np.float64, copy=False)
 
-    def _jacobi(self, lvl, x, b):
+    def _jacobi(self, lvl, x, b, A=None):
+        A = lvl.A if A is None else A
         for _ in range(self.sweeps):
-            x += lvl.omega * lvl.diag_inv * (b - lvl.A @ x)
+            x += lvl.omega * lvl.diag_inv * (b - A @ x)
 
     def aspreconditioner(self):
         """The V-cycle as a :class:`scipy.sparse.linalg.LinearOperator`.
@@ -1291,8 +1325,11 @@ class GridMultigrid:
         Returns
         -------
         ml : pyamg.multilevel.MultilevelSolver
-            Shares the operators (no copies); the prolongations are converted
-            to CSR matrices.  Use its
+            Shares the float64 operators (no copies); float32 coarse levels
+            are converted to float64, as pyamg cycles in the precision of the
+            fine level, and the prolongations to CSR matrices.  Its cycle
+            is therefore the float64 form of :meth:`vcycle` (equal to it for
+            ``fine_precision = coarse_precision = "double"``).  Use its
             ``solve(b, accel='cg')``, ``aspreconditioner()``, ``cycle_complexity``.
         """
         from pyamg.multilevel import MultilevelSolver
@@ -1300,9 +1337,9 @@ class GridMultigrid:
         pyamg_levels = []
         for lvl in self.levels:
             L = MultilevelSolver.Level()
-            L.A = lvl.A
+            L.A = lvl.A if lvl.A.dtype == np.float64 else lvl.A.astype(np.float64)
             if lvl.P is not None:
-                L.P = lvl.P if sp.issparse(lvl.P) else lvl.P.tocsr()
+                L.P = (lvl.P if sp.issparse(lvl.P) else lvl.P.tocsr()).astype(np.float64)
                 L.R = L.P.T.tocsr()
                 if lvl.diag_inv is None:
                     nu = self.sweeps

@@ -19,6 +19,11 @@ from sparsedepth.multigrid import (
 # --------------------------------------------------------------------------
 # test systems, built from the plain definition with scipy products
 # --------------------------------------------------------------------------
+#: the hierarchy in float64 throughout, for tests of its exact algebra (the default runs the V-cycle of
+#: grids below 2**21 pixels in float32)
+DOUBLE = dict(fine_precision="double", coarse_precision="double")
+
+
 def forward_diff(n):
     """1-D forward difference, zero last row (Neumann)."""
     main = -np.ones(n)
@@ -117,7 +122,7 @@ def stencil_path(request, monkeypatch):
 def test_galerkin_equals_scipy_triple_product(shape, interpolation, stencil_path):
     rng = np.random.default_rng(1)
     A = random_system(shape, rng, jump=True)
-    mg = GridMultigrid(A, shape, max_coarse=1, interpolation=interpolation)
+    mg = GridMultigrid(A, shape, max_coarse=1, interpolation=interpolation, **DOUBLE)
     assert len(mg.levels) >= 2
     for fine, coarse in zip(mg.levels[:-1], mg.levels[1:]):
         P = sp.csr_array(fine.P if sp.issparse(fine.P) else fine.P.tocsr())
@@ -131,7 +136,7 @@ def test_galerkin_equals_scipy_triple_product(shape, interpolation, stencil_path
 @pytest.mark.parametrize("shape", [(9, 11), (10, 12)])
 def test_galerkin_of_13_point_operator(shape, stencil_path):
     A = biharmonic_system(shape, np.random.default_rng(2))
-    mg = GridMultigrid(A, shape, max_coarse=1)
+    mg = GridMultigrid(A, shape, max_coarse=1, **DOUBLE)
     for fine, coarse in zip(mg.levels[:-1], mg.levels[1:]):
         P = sp.csr_array(fine.P if sp.issparse(fine.P) else fine.P.tocsr())
         expected = (P.T @ fine.A @ P).toarray()
@@ -145,7 +150,7 @@ def test_operator_interpolation_reproduces_constants_without_reaction():
     n = shape[0] * shape[1]
     A = grid_system(shape, 0.0, 10.0 ** rng.uniform(-3, 3, n),
                     10.0 ** rng.uniform(-3, 3, n))
-    mg = GridMultigrid(A, shape, max_coarse=1, interpolation="operator")
+    mg = GridMultigrid(A, shape, max_coarse=1, interpolation="operator", **DOUBLE)
     P = mg.levels[0].P
     np.testing.assert_allclose(P @ np.ones(P.shape[1]), 1.0, rtol=1e-10)
 
@@ -179,7 +184,7 @@ def test_vcycle_is_symmetric_positive_definite(interpolation, smoother, sweeps):
     rng = np.random.default_rng(5)
     A = random_system(shape, rng, jump=True)
     mg = GridMultigrid(A, shape, interpolation=interpolation, smoother=smoother,
-                       sweeps=sweeps, max_coarse=16)
+                       sweeps=sweeps, max_coarse=16, **DOUBLE)
     M = mg.aspreconditioner()
     for _ in range(3):
         u, v = rng.standard_normal((2, A.shape[0]))
@@ -192,7 +197,7 @@ def test_vcycle_symmetric_for_13_point_operator():
     shape = (21, 26)
     rng = np.random.default_rng(6)
     A = biharmonic_system(shape, rng)
-    mg = GridMultigrid(A, shape, max_coarse=16)
+    mg = GridMultigrid(A, shape, max_coarse=16, **DOUBLE)
     u, v = rng.standard_normal((2, A.shape[0]))
     Mu, Mv = mg.vcycle(u), mg.vcycle(v)
     assert abs(u @ Mv - Mu @ v) <= 1e-11 * np.linalg.norm(u) * np.linalg.norm(Mv)
@@ -402,7 +407,7 @@ def test_to_pyamg_multilevel_solver():
     rng = np.random.default_rng(21)
     A = random_system(shape, rng)
     b = rng.standard_normal(A.shape[0])
-    mg = GridMultigrid(A, shape, max_coarse=32)
+    mg = GridMultigrid(A, shape, max_coarse=32, **DOUBLE)
     ml = mg.to_pyamg()
     assert len(ml.levels) == len(mg.levels)
     assert ml.operator_complexity() == pytest.approx(mg.operator_complexity())
@@ -412,6 +417,13 @@ def test_to_pyamg_multilevel_solver():
         x = ml.solve(b, tol=1e-10, accel="cg", residuals=residuals)
     assert np.linalg.norm(b - A @ x) <= 1e-9 * np.linalg.norm(b)
     np.testing.assert_allclose(ml.aspreconditioner() @ b, mg.vcycle(b), rtol=1e-12)
+    # a float32 hierarchy converts: pyamg's cycle is then the float64 form of ours
+    single = GridMultigrid(A, shape, max_coarse=32)
+    assert single.coarse_dtype == np.float32
+    ml = single.to_pyamg()
+    assert all(level.A.dtype == np.float64 for level in ml.levels)
+    expected = mg.vcycle(b)
+    np.testing.assert_allclose(ml.aspreconditioner() @ b, expected, rtol=0, atol=1e-5 * np.abs(expected).max())
 
 
 def test_repr_lists_levels_and_nonzeros():
@@ -492,6 +504,46 @@ def test_single_precision_coarse_levels_round_the_double_ones_and_converge():
     assert np.linalg.norm(rhs - A @ x) <= 1e-10 * np.linalg.norm(rhs)
     with pytest.raises(ValueError, match="coarse_precision"):
         GridMultigrid(A, shape, coarse_precision="half")
+
+
+def test_single_precision_cycle_rounds_the_double_one_and_solves_to_double_accuracy(monkeypatch):
+    import sparsedepth.multigrid as multigrid
+
+    shape = (40, 56)
+    rng = np.random.default_rng(12)
+    A = random_system(shape, rng, jump=True).tocsr()
+    double = GridMultigrid(A, shape, **DOUBLE)
+    single = GridMultigrid(A, shape)  # below 2**21 pixels: the whole cycle in float32
+    assert single.fine_dtype == np.float32 and single.coarse_dtype == np.float32
+    assert single.levels[0].A is A  # the operator itself is kept as given
+    # the float32 copy of the fine values shares A's index arrays
+    assert single._fine_cycle_A.dtype == np.float32
+    assert np.shares_memory(single._fine_cycle_A.indices, A.indices)
+    r = rng.standard_normal(A.shape[0])
+    expected = double.vcycle(r)
+    got = single.vcycle(r)
+    assert got.dtype == np.float64
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-5 * np.abs(expected).max())
+    assert np.abs(got - expected).max() > 0  # it is really another precision
+    # the residuals stay float64: PCG goes far below float32 rounding, in as many iterations as in float64
+    x, info = single.solve(r, rtol=1e-11)
+    assert info.converged
+    assert info.iterations <= double.solve(r, rtol=1e-11)[1].iterations + 2
+    assert np.linalg.norm(r - A @ x) <= 1e-11 * np.linalg.norm(r)
+    np.testing.assert_allclose(x, spla.spsolve(A.tocsc(), r), rtol=0, atol=1e-8 * np.abs(x).max())
+    # and so does the plain V-cycle iteration (iterative refinement), on a system without jumps
+    B = random_system(shape, rng).tocsr()
+    x, info = GridMultigrid(B, shape).solve(r, rtol=1e-11, accel=None)
+    assert info.converged
+    np.testing.assert_allclose(x, spla.spsolve(B.tocsc(), r), rtol=0, atol=1e-9 * np.abs(x).max())
+    # large grids keep the fine level in float64 (no copy) and only the coarse levels in float32
+    monkeypatch.setattr(multigrid, "_SINGLE_COARSE_PIXELS", 100)
+    large = GridMultigrid(A, shape)
+    assert large.fine_dtype == np.float64 and large.coarse_dtype == np.float32
+    assert large._fine_cycle_A is A
+    np.testing.assert_allclose(large.vcycle(r), expected, rtol=0, atol=1e-5 * np.abs(expected).max())
+    with pytest.raises(ValueError, match="fine_precision"):
+        GridMultigrid(A, shape, fine_precision="half")
 
 
 @pytest.mark.parametrize("shape", [(7, 9), (8, 10), (1, 6), (6, 1), (2, 2), (5, 4)])
