@@ -520,7 +520,11 @@ def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
              "iteration or more exact inner solves: the polished F after 30 iterations stayed between 0.6 and 6 "
              "times the plain iteration's, and cheaper inner preconditioners than the V-cycle were far worse. "
              "Running the polish in a second thread while ADMM goes on gained nothing: the V-cycle's Gauss-Seidel "
-             "sweeps (pyamg) hold the GIL, so both slowed down.")
+             "sweeps (pyamg) hold the GIL, so both slowed down. What the iterations wait for is the set of tied "
+             "edges: polished early, F is off mainly through edges tied that the optimum leaves untied, and neither "
+             "per-edge penalties ρ ∝ c^p, more re-tying rounds in the polish, untying the edges whose multiplier "
+             "sits near its bound, nor a max-flow (min-cut) split test of the tied components found them soon "
+             "enough or cheaply enough (the max-flow alone, SciPy's Dinic, costs more than the whole solve here).")
     L.append("- *Hole filling*: `colorization_fill` factorises the block of the hole pixels and of the known pixels "
              "with at least two holes in their window exactly (SuperLU, nested-dissection order) and runs GMRES on the "
              "Schur system of the other known pixels, preconditioned with the Schur complement of a thin strip of "
