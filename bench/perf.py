@@ -423,8 +423,8 @@ def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
     if all("vcycle" in r for r in quad):
         L.append("The parts of one solve (best of 3 / 5 / 5): GridMultigrid set-up, one V-cycle, one product with "
                  "`A`; a PCG iteration is one V-cycle and one product, so the 0.3 s goal leaves "
-                 "(0.3 s − set-up) / (V-cycle + product) iterations. The V-cycle runs in float32 (the default below "
-                 "2²¹ pixels); the same cycle in float64 (`fine_precision = coarse_precision = 'double'`) is timed "
+                 "(0.3 s − set-up) / (V-cycle + product) iterations. The V-cycle runs in float32 (the default up to "
+                 "2²⁶ non-zeros); the same cycle in float64 (`fine_precision = coarse_precision = 'double'`) is timed "
                  "interleaved with it.\n")
         L.append("| system | set-up s | V-cycle ms | V-cycle in float64 ms | A·x ms | PCG its measured | "
                  "its that fit in 0.3 s |")
@@ -486,11 +486,12 @@ def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
              "image per neighbour offset, one array operation per pair of operator taps) and convert it once to CSR; "
              "ours is then `GridMultigrid` (geometric; `interpolation='auto'`: black-box for 5/9-point, bilinear for "
              "13-point stencils; below 2²¹ pixels it reads the stencil from the CSR once and keeps each level's stencil "
-             "array during the set-up, larger frames read it back one parity class at a time; at those sizes the "
-             "V-cycle also runs in float32, on a float32 copy of the fine values: see the V-cycle columns above; "
-             "larger frames, such as the 16× row of the scaling table, smooth their fine level in float64, as the "
-             "copy would cost 4 bytes per non-zero) + PCG on the true float64 residual. The default weights carry the image-weighted second-order term, a fourth-order operator with "
-             "coefficients that jump by orders of magnitude at image edges: point Gauss-Seidel smooths it poorly, so "
+             "array during the set-up, larger frames read it back one parity class at a time; the V-cycle runs in "
+             "float32, on a float32 copy of the fine values, for operators of up to 2²⁶ non-zeros (all rows of the "
+             "scaling table; the 8-MP default system, 1.04e8 non-zeros, smooths its fine level in float64, as its "
+             "copy would weigh on the peak memory): see the V-cycle columns above) + PCG on the true float64 "
+             "residual. The default weights carry the image-weighted second-order term, a fourth-order operator "
+             "with coefficients that jump by orders of magnitude at image edges: point Gauss-Seidel smooths it poorly, so "
              f"PCG needs {q['ours_iters']} V-cycles where the paper's 5-point system needs "
              f"{quad[1]['ours_iters'] if len(quad) > 1 else '?'}; each V-cycle is about five passes over the "
              f"{q['nnz']}-non-zero matrix. `python bench/quadratic_variants.py` measures the alternatives: cubic "
@@ -542,7 +543,8 @@ def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
              "without sparse products and read back one parity class at a time, the bilinear prolongation is "
              "separable (applied by slicing). The 8-MP L1 run keeps `S = 2A + ρKᵀK` instead of `A` (the polish "
              "reduces `(S − ρKᵀK)/2` block by block), its hierarchy's operator-dependent prolongation as two weights "
-             "per pixel (no index arrays), no matrix "
+             "per pixel (no index arrays) and a float32 copy of the 5-point `S`'s values for the V-cycle (4 bytes "
+             "per non-zero), no matrix "
              "for `K` (slicing) and no copy of its weights, the ADMM vectors `u`, `λ` and one work vector (2N each), "
              "and the polish's reduced system"
              + ("" if l1_mem is None else f"; its peak is {l1_mem['peak_mb']:.0f} MB") + ".")

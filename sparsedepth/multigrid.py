@@ -32,10 +32,10 @@ coefficient image per neighbour offset, so that
 
 The cycle is a symmetric V-cycle (forward Gauss--Seidel before, backward
 Gauss--Seidel after the coarse-grid correction, using pyamg's compiled
-kernels), so it is a valid preconditioner for conjugate gradients.  Below
-``2**21`` pixels it runs in float32 (on a float32 copy of the fine operator's
-values), which moves fewer bytes per sweep; the callers' residuals stay
-float64, so a solve's accuracy does not depend on it.
+kernels), so it is a valid preconditioner for conjugate gradients.  Unless
+the operator is very large it runs in float32 (on a float32 copy of the fine
+operator's values), which moves fewer bytes per sweep; the callers'
+residuals stay float64, so a solve's accuracy does not depend on it.
 :func:`solve_spd` runs preconditioned CG with a choice of preconditioners and
 returns an honest residual history.
 """
@@ -64,10 +64,12 @@ __all__ = [
 _INTERPOLATIONS = ("bilinear", "operator", "auto")
 _SMOOTHERS = ("gauss_seidel", "jacobi")
 _PRECONDITIONERS = ("grid", "amg", "sa", "jacobi", "none")
-#: fine grids below this many pixels run the whole V-cycle in float32 (fine_precision="auto"), keeping
-#: a float32 copy of the fine operator's values; larger ones keep only their coarse levels in float32
-#: (coarse_precision="auto"), as the copy would cost 4 bytes per non-zero of the largest matrix
+#: fine grids from this many pixels keep their coarse levels in float32 (coarse_precision="auto")
 _SINGLE_COARSE_PIXELS = 1 << 21
+#: fine operators with at most this many non-zeros are smoothed in float32 (fine_precision="auto"), on
+#: a float32 copy of their values (at most 256 MB); larger ones (an 8-megapixel 13-point system has
+#: 1.04e8) are smoothed in float64, as the copy would then weigh on the peak memory
+_SINGLE_FINE_VALUES = 1 << 26
 # Below this many fine pixels every level's stencil is kept as one (K, H, W)
 # array during the set-up (fine: read from the CSR once; coarse: the Galerkin
 # result itself) instead of being read back from the CSR one parity class at a
@@ -915,8 +917,9 @@ class GridMultigrid:
         non-zero), so each sweep moves fewer bytes; the operator `A` itself
         is kept as given, so the residuals of :meth:`solve` and of PCG stay
         float64 and the accuracy of a solve is unchanged (the V-cycle is
-        only a preconditioner).  ``"auto"`` takes it below ``2**21`` fine
-        pixels, where the copy is small.
+        only a preconditioner).  ``"auto"`` takes it when `A` has at most
+        ``2**26`` non-zeros (a copy of at most 256 MB: a 13-point system of
+        up to about 5 megapixels).
 
     Attributes
     ----------
@@ -1028,7 +1031,7 @@ class GridMultigrid:
         A, shape = _check_matrix(A, shape)
         self.shape = shape
         large = shape[0] * shape[1] >= _SINGLE_COARSE_PIXELS
-        fine_single = fine_precision == "single" or (fine_precision == "auto" and not large)
+        fine_single = fine_precision == "single" or (fine_precision == "auto" and A.nnz <= _SINGLE_FINE_VALUES)
         coarse_single = coarse_precision == "single" or (coarse_precision == "auto" and (large or fine_single))
         self.fine_dtype = np.dtype(np.float32 if fine_single else np.float64)
         self.coarse_dtype = np.dtype(np.float32 if coarse_single else np.float64)

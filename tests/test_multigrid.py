@@ -19,8 +19,8 @@ from sparsedepth.multigrid import (
 # --------------------------------------------------------------------------
 # test systems, built from the plain definition with scipy products
 # --------------------------------------------------------------------------
-#: the hierarchy in float64 throughout, for tests of its exact algebra (the default runs the V-cycle of
-#: grids below 2**21 pixels in float32)
+#: the hierarchy in float64 throughout, for tests of its exact algebra (by default the V-cycle runs in
+#: float32 unless the operator is very large)
 DOUBLE = dict(fine_precision="double", coarse_precision="double")
 
 
@@ -536,7 +536,13 @@ def test_single_precision_cycle_rounds_the_double_one_and_solves_to_double_accur
     x, info = GridMultigrid(B, shape).solve(r, rtol=1e-11, accel=None)
     assert info.converged
     np.testing.assert_allclose(x, spla.spsolve(B.tocsc(), r), rtol=0, atol=1e-9 * np.abs(x).max())
-    # large grids keep the fine level in float64 (no copy) and only the coarse levels in float32
+    # operators with too many non-zeros for a float32 copy are smoothed in float64 (no copy) on the fine level;
+    # their coarse levels are float32 only on large grids
+    monkeypatch.setattr(multigrid, "_SINGLE_FINE_VALUES", A.nnz - 1)
+    no_copy = GridMultigrid(A, shape)
+    assert no_copy.fine_dtype == np.float64 and no_copy.coarse_dtype == np.float64
+    assert no_copy._fine_cycle_A is A
+    np.testing.assert_array_equal(no_copy.vcycle(r), expected)
     monkeypatch.setattr(multigrid, "_SINGLE_COARSE_PIXELS", 100)
     large = GridMultigrid(A, shape)
     assert large.fine_dtype == np.float64 and large.coarse_dtype == np.float32
