@@ -525,6 +525,11 @@ def test_single_precision_cycle_rounds_the_double_one_and_solves_to_double_accur
     assert got.dtype == np.float64
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-5 * np.abs(expected).max())
     assert np.abs(got - expected).max() > 0  # it is really another precision
+    # the Jacobi smoother and operator-dependent interpolation in float32 too
+    for options in (dict(smoother="jacobi"), dict(interpolation="operator")):
+        want = GridMultigrid(A, shape, **options, **DOUBLE).vcycle(r)
+        np.testing.assert_allclose(GridMultigrid(A, shape, **options).vcycle(r), want, rtol=0,
+                                   atol=1e-5 * np.abs(want).max())
     # the residuals stay float64: PCG goes far below float32 rounding, in as many iterations as in float64
     x, info = single.solve(r, rtol=1e-11)
     assert info.converged
