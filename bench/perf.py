@@ -382,8 +382,7 @@ def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
     L.append(f"| L1 (γ = 0.01), exact F within 1e-6 of the best, vs L-BFGS-B time to that value | "
              f"**{lb}{fmt(ratio, '.1f')}×**, {l1['ours_time']:.2f} s (rel. gap {l1['ours_rel']:.1e}) | ≥ 20×, < 1 s | "
              f"{'yes' if ratio and ratio >= 20 and l1['ours_time'] < 1 else 'no'} |")
-    median = (f"; median fill {col['fast_median']:.2f} s: {col['naive'] / col['fast_median']:.0f}×"
-              if "fast_median" in col else "")
+    median = f"; median fill {col['fast_median']:.2f} s: {col['naive'] / col['fast_median']:.0f}×"
     L.append(f"| hole filling (colorization) vs naive port | **{col['ratio']:.0f}×**, {col['fast']:.2f} s "
              f"(max diff {col['maxdiff']:.1e} m{median}) | ≥ 50×, ≤ 1e-6 | "
              f"{'yes' if col['ratio'] >= 50 and col['maxdiff'] <= 1e-6 else 'no'} |")
@@ -431,7 +430,7 @@ def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
         L.append("|---|---|---|---|---|---|---|")
         for r in quad:
             L.append(f"| {r['problem']} | {r['setup']:.3f} | {1e3 * r['vcycle']:.1f} | "
-                     f"{fmt(1e3 * r['vcycle_double'] if 'vcycle_double' in r else None, '.1f')} | "
+                     f"{1e3 * r['vcycle_double']:.1f} | "
                      f"{1e3 * r['matvec']:.1f} | {r['ours_iters']} | {_iterations_that_fit(r):.1f} |")
         L.append("")
     L.append("## 2. L1 problem (γ > 0)\n")
@@ -448,16 +447,11 @@ def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
     L.append(f"| reference ADMM (long) | {l1['ref_time']:.1f} | | {l1['ref_rel']:.1e} | |")
     L.append("")
     L.append("## 3. Hole filling (NYU toolbox colorization)\n")
-    if "naive_runs" in col:  # runs since 2026-11-30: best of 7 against best of 2, interleaved
-        L.append(f"Raw depth of the same frame ({100 * col['holes']:.1f} % holes). `colorization_fill` "
-                 f"{col['fast']:.2f} s (best of 7; median {col['fast_median']:.2f} s), naive port "
-                 f"{col['naive']:.1f} s (best of {len(col['naive_runs'])}: "
-                 f"{', '.join(f'{t:.1f}' for t in col['naive_runs'])} s), interleaved: "
-                 f"**{col['ratio']:.0f}×**, max |difference| {col['maxdiff']:.1e} m.\n")
-    else:
-        L.append(f"Raw depth of the same frame ({100 * col['holes']:.1f} % holes). `colorization_fill` "
-                 f"{col['fast']:.2f} s (best of 3), naive port {col['naive']:.1f} s: **{col['ratio']:.0f}×**, "
-                 f"max |difference| {col['maxdiff']:.1e} m.\n")
+    L.append(f"Raw depth of the same frame ({100 * col['holes']:.1f} % holes). `colorization_fill` "
+             f"{col['fast']:.2f} s (best of 7; median {col['fast_median']:.2f} s), naive port "
+             f"{col['naive']:.1f} s (best of {len(col['naive_runs'])}: "
+             f"{', '.join(f'{t:.1f}' for t in col['naive_runs'])} s), interleaved: "
+             f"**{col['ratio']:.0f}×**, max |difference| {col['maxdiff']:.1e} m.\n")
     L.append("## 4. Scaling (quadratic, default weights with γ = 0)\n")
     L.append("Best of 3 interleaved rounds per size (set-up + PCG to 1e-8); the whole `complete_depth` call "
              "(objective assembly included) once.\n")

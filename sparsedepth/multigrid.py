@@ -1213,9 +1213,10 @@ class GridMultigrid:
         b = np.ascontiguousarray(b, dtype=self.fine_dtype).reshape(-1)
         levels = self.levels
         nu = self.sweeps
+        # the operator each smoothed level is cycled with: the fine one in the cycle's precision
+        cycle_ops = [self._fine_cycle_A] + [lvl.A for lvl in levels[1:-1]]
         xs, bs = [], []
-        for li, lvl in enumerate(levels[:-1]):
-            A = self._fine_cycle_A if li == 0 else lvl.A
+        for lvl, A in zip(levels[:-1], cycle_ops):
             x = np.zeros_like(b)
             if lvl.diag_inv is None:
                 _gs_forward(A, x, b, nu)
@@ -1228,13 +1229,12 @@ class GridMultigrid:
             b = (lvl.P.T @ r).astype(self.coarse_dtype, copy=False)
             del r  # work vectors go as soon as possible: peak memory of 8-MP frames
         x = self._coarse_solve(b.astype(np.float64, copy=False)).astype(self.coarse_dtype, copy=False)
-        for li in range(len(levels) - 2, -1, -1):
-            lvl, xf, bf = levels[li], xs[li], bs[li]
+        for lvl, A, xf, bf in zip(levels[-2::-1], cycle_ops[::-1], xs[::-1], bs[::-1]):
             lvl.P.add_prolonged(xf, x)
             if lvl.diag_inv is None:
-                _gs_backward(self._fine_cycle_A if li == 0 else lvl.A, xf, bf, nu)
+                _gs_backward(A, xf, bf, nu)
             else:
-                self._jacobi(lvl, xf, bf, self._fine_cycle_A if li == 0 else lvl.A)
+                self._jacobi(lvl, xf, bf, A)
             x = xf
         return x.astype(np.float64, copy=False)
 
@@ -1340,9 +1340,9 @@ class GridMultigrid:
         pyamg_levels = []
         for lvl in self.levels:
             L = MultilevelSolver.Level()
-            L.A = lvl.A if lvl.A.dtype == np.float64 else lvl.A.astype(np.float64)
+            L.A = lvl.A.astype(np.float64, copy=False)
             if lvl.P is not None:
-                L.P = (lvl.P if sp.issparse(lvl.P) else lvl.P.tocsr()).astype(np.float64)
+                L.P = (lvl.P if sp.issparse(lvl.P) else lvl.P.tocsr()).astype(np.float64, copy=False)
                 L.R = L.P.T.tocsr()
                 if lvl.diag_inv is None:
                     nu = self.sweeps
