@@ -530,7 +530,11 @@ def report(quad, l1, col, scaling, l1_scaling, mem, info, command):
              "no margin. In development experiments (not part of this script) a float32 preconditioner, other "
              "fill-reducing orders, banded LAPACK for the border ring, wider strips and more Neumann terms gained "
              "too little to keep: SuperLU's time follows the number of non-zeros of its factors more than their "
-             "flops, and GMRES needs 4 iterations with any strip width from 2 to 4.")
+             "flops, and GMRES needs 4 iterations with any strip width from 2 to 4. Nor did splitting the hole "
+             "block at its top separator (the middle column) and factorising the two halves, each bordered by the "
+             "separator, in the two threads: the halves are unequal (the wide left border) and the larger one alone "
+             "factorises almost as slowly as the whole block, while every lift then needs two rounds of half-size "
+             "solves with the separator's Schur complement between them, which cost what the factorisation saved.")
     l1_mem = next((m for m in mem if m.get("mode") == "l1" and "peak_mb" in m), None)
     L.append("- *Memory*: the quadratic 8-MP run keeps the 13-point `A` (CSR, ~1.2 GB), the objective's weight images "
              "and a hierarchy whose coarse levels are float32 (`coarse_precision='auto'`); the stencil is assembled "
