@@ -1238,8 +1238,8 @@ class GridMultigrid:
             x = xf
         return x.astype(np.float64, copy=False)
 
-    def _jacobi(self, lvl, x, b, A=None):
-        A = lvl.A if A is None else A
+    def _jacobi(self, lvl, x, b, A):
+        """``sweeps`` damped Jacobi sweeps on ``A x = b`` (``A``: ``lvl``'s operator in the cycle's precision)."""
         for _ in range(self.sweeps):
             x += lvl.omega * lvl.diag_inv * (b - A @ x)
 
@@ -1350,7 +1350,7 @@ class GridMultigrid:
                     L.postsmoother = lambda A, x, b, nu=nu: _gs_backward(A, x, b, nu)
                 else:
                     L.presmoother = L.postsmoother = (
-                        lambda A, x, b, lvl=lvl: self._jacobi(lvl, x, b))
+                        lambda A, x, b, lvl=lvl: self._jacobi(lvl, x, b, A))
             pyamg_levels.append(L)
         ml = MultilevelSolver(pyamg_levels, coarse_solver=_CoarseSolve(self))
         ml.symmetric_smoothing = True  # forward GS before, backward GS after
