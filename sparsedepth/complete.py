@@ -595,7 +595,10 @@ def _run_one(args, argv, mode, stdout, stderr) -> int:
     items = []
     for kind, target in planned:
         if kind in _DEPTH_OUTPUTS:
-            writer = _depth_writer(target.path, outcome.depth, scale=png_scale)
+            try:
+                writer = _depth_writer(target.path, outcome.depth, scale=png_scale)
+            except ValueError as exc:
+                raise _UsageError(f"{target.label}: {_one_line(exc)}") from None
         elif kind in ("--json", "metrics.json"):
             writer = _bytes_writer(report_text)
         else:

@@ -306,3 +306,27 @@ def test_batch_outdir_missing_refused(tmp_path, capsys):
     _batch_folder(tmp_path)
     _run_refused(["--batch", tmp_path, "--csv", tmp_path / "m.csv", "--outdir", tmp_path / "absent", "--workers",
                   "1", "-q", *FAST], capsys, tmp_path, "--outdir", "does not exist")
+
+
+def test_demo_outdir_that_is_a_file_is_refused(tmp_path, capsys):
+    (tmp_path / "plain").write_text("a file, not a folder")
+    _run_refused(["--outdir", tmp_path / "plain" / "demo", "--downsample", "8", "-q", *FAST], capsys, tmp_path,
+                 "--outdir", f"'{tmp_path / 'plain'}' is not a folder")
+
+
+def test_commit_removes_everything_when_a_writer_raises(tmp_path):
+    from sparsedepth._outputs import Named, commit
+
+    (tmp_path / "old.txt").write_bytes(b"old")
+    targets = [Named("--a", str(tmp_path / "old.txt"), tmp_path / "old.txt"),
+               Named("--b", str(tmp_path / "new" / "b.txt"), tmp_path / "new" / "b.txt", create_parent=True)]
+
+    def broken(tmp):
+        tmp.write_bytes(b"half")
+        raise RuntimeError("encoder failed")
+
+    with pytest.raises(RuntimeError, match="encoder failed"):
+        commit([(targets[0], lambda tmp: tmp.write_bytes(b"new")), (targets[1], broken)])
+    assert _snapshot(tmp_path) == {"old.txt": b"old"}  # no new folder, no temporary file
+    commit([(targets[0], lambda tmp: tmp.write_bytes(b"new")), (targets[1], lambda tmp: tmp.write_bytes(b"b"))])
+    assert _snapshot(tmp_path) == {"new": None, "new/b.txt": b"b", "old.txt": b"new"}
