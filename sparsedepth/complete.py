@@ -8,6 +8,10 @@ library errors into one line on stderr with exit code 2.
 
 Exit codes: 0 success; 1 a batch finished but some frames failed (see the
 CSV); 2 bad options or input (nothing written); 130 interrupted.
+
+Files: no output may be an input or another output, and every output is
+checked to be creatable before the work starts.  One frame's outputs are
+written all or nothing (see :func:`sparsedepth._outputs.commit`).
 """
 
 from __future__ import annotations
@@ -29,7 +33,8 @@ from . import __version__
 from .batch import BatchOptions, evaluate_frame, find_frames, nyu_frames, run_batch
 from .datasets import load_motorcycle
 from .holes import FILL_METHODS
-from .io import DEPTH_SCALES, _atomic_target, _resolve_scale, read_depth, read_image, write_depth
+from ._outputs import Named, check_distinct, check_writable, commit
+from .io import DEPTH_SCALES, _depth_writer, _resolve_scale, read_depth, read_image
 from .solvers import SOLVERS
 from .weights import DEFAULT_WEIGHTS, Weights
 
@@ -264,9 +269,51 @@ def _check_output(path, allowed, what) -> Path:
     path = Path(path)
     if path.suffix.lower() not in allowed:
         raise _UsageError(f"{what} '{path}': unsupported extension '{path.suffix or '(none)'}'; use {', '.join(allowed)}")
-    if not path.parent.is_dir():
-        raise _UsageError(f"{what} '{path}': folder '{path.parent}' does not exist")
     return path
+
+
+_DEPTH_OUTPUTS = ("--out", "depth.npy", "depth.png")
+
+
+def _one_frame_outputs(args, mode) -> list[tuple[str, Named]]:
+    """(kind, file) of every output of one frame; kind is the option or the file name in --outdir."""
+    planned = []
+    for flag, value in (("--out", args.out), ("--json", args.json), ("--figure", args.figure)):
+        if value is not None:
+            planned.append((flag, Named(flag, value, Path(value))))
+    outdir = DEMO_DIR if mode == "demo" and args.outdir is None else args.outdir
+    if outdir is not None:
+        names = ["depth.npy", "depth.png", "metrics.json"]
+        if _matplotlib() is not None:
+            names.append("figure.png")
+        planned += [(name, Named("--outdir", outdir, Path(outdir) / name, create_parent=mode == "demo"))
+                    for name in names]
+    return planned
+
+
+def _one_frame_inputs(args) -> list[Named]:
+    return [Named(flag, value, Path(value)) for flag, value in (
+        ("--image", args.image), ("--depth", args.depth), ("--mask", args.mask), ("--truth", args.truth),
+        ("--calib", args.calib)) if value is not None]
+
+
+def _check_png_range(depth, scale, targets, what) -> None:
+    """Refuse a PNG output whose depth would overflow 16 bits or round to 0 at ``scale``."""
+    if not targets:
+        return
+    values = depth[np.isfinite(depth) & (depth > 0)]
+    if values.size == 0:
+        return
+    high, low = float(values.max()), float(values.min())
+    target = targets[0]
+    other = ", or a float format (.npy, .npz, .h5, .pfm)" if target.flag == "--out" else ""
+    if np.rint(high * scale) > np.iinfo(np.uint16).max:
+        raise _UsageError(f"{target.label}: {what} reaches {high:.6g} m, which overflows a 16-bit PNG at scale "
+                          f"{scale:g} ({high * scale:.0f} > 65535); give --out-scale {65535 / high:.6g} or "
+                          f"less{other}")
+    if np.rint(low * scale) == 0:
+        raise _UsageError(f"{target.label}: {what} has {low:.6g} m, which rounds to 0 (invalid) in a PNG at scale "
+                          f"{scale:g}; give --out-scale above {0.5 / low:.6g}{other}")
 
 
 def _validate(args) -> str:
@@ -306,8 +353,6 @@ def _validate(args) -> str:
             raise _UsageError("--nyu-mat without --fill-holes samples the dense depths: give --keep-fraction "
                               "or --keep-count")
         _check_output(args.csv, (".csv",), "--csv")
-        if args.outdir is not None and not Path(args.outdir).is_dir():
-            raise _UsageError(f"--outdir '{args.outdir}' does not exist")
     else:
         if args.csv or args.workers or args.indices is not None:
             raise _UsageError("--csv, --workers and --indices are for --batch/--nyu-mat")
@@ -317,11 +362,12 @@ def _validate(args) -> str:
             _check_output(args.json, (".json",), "--json")
         if args.figure:
             _check_output(args.figure, _FIGURE_EXTENSIONS, "--figure")
-            if _matplotlib() is None:
-                raise _UsageError("--figure needs matplotlib, which is not installed: "
-                                  "pip install 'sparsedepth[plot]' (or matplotlib)")
-        if args.outdir is not None and mode == "files" and not Path(args.outdir).is_dir():
-            raise _UsageError(f"--outdir '{args.outdir}' does not exist")
+        outputs = [target for _, target in _one_frame_outputs(args, mode)]
+        check_distinct(outputs, _one_frame_inputs(args))
+        check_writable(outputs)
+        if args.figure and _matplotlib() is None:
+            raise _UsageError("--figure needs matplotlib, which is not installed: "
+                              "pip install 'sparsedepth[plot]' (or matplotlib)")
     return mode
 
 
@@ -489,9 +535,8 @@ def _render_figure(image, outcome, extension) -> bytes:
     return buffer.getvalue()
 
 
-def _write_bytes(path, data: bytes) -> None:
-    with _atomic_target(path) as tmp:
-        Path(tmp).write_bytes(data)
+def _bytes_writer(data: bytes):
+    return lambda tmp: Path(tmp).write_bytes(data)
 
 
 # --------------------------------------------------------------------------------------
@@ -507,12 +552,10 @@ def _run_one(args, argv, mode, stdout, stderr) -> int:
         keep_fraction = args.keep_fraction
         if keep_fraction is None and args.keep_count is None:
             keep_fraction = DEMO_KEEP_FRACTION
-        outdir = Path(DEMO_DIR if args.outdir is None else args.outdir)
     else:
         image, depth, mask, truth, description = _read_inputs(args, stderr)
         downsample = 1 if args.downsample is None else args.downsample
         keep_fraction = args.keep_fraction
-        outdir = None if args.outdir is None else Path(args.outdir)
     if downsample > 1:
         description += f" (downsampled by {downsample})"
         image, depth = image[::downsample, ::downsample], depth[::downsample, ::downsample]
@@ -520,6 +563,11 @@ def _run_one(args, argv, mode, stdout, stderr) -> int:
         truth = None if truth is None else truth[::downsample, ::downsample]
     png_scale = args.out_scale if args.out_scale is not None else (args.depth_scale or 1000.0)
     png_scale = _resolve_scale(png_scale)
+    planned = _one_frame_outputs(args, mode)
+    png_targets = [target for kind, target in planned
+                   if kind in _DEPTH_OUTPUTS and target.path.suffix.lower() == ".png"]
+    _check_png_range(depth if mask is None else np.where(mask, depth, np.nan), png_scale, png_targets,
+                     f"the depth of {'the demo' if mode == 'demo' else '--depth'}")
 
     complete_fill = args.fill_holes and args.fill_method == "complete"
     use_solver = not args.fill_holes or complete_fill
@@ -531,39 +579,35 @@ def _run_one(args, argv, mode, stdout, stderr) -> int:
         callback=_Progress(stderr, not args.quiet) if use_solver else None,
     )
 
-    # everything to write is computed first, so that a failure leaves no partial set
+    # every output is encoded and checked before any file is touched; commit writes all or none
+    _check_png_range(outcome.depth, png_scale, png_targets, "the completed depth")
     report = _report(args, argv, outcome, description, weights, weights_given, png_scale)
-    report_text = json.dumps(report, indent=2, allow_nan=False) + "\n"
+    report_text = (json.dumps(report, indent=2, allow_nan=False) + "\n").encode()
+    kinds = {kind for kind, _ in planned}
     figure_bytes = None
-    if args.figure:
+    if "--figure" in kinds:
         figure_bytes = _render_figure(image, outcome, Path(args.figure).suffix.lower())
-    outdir_figure = None
-    if outdir is not None:
-        if _matplotlib() is not None:
-            outdir_figure = figure_bytes if (args.figure or "").lower().endswith(".png") else \
-                _render_figure(image, outcome, ".png")
-        elif not args.quiet:
-            print("note: matplotlib is not installed, no figure.png (pip install 'sparsedepth[plot]')", file=stderr)
+    if "figure.png" in kinds and not (args.figure or "").lower().endswith(".png"):
+        outdir_figure = _render_figure(image, outcome, ".png")
+    else:
+        outdir_figure = figure_bytes
 
-    written = []
-    if args.out:
-        write_depth(args.out, outcome.depth, scale=png_scale)
-        written.append(args.out)
-    if outdir is not None:
-        outdir.mkdir(parents=True, exist_ok=True)
-        write_depth(outdir / "depth.npy", outcome.depth)
-        write_depth(outdir / "depth.png", outcome.depth, scale=png_scale)
-        _write_bytes(outdir / "metrics.json", report_text.encode())
-        written += [outdir / "depth.npy", outdir / "depth.png", outdir / "metrics.json"]
-        if outdir_figure is not None:
-            _write_bytes(outdir / "figure.png", outdir_figure)
-            written.append(outdir / "figure.png")
-    if args.json:
-        _write_bytes(args.json, report_text.encode())
-        written.append(args.json)
-    if figure_bytes is not None:
-        _write_bytes(args.figure, figure_bytes)
-        written.append(args.figure)
+    items = []
+    for kind, target in planned:
+        if kind in _DEPTH_OUTPUTS:
+            try:
+                writer = _depth_writer(target.path, outcome.depth, scale=png_scale)
+            except ValueError as exc:
+                raise _UsageError(f"{target.label}: {_one_line(exc)}") from None
+        elif kind in ("--json", "metrics.json"):
+            writer = _bytes_writer(report_text)
+        else:
+            writer = _bytes_writer(figure_bytes if kind == "--figure" else outdir_figure)
+        items.append((target, writer))
+    commit(items)
+    written = [target.path for _, target in planned]
+    if any(target.flag == "--outdir" for _, target in planned) and "figure.png" not in kinds and not args.quiet:
+        print("note: matplotlib is not installed, no figure.png (pip install 'sparsedepth[plot]')", file=stderr)
 
     _print_table(outcome, description, stdout)
     for path in written:
@@ -573,6 +617,20 @@ def _run_one(args, argv, mode, stdout, stderr) -> int:
 
 def _run_batch(args, stderr) -> int:
     weights, _ = _weights(args)
+    if args.batch is not None:
+        frames = find_frames(args.batch, image_prefix=args.image_prefix, depth_prefix=args.depth_prefix,
+                             truth_prefix=args.truth_prefix)
+        inputs = [Named("--batch", args.batch, Path(path)) for frame in frames
+                  for path in (frame.image, frame.depth, frame.truth) if path is not None]
+    else:
+        frames = nyu_frames(args.nyu_mat, args.indices)
+        inputs = [Named("--nyu-mat", args.nyu_mat, Path(args.nyu_mat))]
+    outputs = [Named("--csv", args.csv, Path(args.csv))]
+    if args.outdir is not None:
+        outputs += [Named("--outdir", args.outdir, Path(args.outdir) / f"{frame.name}.{args.out_format}")
+                    for frame in frames]
+    check_distinct(outputs, inputs)
+    check_writable(outputs)
     options = BatchOptions(
         task="fill" if args.fill_holes else "complete",
         keep_fraction=args.keep_fraction, keep_count=args.keep_count, seed=args.seed,
@@ -581,11 +639,6 @@ def _run_batch(args, stderr) -> int:
         downsample=args.downsample or 1, out_dir=args.outdir, out_format="." + args.out_format,
         out_scale=args.out_scale if args.out_scale is not None else (args.depth_scale or 1000.0),
     )
-    if args.batch is not None:
-        frames = find_frames(args.batch, image_prefix=args.image_prefix, depth_prefix=args.depth_prefix,
-                             truth_prefix=args.truth_prefix)
-    else:
-        frames = nyu_frames(args.nyu_mat, args.indices)
 
     def progress(done, total, row):
         if args.quiet:

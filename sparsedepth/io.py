@@ -172,6 +172,26 @@ def _as_depth(array, source: str) -> np.ndarray:
 # --------------------------------------------------------------------------------------
 # atomic writes
 # --------------------------------------------------------------------------------------
+def _create_temporary(path: Path, kind: str = "tmp") -> Path:
+    """Create a new empty file ``.<name>.<random>.<kind><suffix>`` next to ``path``; return its path.
+
+    The file is created with ``O_EXCL`` (nothing existing is ever clobbered)
+    and mode ``0o666`` so that the umask applies as for :func:`open`.  The
+    name keeps the destination's extension (some encoders choose the format
+    from it).  Raises the :class:`OSError` of the failed creation (missing
+    or read-only folder, full disk, ...).
+    """
+    for _ in range(100):
+        tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.{kind}{path.suffix}"
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:  # pragma: no cover - astronomically unlikely
+            continue
+        os.close(fd)
+        return tmp
+    raise FileExistsError(f"could not create a temporary file in '{path.parent}'.")  # pragma: no cover
+
+
 @contextlib.contextmanager
 def _atomic_target(path) -> Iterator[Path]:
     """Yield a fresh temporary path next to ``path``; move it onto ``path`` on success.
@@ -183,20 +203,9 @@ def _atomic_target(path) -> Iterator[Path]:
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"`path` must be a str or os.PathLike, got {type(path).__name__}.")
     path = Path(path)
-    parent = path.parent
-    if not parent.is_dir():
-        raise FileNotFoundError(f"`path`: directory '{parent}' does not exist.")
-    for _ in range(100):
-        tmp = parent / f".{path.name}.{secrets.token_hex(6)}.tmp{path.suffix}"
-        try:
-            # O_EXCL: never clobber anything; mode 0o666 so the umask applies as for open().
-            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-        except FileExistsError:  # pragma: no cover - astronomically unlikely
-            continue
-        os.close(fd)
-        break
-    else:  # pragma: no cover
-        raise FileExistsError(f"could not create a temporary file in '{parent}'.")
+    if not path.parent.is_dir():
+        raise FileNotFoundError(f"`path`: directory '{path.parent}' does not exist.")
+    tmp = _create_temporary(path)
     try:
         yield tmp
         with contextlib.suppress(OSError):  # durability is best effort (e.g. Windows)
@@ -1211,6 +1220,19 @@ def write_depth(path, depth, *, scale=1000.0) -> None:
     >>> read_depth(fname)
     array([[ 1., nan]])
     """
+    writer = _depth_writer(path, depth, scale=scale)
+    with _atomic_target(path) as tmp:
+        writer(tmp)
+
+
+def _depth_writer(path, depth, *, scale=1000.0) -> Callable[[Path], None]:
+    """Check and encode ``depth`` for ``path`` as :func:`write_depth` does; return ``writer(tmp)``.
+
+    Every check of :func:`write_depth` (extension, shape, sign, PNG range)
+    happens here, before anything is written; the returned function only
+    writes the encoded data to the file it is given, in the format of
+    ``path``'s extension.
+    """
     ext = _check_extension(Path(path), _WRITE_DEPTH_EXTENSIONS, "write depth")
     scale = _resolve_scale(scale)
     array = _check_real_array(depth, "depth")
@@ -1238,5 +1260,4 @@ def write_depth(path, depth, *, scale=1000.0) -> None:
     else:  # .pfm
         pfm = _check_pfm_values(np.where(np.isnan(values), np.inf, values), "depth")
         writer = lambda tmp: _write_pfm_file(tmp, pfm, "little")  # noqa: E731
-    with _atomic_target(path) as tmp:
-        writer(tmp)
+    return writer
