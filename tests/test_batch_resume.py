@@ -1,6 +1,7 @@
 """Batches: resuming, settings fingerprint, option checks, layouts, killed workers, signals (real subprocesses)."""
 
 import csv
+import errno
 import multiprocessing
 import os
 import signal
@@ -16,6 +17,7 @@ import numpy as np
 import pytest
 
 import sparsedepth as sd
+import sparsedepth.batch
 from conftest import REPO
 from conftest import make_scene as _scene
 from sparsedepth.batch import (
@@ -187,6 +189,29 @@ def test_torn_last_line_of_a_killed_driver_is_dropped(batch):
     calls = []
     _run(frames, csv_path, options, calls)
     assert calls == [] and sorted(r["name"] for r in _rows(csv_path)) == ["a", "b", "c"]
+
+
+def test_full_disk_while_writing_the_csv_loses_nothing(batch, monkeypatch):
+    frames, out, options, csv_path = batch
+    real = sparsedepth.batch._csv_line
+    lines = []
+
+    def full_after_one(row):
+        if lines:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        lines.append(row["name"])
+        return real(row)
+
+    monkeypatch.setattr(sparsedepth.batch, "_csv_line", full_after_one)
+    with pytest.raises(OSError, match="No space"):
+        _run(frames, csv_path, options)
+    assert [r["name"] for r in _rows(csv_path)] == lines  # the row written before is kept
+    assert _temporaries(out) == [] and _temporaries(csv_path.parent) == []
+    monkeypatch.setattr(sparsedepth.batch, "_csv_line", real)
+    calls = []
+    summary = _run(frames, csv_path, options, calls)
+    assert sorted(c[2] for c in calls) == sorted(set("abc") - set(lines)) and summary.skipped == 1
+    assert sorted(r["name"] for r in _rows(csv_path)) == ["a", "b", "c"]
 
 
 def test_killed_worker_gives_error_rows_and_the_rest_runs(tmp_path):
@@ -414,28 +439,36 @@ def test_signal_stops_workers_keeps_rows_and_rerun_completes(tmp_path, signum, c
             "--keep-fraction", "0.05", "--solver", "adam", "--tol", "0", "--max-iter", "100", "--csv", str(csv_path),
             "--outdir", str(out), "--workers", "2", "-q"]
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    proc = subprocess.Popen(argv, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            start_new_session=group)
+    log = tmp_path / "stderr.txt"
     workers = set()
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and proc.poll() is None:
+    with open(log, "wb") as stderr:  # not a pipe: a worker left alive must not block the test
+        proc = subprocess.Popen(argv, cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=stderr,
+                                start_new_session=group)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            workers.update(_descendants(proc.pid))
+            if csv_path.exists() and len(_lines(csv_path)) > 2:  # header, one row, the empty tail
+                break
+            time.sleep(0.02)
         workers.update(_descendants(proc.pid))
-        if csv_path.exists() and len(_lines(csv_path)) > 2:  # header, one row, the empty tail
-            break
-        time.sleep(0.02)
-    workers.update(_descendants(proc.pid))
-    assert proc.poll() is None, "the batch finished before the signal: make the frames slower"
-    if group:
-        os.killpg(proc.pid, signum)
-    else:
-        proc.send_signal(signum)
-    _, err = proc.communicate(timeout=60)
-    assert proc.returncode == code, err.decode()
-    assert workers, "no worker process was seen"
-    deadline = time.monotonic() + 10
-    while any(_alive(pid) for pid in workers) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert not any(_alive(pid) for pid in workers)
+        assert proc.poll() is None, "the batch finished before the signal: make the frames slower"
+        if group:
+            os.killpg(proc.pid, signum)
+        else:
+            proc.send_signal(signum)
+        proc.wait(timeout=60)
+        assert proc.returncode == code, log.read_text()
+        assert workers, "no worker process was seen"
+        deadline = time.monotonic() + 10
+        while any(_alive(pid) for pid in workers) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not [pid for pid in workers if _alive(pid)], "worker processes outlived the batch"
+    finally:  # whatever failed, leave no process behind
+        for pid in [proc.pid, *workers]:
+            if _alive(pid):
+                os.kill(pid, signal.SIGKILL)
+        proc.wait(timeout=60)
     rows = _rows(csv_path)
     assert 1 <= len(rows) < n and len({r["name"] for r in rows}) == len(rows)
     assert all(r["status"] == "ok" and Path(r["output"]).is_file() for r in rows)
