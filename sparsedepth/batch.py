@@ -33,6 +33,7 @@ import numbers
 import os
 import signal
 import time
+from collections import deque
 from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, CancelledError, Executor, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -1044,9 +1045,10 @@ def run_batch(
     *Failures.*  A frame that raises (unreadable file, size mismatch, no
     valid depth, ...) becomes a row with ``status=error`` and the message
     in ``error``; the other frames go on.  If the executor fails for a
-    frame (e.g. a killed worker process breaks the default pool), the frame
-    gets an error row and the default pool is replaced for the remaining
-    frames.
+    frame, the frame gets an error row, except that when a worker process
+    of the default pool dies (killed, out of memory), the pool is replaced
+    and the frames it was running are run once more before they count as
+    failed.
 
     Memory is bounded by the frames in flight: each worker reads its own
     frame from disk and returns only a row.
@@ -1121,7 +1123,7 @@ def run_batch(
             executor = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker)
         pending: dict = {}
         stopped = False
-        queue = iter(todo)
+        todo_left, retry, retried = deque(todo), deque(), set()
         try:
             with open(csv_path, "a", newline="", encoding="utf-8") as handle:
 
@@ -1136,7 +1138,8 @@ def run_batch(
 
                 def submit_next() -> None:
                     nonlocal executor
-                    for position in queue:
+                    while retry or todo_left:
+                        position = retry.popleft() if retry else todo_left.popleft()
                         try:
                             future = executor.submit(_process, position, frames[position], options)
                         except BrokenExecutor as exc:
@@ -1159,6 +1162,11 @@ def run_batch(
                         try:
                             row = future.result()
                         except (Exception, CancelledError) as exc:  # noqa: BLE001 - the executor failed
+                            if own and isinstance(exc, BrokenExecutor) and position not in retried:
+                                retried.add(position)  # a worker died (killed, out of memory): once more
+                                retry.append(position)
+                                submit_next()
+                                continue
                             row = {"position": position, "name": names[position], "status": "error",
                                    "error": _one_line(exc)}
                         record(row)
