@@ -944,7 +944,7 @@ def _stop_pool(executor: ProcessPoolExecutor, *, terminate: bool) -> None:
                 if process.is_alive():
                     process.kill()
                     process.join(5.0)
-    executor.shutdown(wait=True, cancel_futures=True)
+    executor.shutdown(wait=True)
 
 
 def run_batch(
@@ -1175,10 +1175,11 @@ def run_batch(
             stopped = True
             raise
         finally:
-            for future in pending:
-                future.cancel()
-            if own:
+            if own:  # the stopped pool fails its pending futures itself (cancelling them first upsets it)
                 _stop_pool(executor, terminate=stopped)
+            else:
+                for future in pending:
+                    future.cancel()
             _remove_temporaries([names[p] for p in pending.values()], options)
             if appended:
                 with contextlib.suppress(OSError):  # a full disk: the appended log stays, compacted next run

@@ -459,6 +459,8 @@ def test_signal_stops_workers_keeps_rows_and_rerun_completes(tmp_path, signum, c
             proc.send_signal(signum)
         proc.wait(timeout=60)
         assert proc.returncode == code, log.read_text()
+        message = log.read_text()
+        assert message.count("\n") == 1 and "run the same command to resume" in message, message  # no traceback
         assert workers, "no worker process was seen"
         deadline = time.monotonic() + 10
         while any(_alive(pid) for pid in workers) and time.monotonic() < deadline:
