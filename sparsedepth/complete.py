@@ -90,7 +90,7 @@ examples:
       a batch: one row of metrics per frame in fill.csv, written as frames
       finish; the same command again skips the frames already done and runs the
       missing and failed ones (--overwrite starts afresh)
-  {PROG} --batch image_02/data --batch-depths proj_depth/groundtruth/image_02 \
+  {PROG} --batch image_02/data --batch-depths proj_depth/groundtruth/image_02 \\
       --depth-scale kitti --keep-fraction 0.05 --csv kitti.csv --outdir dense/
       a KITTI-style pair of folders (same file names); --batch on a folder of
       NYU .h5 files (rgb + depth) reads those

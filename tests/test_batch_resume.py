@@ -502,3 +502,28 @@ def test_real_nyu_folder_prefix_error_names_the_files(shared_data, tmp_path):
     assert (first.succeeded, second.skipped) == (1, 1) and (tmp_path / "r.csv").read_bytes() == content
     (row,) = _rows(tmp_path / "r.csv")
     assert second.rmse_ratio == pytest.approx(float(row["rmse"]) / float(row["nn_rmse"]), rel=1e-12)
+
+
+@pytest.mark.parametrize("argv, expect", [
+    (["--overwrite"], "--overwrite"),
+    (["--batch-depths", "x"], "--batch-depths"),
+    (["--batch", "{tmp}", "--batch-truths", "{tmp}", "--csv", "{tmp}/m.csv"], "--batch-truths goes with"),
+    (["--nyu-mat", "{tmp}/n.mat", "--batch-depths", "{tmp}", "--fill-holes", "--csv", "{tmp}/m.csv"],
+     "pairs with --batch"),
+])
+def test_cli_batch_only_flags(tmp_path, capsys, argv, expect):
+    rc = main([a.format(tmp=tmp_path) for a in argv])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and expect in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_folder_pair_with_truth_folder(tmp_path):
+    for sub in ("img", "raw", "gt"):
+        (tmp_path / sub).mkdir()
+    image, depth = _scene()
+    iio.imwrite(tmp_path / "img" / "f1.png", image)
+    sd.write_depth(tmp_path / "raw" / "f1.png", depth, scale=1000)
+    sd.write_depth(tmp_path / "gt" / "f1.npy", depth)
+    (frame,) = find_frame_pairs(tmp_path / "img", tmp_path / "raw", truth_folder=tmp_path / "gt")
+    assert frame.truth == str(tmp_path / "gt" / "f1.npy") and frame.name == "f1"
