@@ -6,8 +6,14 @@ Everything is done by library functions; this module only parses options,
 reads and writes files, prints the table and progress (on stderr), and turns
 library errors into one line on stderr with exit code 2.
 
-Exit codes: 0 success; 1 a batch finished but some frames failed (see the
-CSV); 2 bad options or input (nothing written); 130 interrupted.
+Exit codes: 0 success (a batch: every frame has an ok row, including frames
+skipped because an earlier run did them); 1 a batch finished but some frames
+failed (error rows in the CSV); 2 bad options or input (one line on stderr,
+before any frame runs), a CSV written with other settings (see --overwrite),
+or the CSV could not be written (e.g. a full disk); 130 interrupted by SIGINT
+(Ctrl-C); 143 terminated by SIGTERM.  An interrupted or terminated batch
+stops its worker processes, removes their temporary files and keeps the rows
+of the finished frames: the same command again resumes it.
 
 Files: no output may be an input or another output, and every output is
 checked to be creatable before the work starts.  One frame's outputs are
@@ -23,6 +29,7 @@ import io as _io
 import json
 import math
 import platform
+import signal
 import sys
 import time
 from pathlib import Path
@@ -30,7 +37,18 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .batch import BatchOptions, evaluate_frame, find_frames, nyu_frames, run_batch
+from .batch import (
+    BatchOptions,
+    FileFrame,
+    default_workers,
+    evaluate_frame,
+    find_frame_pairs,
+    find_frames,
+    nyu_frames,
+    nyu_h5_frames,
+    run_batch,
+    settings_path,
+)
 from .datasets import load_motorcycle
 from .holes import FILL_METHODS
 from ._outputs import Named, check_distinct, check_writable, commit
@@ -76,11 +94,20 @@ examples:
       fill the holes of raw Kinect depth the NYU-toolbox way (colorization)
   {PROG} --nyu-mat nyu_depth_v2_labeled.mat --indices 0:100 --fill-holes \\
       --csv fill.csv --workers 4
-      a batch: per-frame metrics appended to fill.csv as frames finish
+      a batch: one row of metrics per frame in fill.csv, written as frames
+      finish; the same command again skips the frames already done and runs the
+      missing and failed ones (--overwrite starts afresh)
+  {PROG} --batch image_02/data --batch-depths proj_depth/groundtruth/image_02 \\
+      --depth-scale kitti --keep-fraction 0.05 --csv kitti.csv --outdir dense/
+      a KITTI-style pair of folders (same file names); --batch on a folder of
+      NYU .h5 files (rgb + depth) reads those
 
 depth scales: stored integer value / scale = metres; presets {', '.join(f'{k} ({v:g})' for k, v in DEPTH_SCALES.items())}.
 exit codes: 0 ok; 1 batch with failed frames (rows with an error in the CSV);
-2 bad option or input (one line on stderr, no output written); 130 interrupted.
+2 bad option or input (one line on stderr, no output written), a CSV written
+with other settings, or the CSV could not be written; 130 SIGINT (Ctrl-C);
+143 SIGTERM.  A stopped batch ends its workers, removes their temporary files
+and keeps the finished rows: rerun the same command to resume.
 """
 
 
@@ -225,7 +252,9 @@ def build_parser() -> argparse.ArgumentParser:
     bat = parser.add_argument_group("batch")
     src = bat.add_mutually_exclusive_group()
     src.add_argument("--batch", metavar="DIR",
-                     help="folder of frames paired by name: <image-prefix><id>.<ext> with <depth-prefix><id>.<ext>.")
+                     help="folder of frames paired by name: <image-prefix><id>.<ext> with <depth-prefix><id>.<ext>; "
+                          "with --batch-depths, the image folder; a folder with no <image-prefix> image but .h5 "
+                          "files (searched recursively) is read as NYU .h5 frames (rgb + depth in metres).")
     src.add_argument("--nyu-mat", metavar="FILE",
                      help="NYU Depth V2 labeled .mat (read lazily): --fill-holes fills rawDepths and scores against "
                           "depths; otherwise depths is sampled with --keep-fraction/--keep-count.")
@@ -234,11 +263,23 @@ def build_parser() -> argparse.ArgumentParser:
     bat.add_argument("--image-prefix", default="rgb_", help="image file prefix in --batch (default rgb_).")
     bat.add_argument("--depth-prefix", default="depth_", help="depth file prefix in --batch (default depth_).")
     bat.add_argument("--truth-prefix", default=None, help="optional ground-truth file prefix in --batch.")
-    bat.add_argument("--csv", metavar="PATH", help="per-frame metrics, one row appended per finished frame.")
+    bat.add_argument("--csv", metavar="PATH",
+                     help="per-frame metrics, one row per frame, written as frames finish.  If it exists (from the "
+                          "same command) the run resumes: frames with an ok row and their output are skipped, "
+                          "missing and failed ones run, and each failed row is replaced by the new one.  The "
+                          "settings are kept beside it in PATH.settings.json.")
     bat.add_argument("--workers", type=_positive_int, metavar="N",
-                     help="worker processes (default: number of CPUs).")
+                     help=f"worker processes (default {default_workers()} here: half the CPUs, at least 1, "
+                          "at most 8).")
     bat.add_argument("--out-format", choices=["npy", "npz", "h5", "pfm", "png"], default="npy",
                      help="format of the per-frame outputs in --outdir (default npy).")
+    bat.add_argument("--batch-depths", metavar="DIR",
+                     help="with --batch DIR: the depth folder, files named like the images (KITTI layout).")
+    bat.add_argument("--batch-truths", metavar="DIR",
+                     help="with --batch-depths: optional ground-truth folder, files named like the images.")
+    bat.add_argument("--overwrite", action="store_true",
+                     help="start the batch afresh: replace an existing --csv (even one written with other "
+                          "settings) and recompute every frame.")
     return parser
 
 
@@ -615,44 +656,171 @@ def _run_one(args, argv, mode, stdout, stderr) -> int:
     return 0
 
 
-def _run_batch(args, stderr) -> int:
-    weights, _ = _weights(args)
-    if args.batch is not None:
-        frames = find_frames(args.batch, image_prefix=args.image_prefix, depth_prefix=args.depth_prefix,
-                             truth_prefix=args.truth_prefix)
-        inputs = [Named("--batch", args.batch, Path(path)) for frame in frames
-                  for path in (frame.image, frame.depth, frame.truth) if path is not None]
-    else:
-        frames = nyu_frames(args.nyu_mat, args.indices)
-        inputs = [Named("--nyu-mat", args.nyu_mat, Path(args.nyu_mat))]
-    outputs = [Named("--csv", args.csv, Path(args.csv))]
-    if args.outdir is not None:
-        outputs += [Named("--outdir", args.outdir, Path(args.outdir) / f"{frame.name}.{args.out_format}")
-                    for frame in frames]
-    check_distinct(outputs, inputs)
-    check_writable(outputs)
-    options = BatchOptions(
-        task="fill" if args.fill_holes else "complete",
-        keep_fraction=args.keep_fraction, keep_count=args.keep_count, seed=args.seed,
-        fill_method=args.fill_method, weights=weights, solver=args.solver or "auto",
-        tol=args.tol, max_iter=args.max_iter, depth_scale=args.depth_scale,
-        downsample=args.downsample or 1, out_dir=args.outdir, out_format="." + args.out_format,
-        out_scale=args.out_scale if args.out_scale is not None else (args.depth_scale or 1000.0),
-    )
+_OPTION_FLAGS = {
+    "task": "--fill-holes", "keep_fraction": "--keep-fraction", "keep_count": "--keep-count", "seed": "--seed",
+    "fill_method": "--fill-method", "weights": "the weight options", "solver": "--solver", "tol": "--tol",
+    "max_iter": "--max-iter", "depth_scale": "--depth-scale", "downsample": "--downsample", "out_dir": "--outdir",
+    "out_format": "--out-format", "out_scale": "--out-scale",
+}
 
-    def progress(done, total, row):
-        if args.quiet:
+
+class _Terminated(BaseException):
+    """Raised in the batch driver by SIGTERM (a BaseException, like KeyboardInterrupt)."""
+
+
+def _check_batch_flags(args, mode) -> None:
+    if mode != "batch" and (args.batch_depths or args.batch_truths or args.overwrite):
+        raise _UsageError("--batch-depths, --batch-truths and --overwrite are for --batch/--nyu-mat")
+    if args.batch_depths is not None and args.batch is None:
+        raise _UsageError("--batch-depths pairs with --batch DIR (the image folder)")
+    if args.batch_truths is not None and args.batch_depths is None:
+        raise _UsageError("--batch-truths goes with --batch-depths (--truth-prefix for a --batch folder)")
+
+
+def _batch_options(args, weights) -> BatchOptions:
+    try:
+        return BatchOptions(
+            task="fill" if args.fill_holes else "complete",
+            keep_fraction=args.keep_fraction, keep_count=args.keep_count, seed=args.seed,
+            fill_method=args.fill_method, weights=weights, solver=args.solver or "auto",
+            tol=args.tol, max_iter=args.max_iter, depth_scale=args.depth_scale,
+            downsample=args.downsample or 1, out_dir=args.outdir, out_format="." + args.out_format,
+            out_scale=args.out_scale if args.out_scale is not None else (args.depth_scale or 1000.0),
+        )
+    except (ValueError, TypeError, OSError) as exc:
+        flag = _OPTION_FLAGS.get(getattr(exc, "option", None))
+        if flag is None:
+            raise
+        raise _UsageError(f"{flag}: {_one_line(exc)}") from None
+
+
+def _batch_frames(args):
+    if args.nyu_mat is not None:
+        return nyu_frames(args.nyu_mat, args.indices)
+    if args.batch_depths is not None:
+        return find_frame_pairs(args.batch, args.batch_depths, truth_folder=args.batch_truths)
+    folder = Path(args.batch)
+    if folder.is_dir():
+        has_images = any(p.is_file() and p.name.startswith(args.image_prefix) for p in folder.iterdir())
+        if not has_images and any(p.suffix.lower() in (".h5", ".hdf5") for p in folder.rglob("*")):
+            return nyu_h5_frames(folder)
+    return find_frames(folder, image_prefix=args.image_prefix, depth_prefix=args.depth_prefix,
+                       truth_prefix=args.truth_prefix)
+
+
+def _duration(seconds: float) -> str:
+    seconds = int(round(seconds))
+    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
+
+
+class _BatchProgress:
+    """Progress of a batch on stderr: a tqdm bar on a terminal if tqdm is installed, else one line per frame."""
+
+    def __init__(self, stream, enabled: bool, frames: int):
+        self.stream, self.enabled, self.frames = stream, enabled, frames
+        self.start = time.monotonic()
+        self.bar = None
+        self.tqdm = None
+        if enabled and getattr(stream, "isatty", lambda: False)():
+            try:
+                from tqdm import tqdm
+            except ImportError:
+                pass
+            else:
+                self.tqdm = tqdm
+
+    def __call__(self, done, total, row):
+        if not self.enabled:
             return
+        if done == 1 and total < self.frames:
+            self._write(f"resuming: {self.frames - total} of {self.frames} frames already done, skipped")
         if row["status"] == "ok":
             score = f"RMSE {float(row['rmse']):.4f} m, " if row.get("rmse") else ""
             text = f"ok, {score}{row.get('runtime', '?')} s"
         else:
             text = f"FAILED: {row.get('error', '')}"
-        print(f"[{done}/{total}] {row['name']}: {text}", file=stderr, flush=True)
+        if self.tqdm is not None:
+            if self.bar is None:
+                self.bar = self.tqdm(total=total, initial=0, file=self.stream, unit="frame")
+            self.bar.update(1)
+            if row["status"] != "ok":
+                self.bar.write(f"{row['name']}: {text}", file=self.stream)
+            return
+        elapsed = time.monotonic() - self.start
+        rate = done / elapsed if elapsed > 0 else float("inf")
+        eta = (total - done) / rate if rate > 0 else 0.0
+        self._write(f"[{done}/{total}] {row['name']}: {text}; {rate:.3g} frames/s, ETA {_duration(eta)}")
 
-    summary = run_batch(frames, args.csv, options=options, max_workers=args.workers, progress=progress)
-    print(f"{summary.succeeded} of {summary.total} frames done, {summary.failed} failed; metrics in {summary.csv_path}",
-          file=sys.stdout)
+    def _write(self, text):
+        if self.bar is not None:
+            self.bar.write(text, file=self.stream)
+        else:
+            print(text, file=self.stream, flush=True)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _on_signal(signum, frame):  # noqa: ARG001 - signal handler API
+    # the first signal decides; the driver then cleans up without being interrupted again
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
+    raise _Terminated
+
+
+def _check_batch_files(args, frames) -> None:
+    """Refuse a --csv or --outdir file that is an input or another output; prove every output can be created."""
+    inputs = []
+    for frame in frames:
+        if isinstance(frame, FileFrame):
+            paths = [p for p in (frame.image, frame.depth, frame.truth) if p is not None]
+            flag, given = "--batch", args.batch
+        else:
+            paths = [frame.path]
+            flag, given = ("--nyu-mat", args.nyu_mat) if args.nyu_mat is not None else ("--batch", args.batch)
+        inputs += [Named(flag, given, Path(path)) for path in paths]
+    outputs = [Named("--csv", args.csv, Path(args.csv)), Named("--csv", args.csv, settings_path(args.csv))]
+    if args.outdir is not None:
+        outputs += [Named("--outdir", args.outdir, Path(args.outdir) / f"{frame.name}.{args.out_format}")
+                    for frame in frames]
+    check_distinct(outputs, inputs)
+    check_writable(outputs)
+
+
+def _run_batch(args, stderr) -> int:
+    weights, _ = _weights(args)
+    options = _batch_options(args, weights)
+    frames = _batch_frames(args)
+    _check_batch_files(args, frames)
+    reporter = _BatchProgress(stderr, not args.quiet, len(frames))
+    previous = {}
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, _on_signal)
+    except ValueError:  # not the main thread: signals stay as they are
+        pass
+    try:
+        summary = run_batch(frames, args.csv, options=options, max_workers=args.workers, progress=reporter,
+                            overwrite=args.overwrite)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted; the rows of finished frames are in {args.csv}: run the same command to resume",
+              file=stderr)
+        return 130
+    except _Terminated:
+        print(f"{PROG}: terminated (SIGTERM); the rows of finished frames are in {args.csv}: run the same command "
+              "to resume", file=stderr)
+        return 143
+    finally:
+        reporter.close()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    ratio = "" if summary.rmse_ratio is None else \
+        f"; mean RMSE / nearest-neighbour RMSE {summary.rmse_ratio:.3f} over {summary.scored} scored frames"
+    print(f"{summary.succeeded} of {summary.total} frames done, {summary.failed} failed, {summary.skipped} skipped "
+          f"(done before){ratio}; metrics in {summary.csv_path}", file=sys.stdout)
     return 1 if summary.failed else 0
 
 
@@ -673,6 +841,7 @@ def main(argv=None) -> int:
         return 0 if exc.code is None else int(exc.code)
     try:
         mode = _validate(args)
+        _check_batch_flags(args, mode)
         if mode == "batch":
             return _run_batch(args, stderr)
         return _run_one(args, argv, mode, stdout, stderr)
