@@ -1,5 +1,6 @@
 """Trustworthy results: the range clamp, solvers without division by zero, unit independence, strict arguments."""
 
+import functools
 import warnings
 
 import numpy as np
@@ -124,7 +125,7 @@ def test_lbfgsb_in_large_and_tiny_units_reaches_the_optimum(s):
     np.testing.assert_allclose(res.depth / s, ref.depth, rtol=0, atol=5e-3)
     # the smoothed objective's minimiser (eps = 1e-4 m) is within 1e-3 of the exact optimum in F
     assert obj.value(res.depth.ravel() / s) <= ref.objective * (1 + 1e-3)
-    metres = _quiet(complete_depth, image, sparse, mask, weights=L1, solver="lbfgsb", clip_to_observed=False)
+    metres = _in_metres("lbfgsb", None, (8, 10), 0.2, 0)
     assert obj.value(res.depth.ravel() / s) == pytest.approx(metres.objective, rel=1e-6)  # (s² F overflows at 1e154)
 
 
@@ -151,10 +152,17 @@ def test_history_and_callback_are_in_user_units(solver):
     assert res.objective == pytest.approx(obj.value(res.depth), rel=1e-12)
 
 
+@functools.lru_cache(maxsize=None)
+def _in_metres(solver, max_iter=None, shape=(6, 8), fraction=0.3, seed=3):
+    """One run in metres per configuration, shared by the tests that scale it (read only)."""
+    image, sparse, mask, _ = make_problem(shape, fraction=fraction, seed=seed)
+    return _quiet(complete_depth, image, sparse, mask, weights=L1, solver=solver, max_iter=max_iter,
+                  clip_to_observed=False)
+
+
 def _scaled_pair(solver, s, *, max_iter=None, shape=(6, 8), seed=3):
     image, sparse, mask, _ = make_problem(shape, fraction=0.3, seed=seed)
-    base = _quiet(complete_depth, image, sparse, mask, weights=L1, solver=solver, max_iter=max_iter,
-                  clip_to_observed=False)
+    base = _in_metres(solver, max_iter, shape, 0.3, seed)
     scaled = _quiet(complete_depth, image, sparse * s, mask, weights=L1.replace(gamma=L1.gamma * s), solver=solver,
                     max_iter=max_iter, l1_smoothing=1e-4 * s, clip_to_observed=False)
     return base, scaled
