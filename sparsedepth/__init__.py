@@ -10,9 +10,9 @@ from .baselines import biharmonic_fill, colorization_baseline, linear_fill, near
 from .completion import choose_solver, complete_depth
 from .metrics import DepthMetrics, depth_metrics
 from .objective import AbsTerm, Objective, QuadraticTerm, build_objective, edge_weights
-from .result import CompletionResult, IterationRecord, SolverState
+from .result import ClampWarning, CompletionResult, IterationRecord, SolverState
 from .sampling import sample_depth, sample_mask, valid_depth_mask
-from .solvers import SOLVERS
+from .solvers import SOLVER_OPTIONS, SOLVERS
 from .weights import DEFAULT_WEIGHTS, Weights
 from .datasets import (
     Frame,
@@ -33,6 +33,7 @@ __all__ = [
     "Weights",
     "DEFAULT_WEIGHTS",
     "CompletionResult",
+    "ClampWarning",
     "IterationRecord",
     "SolverState",
     "Objective",
@@ -50,6 +51,7 @@ __all__ = [
     "sample_mask",
     "valid_depth_mask",
     "SOLVERS",
+    "SOLVER_OPTIONS",
     "Frame",
     "load_motorcycle",
     "load_embedded_frame",

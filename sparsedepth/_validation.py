@@ -4,7 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["as_float_image", "as_depth_and_mask", "check_same_shape"]
+__all__ = ["as_float_image", "as_depth_and_mask", "check_same_shape", "check_weights"]
+
+
+def check_weights(weights, *, name: str = "weights") -> None:
+    """Raise ``TypeError`` unless ``weights`` is a :class:`sparsedepth.Weights`."""
+    from .weights import Weights
+
+    if not isinstance(weights, Weights):
+        hint = "use sd.Weights(**d)" if isinstance(weights, dict) else "use sd.Weights(alpha=..., gamma=...)"
+        raise TypeError(f"{name} must be a sparsedepth.Weights; got {type(weights).__name__}: {hint}")
 
 
 def as_float_image(image, *, name: str = "image") -> np.ndarray:
@@ -66,7 +75,13 @@ def as_depth_and_mask(sparse_depth, mask=None, *, name: str = "sparse_depth"):
     depth = depth.astype(np.float64)  # copy: the caller's array is never modified
     if mask is None:
         with np.errstate(invalid="ignore"):
+            negative = depth < 0
             observed = np.isfinite(depth) & (depth > 0)
+        if negative.any():
+            raise ValueError(
+                f"{name} has {int(np.count_nonzero(negative))} negative values (min {depth[negative].min():g}) and no "
+                "mask; depth must be >= 0: mark missing depth with 0 or NaN, or pass mask (True where observed)"
+            )
     else:
         observed = np.asarray(mask)
         check_same_shape(observed.shape, depth.shape, "mask", name)

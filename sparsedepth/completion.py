@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
+from ._validation import as_depth_and_mask, check_weights
 from .objective import DEFAULT_L1_SMOOTHING, build_objective
-from .result import CompletionResult
-from .solvers import SOLVERS, solve
+from .result import ClampWarning, CompletionResult
+from .solvers import SOLVERS, _solve_scaled, check_solver_arguments, depth_scale
 from .weights import DEFAULT_WEIGHTS, Weights
 
 __all__ = ["complete_depth", "choose_solver"]
@@ -30,6 +33,7 @@ def complete_depth(
     x0=None,
     l1_smoothing: float = DEFAULT_L1_SMOOTHING,
     options: dict | None = None,
+    clip_to_observed: bool = True,
 ) -> CompletionResult:
     """Complete a sparse depth map into a dense one, guided by an image.
 
@@ -49,7 +53,7 @@ def complete_depth(
         Depth in metres at the observed pixels.
     mask : ndarray of bool, (H, W), optional
         True where depth is observed.  Default: finite and ``> 0`` (0 and NaN
-        mean "no measurement").
+        mean "no measurement"; a negative value is then an error).
     weights : Weights
         Term weights; default :data:`~sparsedepth.weights.DEFAULT_WEIGHTS`.
     solver : {"auto", "direct", "cg", "amg", "irls", "admm", "lbfgsb", "adam"}
@@ -67,18 +71,60 @@ def complete_depth(
     l1_smoothing : float
         ``ε`` of the smoothed L1 used by the gradient-based solvers.
     options : dict, optional
-        Solver-specific options (see each solver's docstring).
+        Solver-specific options: the keys of
+        :data:`sparsedepth.SOLVER_OPTIONS` for the solver (see each solver's
+        docstring); any other key is an error.
+    clip_to_observed : bool
+        Clamp the completed depth to ``[min, max]`` of the observed depth
+        (default); ``False`` keeps the solver's values (``>= 0``).
 
     Returns
     -------
     CompletionResult
+        ``clamped`` pixels were moved into ``depth_range`` by the clamp.
 
     Raises
     ------
     ValueError
         Inconsistent shapes, no observed pixel, NaN/inf in the image, negative
-        observed depth, wrong number of dimensions, a negative weight, an unknown
-        solver, or a quadratic-only solver with γ > 0.
+        depth (observed, or anywhere without a mask), wrong number of
+        dimensions, a negative weight, an unknown solver or option key, or a
+        quadratic-only solver with γ > 0.
+    TypeError
+        ``weights`` not a :class:`Weights`, ``max_iter`` not an int, ``tol``
+        not a number, ``options`` not a dict, or an option of the wrong type.
+
+    Warns
+    -----
+    ClampWarning
+        When the clamp moved any pixel (the count is ``result.clamped``).
+
+    Notes
+    -----
+    The solve runs in normalised units: depth, ``x0``, ``γ`` and
+    ``l1_smoothing`` are divided by ``s``, the power of two nearest the
+    median observed depth (:func:`sparsedepth.solvers.depth_scale`); the
+    quadratic weights are unchanged, so the objective is ``F / s²``.  The
+    result (depth, objective, terms, history, callback states) is in the
+    units of ``sparse_depth``, and the answer does not depend on the unit
+    (micrometres to kilometres).
+
+    The quadratic terms (the second-order smoothness of the default weights
+    in particular) can overshoot: a completed value may leave the range of
+    the observations, down to 0 (the bound ``z >= 0``) near a steep change.
+    With ``clip_to_observed=True`` every value is clamped to ``[min, max]``
+    of the observed depth, which never produces 0 m pixels from positive
+    observations; the number of moved pixels is ``result.clamped`` and a
+    :class:`~sparsedepth.ClampWarning` is issued when it is not 0.
+
+    An outlier sample (say 65.5 m in a 1-4 m room) is kept as an
+    observation: the data term pulls its neighbourhood toward it, so a
+    blob of too-large depth surrounds it and the smoothness terms ring
+    around it, undershooting below the other observations.  The clamp
+    cannot remove the blob (the outlier widens the range to 65.5 m) but it
+    holds the undershoot at the smallest observation, and the warning
+    counts those pixels.  Remove outliers (or leave them out of ``mask``)
+    before completing.
 
     Examples
     --------
@@ -91,10 +137,24 @@ def complete_depth(
     >>> result.depth.shape
     (40, 50)
     """
+    check_weights(weights)
     name = choose_solver(weights) if solver == "auto" else solver
     if name not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose one of {['auto', *sorted(SOLVERS)]}")
-    objective, coarse, observed = build_objective(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing)
+    tol, max_iter, options = check_solver_arguments(name, tol, max_iter, options)
+    if not isinstance(clip_to_observed, (bool, np.bool_)):
+        raise TypeError(f"clip_to_observed must be True or False; got {type(clip_to_observed).__name__}")
+    depth, observed = as_depth_and_mask(sparse_depth, mask)
+    observed_values = depth[observed]
+    depth_range = (float(observed_values.min()), float(observed_values.max())) if clip_to_observed else (0.0, np.inf)
+    del observed_values
+    scale = depth_scale(depth[observed])
+    # the objective is built in units of `scale` (depth / s, gamma / s, eps / s: F / s²), see Notes
+    depth /= scale
+    objective, coarse, observed = build_objective(
+        image, depth, observed, weights=weights.replace(gamma=weights.gamma / scale),
+        l1_smoothing=l1_smoothing / scale)
+    del depth
     if x0 is None:
         start = coarse.reshape(-1).view()  # no copy (8-MP memory); every solver copies its start
         start.flags.writeable = False  # ... and the prior's target must stay intact
@@ -104,13 +164,26 @@ def complete_depth(
             raise ValueError(f"x0 has shape {start.shape}, expected {objective.shape}")
         if not np.all(np.isfinite(start)):
             raise ValueError("x0 contains NaN or infinite values")
-        start = np.maximum(start.ravel(), 0.0)
-    out, runtime = solve(objective, start, solver=name, tol=tol, max_iter=max_iter, callback=callback, options=options)
-    z = out.z
-    negative = z < 0
-    z = np.where(negative, 0.0, z)
-    clamped = int(np.count_nonzero(negative | (z == 0)))
-    terms = objective.term_values(z)
+        start = np.maximum(start.ravel(), 0.0) / scale
+    out, runtime = _solve_scaled(objective, start, scale=scale, solver=name, tol=tol, max_iter=max_iter,
+                                 callback=callback, options=options)
+    z = out.z  # in the user's units
+    low, high = depth_range
+    if clip_to_observed:
+        # moves of rounding size (a flat input whose solution is the observed value to 1e-15) are not counted
+        slack = 1e-9 * high
+        clamped = int(np.count_nonzero((z < low - slack) | (z > high + slack)))
+    else:
+        clamped = int(np.count_nonzero(z <= 0))
+    z = np.clip(z, low, high)
+    if clamped:
+        warnings.warn(
+            f"complete_depth: {clamped} of {z.size} pixels were outside the depth range "
+            f"[{low:g}, {high:g}] and were clamped to it (result.clamped, result.depth_range)"
+            + ("" if clip_to_observed else "; clip_to_observed=False: they are held at the bound 0"),
+            ClampWarning, stacklevel=2)
+    scale2 = scale * scale
+    terms = {key: value * scale2 for key, value in objective.term_values(z / scale).items()}
     return CompletionResult(
         depth=z.reshape(objective.shape),
         objective=float(sum(terms.values())),
@@ -123,4 +196,5 @@ def complete_depth(
         solver=name,
         weights=weights,
         runtime=runtime,
+        depth_range=depth_range,
     )

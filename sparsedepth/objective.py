@@ -28,7 +28,7 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 
-from ._validation import as_depth_and_mask, as_float_image, check_same_shape
+from ._validation import as_depth_and_mask, as_float_image, check_same_shape, check_weights
 from .baselines import nearest_fill
 from .operators import StencilOperator, gradient_stencil, hessian_stencil
 from .stencil import stencil_to_csr
@@ -536,9 +536,10 @@ def build_objective(
     ValueError
         For inconsistent shapes, no observed pixel, NaN/inf in the image,
         negative observed depth, wrong dimensions or bad weights.
+    TypeError
+        If ``weights`` is not a :class:`~sparsedepth.weights.Weights`.
     """
-    if not isinstance(weights, Weights):
-        raise ValueError(f"weights must be a sparsedepth.Weights, got {type(weights).__name__}")
+    check_weights(weights)
     img = as_float_image(image)
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     check_same_shape(img.shape[:2], depth.shape, "image", "sparse_depth")

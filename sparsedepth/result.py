@@ -9,7 +9,15 @@ import numpy as np
 
 from .weights import Weights
 
-__all__ = ["IterationRecord", "SolverState", "CompletionResult"]
+__all__ = ["IterationRecord", "SolverState", "CompletionResult", "ClampWarning"]
+
+
+class ClampWarning(UserWarning):
+    """Warned by :func:`sparsedepth.complete_depth` when pixels were moved into the depth range.
+
+    ``CompletionResult.clamped`` holds the count and ``CompletionResult.depth_range``
+    the range; filter it with ``warnings.filterwarnings("ignore", category=sparsedepth.ClampWarning)``.
+    """
 
 
 @dataclass(frozen=True)
@@ -62,7 +70,7 @@ class CompletionResult:
     Attributes
     ----------
     depth : ndarray, (H, W)
-        Completed depth, ``>= 0`` everywhere.
+        Completed depth, inside :attr:`depth_range` everywhere.
     objective : float
         Exact objective ``F(depth)``.
     terms : dict of str to float
@@ -72,13 +80,21 @@ class CompletionResult:
         True when the solver's stopping rule was met (see the solver's notes).
     message : str
     clamped : int
-        Number of pixels held at 0 by the non-negativity constraint in the
-        returned depth (projected or at an active bound).
+        Number of pixels the range clamp moved: the solver's value was outside
+        :attr:`depth_range` by more than ``1e-9`` times its upper end and was
+        replaced by the nearer end (values outside by less, rounding, are
+        clamped too but not counted).  With
+        ``clip_to_observed=False`` the range is ``[0, inf)`` and the count is
+        the pixels at the lower bound 0 (held there by the constraint
+        ``z >= 0`` or projected onto it).
     history : tuple of IterationRecord
     solver : str
     weights : Weights
     runtime : float
         Seconds from the start of the solver (set-up included) to the end.
+    depth_range : tuple of float
+        ``(low, high)`` the depth was clamped to: the smallest and largest
+        observed depth with ``clip_to_observed=True``, else ``(0, inf)``.
     """
 
     depth: np.ndarray
@@ -92,6 +108,7 @@ class CompletionResult:
     solver: str = ""
     weights: Optional[Weights] = None
     runtime: float = 0.0
+    depth_range: tuple = (0.0, float("inf"))
 
     def history_array(self, name: str) -> np.ndarray:
         """One field of :attr:`history` as an array (``None`` becomes NaN)."""

@@ -4,7 +4,15 @@ Every solver takes an :class:`~sparsedepth.objective.Objective`, a starting
 point and stopping parameters, and returns a :class:`SolverOutput`; the public
 entry point :func:`sparsedepth.complete_depth` turns it into a
 :class:`~sparsedepth.result.CompletionResult`.  Solvers are registered by name
-in :data:`SOLVERS`.
+in :data:`SOLVERS`, their options (with defaults) in :data:`SOLVER_OPTIONS`.
+
+:func:`solve` works in normalised units: the depth is divided by a power of
+two ``s`` near its median (:func:`depth_scale`) and the objective becomes
+``F / s²`` (:func:`scaled_objective`), so every solver, its defaults and its
+tolerances see data of order 1 whatever the unit.  Every relative stopping
+test on ``F`` has an absolute floor (:func:`_objective_floor`), so ``F* = 0``
+converges; a solver that claims convergence at its start must pass a
+projected-gradient check.
 
 ==========  ===========  ====================================================
 name        objective    stopping rule (``tol``)
@@ -14,20 +22,21 @@ cg          γ = 0        Jacobi-PCG, ``‖b − A z‖ ≤ tol ‖b‖``
 amg         γ = 0        PCG with a multigrid V-cycle (geometric GridMultigrid;
                          ``options={"preconditioner": "amg"}`` for pyamg
                          Ruge–Stüben), same rule
-irls        any          ``F_{k-1} − F_k ≤ tol · F_k`` at the final ε
+irls        any          ``F_{k-1} − F_k ≤ tol · F_k + floor`` at the final ε
 admm        any          primal residual ``<= tol`` (relative) starts exact
                          active-set polishes, 3, 6, 12, 12, ... iterations
                          apart; stops when the best polished F changes by
-                         ``<= 2e-7`` (relative) between two of them
+                         ``<= 2e-7`` (relative, + floor) between two of them
 lbfgsb      any          SciPy L-BFGS-B on the smoothed objective scaled by
                          ``1/F(x0)``; ``ftol = tol``
 adam        any          projected Adam on the smoothed objective; relative
-                         decrease over 50 steps ``≤ tol``
+                         decrease over 50 steps ``≤ tol`` (+ floor)
 ==========  ===========  ====================================================
 """
 
 from __future__ import annotations
 
+import numbers
 import time
 from dataclasses import dataclass
 
@@ -40,9 +49,11 @@ from ._l1 import StackedL1, _graph_components
 from .linear import make_preconditioner, pcg
 from .multigrid import GridMultigrid
 from .stencil import _index_dtype, full_pattern_offsets
+from .objective import AbsTerm, Objective, QuadraticTerm
 from .result import IterationRecord, SolverState
 
-__all__ = ["SolverOutput", "SOLVERS", "DEFAULT_TOL", "solve"]
+__all__ = ["SolverOutput", "SOLVERS", "SOLVER_OPTIONS", "DEFAULT_TOL", "DEFAULT_MAX_ITER", "solve", "depth_scale",
+           "scaled_objective", "check_solver_arguments"]
 
 #: ADMM keeps the quadratic part's matrix ``A`` next to ``S = 2A + ρKᵀK`` below
 #: this many pixels (its polish then merges ``A`` directly, ~0.15 s less per run
@@ -69,27 +80,68 @@ class _Stop(Exception):
 
 
 class _Recorder:
-    """Keeps the history and calls the user callback after every iteration."""
+    """Keeps the history and calls the user callback after every iteration.
 
-    def __init__(self, objective, callback):
+    The solver works in normalised units (depth divided by ``scale``, the
+    objective by ``scale²``); the history and the callback's states are in
+    the user's units (``F · scale²``, ``z · scale``).  A call returns ``F``
+    in the solver's units.
+    """
+
+    def __init__(self, objective, callback, scale=1.0):
         self.objective = objective
         self.callback = callback
+        self.scale = float(scale)
         self.start = time.perf_counter()
         self.history = []
 
     def elapsed(self):
         return time.perf_counter() - self.start
 
+    def user_value(self, F):
+        """``F`` in the user's units."""
+        return float(F) * self.scale * self.scale
+
+    def set_last_value(self, F):
+        """Replace the objective of the last history entry by ``F`` (solver units)."""
+        last = self.history[-1]
+        self.history[-1] = IterationRecord(last.iteration, self.user_value(F), last.time, last.function_evals,
+                                           last.gradient_evals, last.inner_iterations)
+
     def __call__(self, iteration, z, *, fevals=None, gevals=None, inner=None, value=None):
         t = self.elapsed()
         F = self.objective.value(z) if value is None else float(value)
-        self.history.append(IterationRecord(iteration, F, t, fevals, gevals, inner))
+        F_user = self.user_value(F)
+        self.history.append(IterationRecord(iteration, F_user, t, fevals, gevals, inner))
         if self.callback is not None:
+            depth = np.array(z, dtype=float).reshape(self.objective.shape)
+            depth *= self.scale
             try:
-                self.callback(SolverState(iteration, F, t, np.array(z, dtype=float).reshape(self.objective.shape)))
+                self.callback(SolverState(iteration, F_user, t, depth))
             except StopIteration:
                 raise _Stop(iteration, np.array(z, dtype=float)) from None
         return F
+
+
+def _relative(change, reference):
+    """``change / |reference|`` for a message (no division by zero: ``0/0 = 0``, ``x/0 = inf``)."""
+    reference = abs(float(reference))
+    if reference > 0:
+        return float(change) / reference
+    return 0.0 if change == 0 else float(np.copysign(np.inf, change))
+
+
+def _objective_floor(objective):
+    """An absolute floor for changes of ``F``: rounding level of ``F`` near its scale ``F(0) = c``.
+
+    In normalised units (depth ~1) ``c = zᵀAz − 2bᵀz + c`` at ``z = 0`` is the
+    size of the quadratic terms; a change of ``F`` below ``1e-13 · c`` (about
+    500 rounding units) is not a change the iteration can resolve.  ``c = 0``
+    (all targets zero, e.g. an all-zero depth map) gives the floor
+    ``1e-13 · N`` (``F* = 0`` there and every change is noise at depth ~1).
+    """
+    _, _, c = objective.normal_equations()
+    return 1e-13 * (abs(c) if c > 0 else float(objective.size))
 
 
 def _require_quadratic(objective, name):
@@ -137,9 +189,7 @@ def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner):
 
     z, n, converged, rel = pcg(A, b, x0=x0, M=M, rtol=tol, maxiter=max_iter, callback=cb, callback_residual=True)
     if recorder.history and recorder.history[-1].iteration == n and n > 0:
-        last = recorder.history[-1]
-        recorder.history[-1] = IterationRecord(last.iteration, objective.value(z), last.time, last.function_evals,
-                                               last.gradient_evals, last.inner_iterations)
+        recorder.set_last_value(objective.value(z))
     msg = f"relative residual {rel:.2e} {'<=' if converged else '>'} tol {tol:.1e} after {n} CG iterations"
     return _output(z, n, converged, msg, recorder)
 
@@ -162,7 +212,7 @@ def solve_amg(objective, x0, *, tol, max_iter, recorder, options):
     """
     _require_quadratic(objective, "amg")
     return _solve_pcg(
-        objective, x0, tol=tol, max_iter=max_iter, recorder=recorder, preconditioner=options.get("preconditioner", "grid")
+        objective, x0, tol=tol, max_iter=max_iter, recorder=recorder, preconditioner=options["preconditioner"]
     )
 
 
@@ -186,8 +236,12 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
     iteration and re-computed numerically (:meth:`GridMultigrid.update`, same
     stencil) in the others; ``"amg"`` rebuilds a pyamg hierarchy each time.  ε starts at
     ``eps_start`` and is divided by ``eps_factor`` whenever the relative
-    decrease of the exact ``F`` falls below ``tol``, down to ``eps_min``; the
-    solver has converged when that happens at ``eps_min``.  A step that would
+    decrease of the exact ``F`` falls below ``tol`` (``F_{k-1} − F_k <= tol ·
+    F_k + F_floor``, the absolute floor ``F_floor`` of :func:`_objective_floor`),
+    down to ``eps_min``; the solver has converged when that happens at
+    ``eps_min``.  ``eps_start`` and ``eps_min`` default to ``1e-2`` and
+    ``1e-7`` times ``scale``, the median positive starting value (about 1 in
+    the normalised units :func:`solve` works in).  A step that would
     increase the exact ``F`` is halved (along the segment, ``F`` being convex)
     until it does not, so the exact ``F`` never increases.
 
@@ -200,12 +254,17 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
     l1 = objective.abs_terms
     # the reweighted normal matrices Kᵀ diag(ω) K are sparse products: CSR operators, converted once
     l1_csr = [t.operator if sp.issparse(t.operator) else t.operator.tocsr() for t in l1]
-    scale = options.get("scale") or max(float(np.median(np.abs(x0[x0 > 0]))) if np.any(x0 > 0) else 1.0, 1e-12)
-    eps = float(options.get("eps_start", 1e-2 * scale))
-    eps_min = float(options.get("eps_min", 1e-7 * scale))
-    eps_factor = float(options.get("eps_factor", 10.0))
-    inner_rtol = float(options.get("inner_rtol", 1e-6))
-    preconditioner = options.get("preconditioner", "grid")
+    scale = options["scale"]
+    if scale is None:
+        positive = x0[x0 > 0]
+        scale = max(float(np.median(positive)) if positive.size else 1.0, 1e-12)
+    eps = 1e-2 * scale if options["eps_start"] is None else float(options["eps_start"])
+    eps_min = 1e-7 * scale if options["eps_min"] is None else float(options["eps_min"])
+    eps_min = min(eps_min, eps)
+    eps_factor = float(options["eps_factor"])
+    inner_rtol = float(options["inner_rtol"])
+    preconditioner = options["preconditioner"]
+    floor = _objective_floor(objective)
     hierarchy = None
     z = np.maximum(np.asarray(x0, dtype=float).copy(), 0.0)
     F = recorder(0, z, inner=0)
@@ -233,7 +292,7 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
             M = hierarchy.aspreconditioner()
         else:
             M = make_preconditioner(system, preconditioner, shape=objective.shape)
-        z_new, n_inner, _, _ = pcg(system, b, x0=z, M=M, rtol=inner_rtol, maxiter=options.get("inner_max_iter", 500))
+        z_new, n_inner, _, _ = pcg(system, b, x0=z, M=M, rtol=inner_rtol, maxiter=options["inner_max_iter"])
         inner_total += n_inner
         z_new = np.maximum(z_new, 0.0)
         F_new = objective.value(z_new)
@@ -247,13 +306,14 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
                 break
         if F_new > F:
             z_new, F_new = z, F
-        decrease = (F - F_new) / max(abs(F_new), np.finfo(float).tiny)
+        decrease = F - F_new
         z, F = z_new, F_new
         recorder(k, z, inner=inner_total, value=F)
-        if decrease <= tol:
+        if decrease <= tol * abs(F) + floor:
             if eps <= eps_min * (1 + 1e-12) or not l1:
                 converged = True
-                message = f"relative decrease {decrease:.1e} <= tol {tol:.1e} at eps = {eps:.1e}"
+                message = (f"relative decrease {_relative(decrease, F):.1e} <= tol {tol:.1e} (or absolute "
+                           f"{decrease:.1e} <= floor {floor:.1e}) at eps = {eps:.1e}")
                 break
             eps = max(eps / eps_factor, eps_min)
     return _output(z, k, converged, message, recorder)
@@ -424,28 +484,31 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     A0, b, const = objective.normal_equations()
     z = np.maximum(np.asarray(x0, dtype=float).copy(), 0.0)
     recorder(0, z, inner=0)
-    kind = options.get("preconditioner", "grid")
+    kind = options["preconditioner"]
     if not objective.has_l1:
         # nothing to split: one PCG solve
         M = make_preconditioner(A0, kind, shape=objective.shape)
-        z, n, ok, rel = pcg(A0, b, x0=z, M=M, rtol=options.get("inner_rtol", 1e-10))
+        z, n, ok, rel = pcg(A0, b, x0=z, M=M, rtol=options["inner_rtol"])
         recorder(1, z, inner=n)
         return _output(z, 1, ok, f"quadratic problem: relative residual {rel:.1e}", recorder)
     l1 = StackedL1(objective)
-    relax = float(options.get("relaxation", 1.9))
-    inner_rtol = float(options.get("inner_rtol", 1e-10))
-    inner_factor = float(options.get("inner_factor", 0.1))
-    inner_max = int(options.get("inner_max_iter", 1))
-    adapt_iters = int(options.get("adapt_iters", 0))
-    polish = bool(options.get("polish", True)) and l1.exact_pairs
-    polish_args = dict(rounds=int(options.get("polish_rounds", 2)), rtol=float(options.get("polish_rtol", 1e-7)),
-                       preconditioner=options.get("polish_preconditioner", "jacobi"))
-    check_every = int(options.get("check_every", 3))
-    check_rtol = float(options.get("check_rtol", 2e-7))
+    relax = float(options["relaxation"])
+    inner_rtol = float(options["inner_rtol"])
+    inner_factor = float(options["inner_factor"])
+    inner_max = int(options["inner_max_iter"])
+    adapt_iters = int(options["adapt_iters"])
+    polish = bool(options["polish"]) and l1.exact_pairs
+    polish_args = dict(rounds=int(options["polish_rounds"]), rtol=float(options["polish_rtol"]),
+                       preconditioner=options["polish_preconditioner"])
+    check_every = int(options["check_every"])
+    check_rtol = float(options["check_rtol"])
+    F_floor = _objective_floor(objective)
+    # residual floors: edge vectors below 1e-9 per row (depth ~1 in normalised units) count as zero
+    edge_floor_sq = (1e-9 * 1e-9) * l1.rows
     positive = z[z > 0]
     depth_scale = float(np.median(positive)) if positive.size else 1.0
     del positive
-    rho = float(options["rho"]) if "rho" in options else _default_rho(objective, l1.max_weight(), depth_scale)
+    rho = _default_rho(objective, l1.max_weight(), depth_scale) if options["rho"] is None else float(options["rho"])
     # KᵀK in A0's own pattern when A0 is a full in-grid stencil matrix: S then shares A0's index arrays
     KtK = l1.gram(full_pattern_offsets(A0, objective.shape) if l1.grid_gradient else None)
     S = _combine(2.0, A0, rho, KtK)
@@ -499,9 +562,9 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
         if feasible:
             value = 0.5 * (_dot(z, Sz) - rho * Kz_sq) - 2.0 * _dot(b, z) + const + step["value"]
         if need_r:
-            r_norm = np.sqrt(step["r_sq"]) / max(np.sqrt(max(Kz_sq, step["u_sq"])), 1e-300)
+            r_norm = np.sqrt(step["r_sq"] / max(Kz_sq, step["u_sq"], edge_floor_sq))
         if need_s:
-            s_norm = np.sqrt(step["s_sq"] / max(step["lam_sq"], 1e-300))
+            s_norm = np.sqrt(step["s_sq"] / max(step["lam_sq"], edge_floor_sq))
         if feasible:
             recorder(k, z, inner=inner_total, value=value)
         else:
@@ -525,11 +588,11 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
             # (up to 4 check_every), so that slow cases are not dominated by polishes
             interval = check_every if F_prev is None else min(2 * interval, 4 * check_every)
             next_polish = k + interval
-            if F_prev is not None and abs(F_prev - F_pol) <= check_rtol * abs(F_pol):
+            if F_prev is not None and abs(F_prev - F_pol) <= check_rtol * abs(F_pol) + F_floor:
                 converged = True
                 message = (f"active-set polish at iteration {k} changed the best polished F by "
-                           f"{(F_prev - F_pol) / abs(F_pol):.1e} (relative), |.| <= check_rtol {check_rtol:.1e} "
-                           f"(rho = {rho:.3g})")
+                           f"{_relative(F_prev - F_pol, F_pol):.1e} (relative), |.| <= check_rtol {check_rtol:.1e} "
+                           f"(or by {abs(F_prev - F_pol):.1e} <= floor {F_floor:.1e}) (rho = {rho:.3g})")
                 break
         if k <= adapt_iters and k % 5 == 0 and (r_norm > 10 * s_norm or s_norm > 10 * r_norm):
             factor = 2.0 if r_norm > s_norm else 0.5
@@ -737,7 +800,7 @@ def solve_lbfgsb(objective, x0, *, tol, max_iter, recorder, options):
     The objective is divided by ``F(x0)`` so that ``ftol = tol`` is a relative
     decrease; ``gtol`` defaults to 1e-12 on the scaled problem.
     """
-    f0 = max(objective.smoothed_value_and_gradient(x0)[0], np.finfo(float).tiny)
+    f0 = max(objective.smoothed_value_and_gradient(x0)[0], _objective_floor(objective))
     counts = {"f": 0}
 
     def fun(z):
@@ -761,10 +824,10 @@ def solve_lbfgsb(objective, x0, *, tol, max_iter, recorder, options):
         callback=cb,
         options={
             "maxiter": max_iter,
-            "maxfun": options.get("maxfun", 10 * max_iter + 100),
+            "maxfun": 10 * max_iter + 100 if options["maxfun"] is None else options["maxfun"],
             "ftol": tol,
-            "gtol": options.get("gtol", 1e-12),
-            "maxcor": options.get("maxcor", 10),
+            "gtol": options["gtol"],
+            "maxcor": options["maxcor"],
         },
     )
     return _output(res.x, res.nit, res.success, str(res.message), recorder)
@@ -780,11 +843,12 @@ def solve_adam(objective, x0, *, tol, max_iter, recorder, options):
     ``window`` steps.
     """
     scale = max(float(np.median(x0[x0 > 0])) if np.any(x0 > 0) else 1.0, 1e-12)
-    lr = float(options.get("learning_rate", 1e-2 * scale))
-    decay = float(options.get("decay_steps", 200.0))
-    b1, b2 = float(options.get("beta1", 0.9)), float(options.get("beta2", 0.999))
-    window = int(options.get("window", 50))
-    record_every = int(options.get("record_every", 1))
+    lr = 1e-2 * scale if options["learning_rate"] is None else float(options["learning_rate"])
+    decay = float(options["decay_steps"])
+    b1, b2 = float(options["beta1"]), float(options["beta2"])
+    window = int(options["window"])
+    record_every = int(options["record_every"])
+    floor = _objective_floor(objective)
     z = np.maximum(np.asarray(x0, dtype=float).copy(), 0.0)
     m = np.zeros_like(z)
     v = np.zeros_like(z)
@@ -807,9 +871,10 @@ def solve_adam(objective, x0, *, tol, max_iter, recorder, options):
             recorder(k, z, fevals=k, gevals=k)
         if len(values) > window:
             old = values[-window - 1]
-            if 0 <= (old - f) <= tol * abs(f):
+            if 0 <= (old - f) <= tol * abs(f) + floor:
                 converged = True
-                message = f"relative decrease over {window} steps {(old - f) / abs(f):.1e} <= tol {tol:.1e}"
+                message = (f"relative decrease over {window} steps {_relative(old - f, f):.1e} <= tol {tol:.1e} "
+                           f"(or absolute {old - f:.1e} <= floor {floor:.1e})")
                 break
     if k % record_every != 0:
         recorder(k, z, fevals=k, gevals=k)
@@ -829,20 +894,233 @@ SOLVERS = {
 DEFAULT_TOL = {"direct": 0.0, "cg": 1e-8, "amg": 1e-8, "irls": 1e-7, "admm": 1.5e-3, "lbfgsb": 1e-12, "adam": 1e-7}
 DEFAULT_MAX_ITER = {"direct": 1, "cg": 5000, "amg": 500, "irls": 200, "admm": 1000, "lbfgsb": 15000, "adam": 20000}
 
+#: The valid ``options`` of every solver with their defaults (``None``: computed from the problem, see the
+#: solver's docstring).  :func:`solve` rejects any other key and fills in the defaults.
+SOLVER_OPTIONS = {
+    "direct": {},
+    "cg": {},
+    "amg": {"preconditioner": "grid"},
+    "irls": {"eps_start": None, "eps_min": None, "scale": None, "eps_factor": 10.0, "inner_rtol": 1e-6,
+             "inner_max_iter": 500, "preconditioner": "grid"},
+    "admm": {"rho": None, "relaxation": 1.9, "inner_rtol": 1e-10, "inner_factor": 0.1, "inner_max_iter": 1,
+             "adapt_iters": 0, "preconditioner": "grid", "polish": True, "polish_rounds": 2, "polish_rtol": 1e-7,
+             "polish_preconditioner": "jacobi", "check_every": 3, "check_rtol": 2e-7},
+    "lbfgsb": {"maxfun": None, "gtol": 1e-12, "maxcor": 10},
+    "adam": {"learning_rate": None, "decay_steps": 200.0, "beta1": 0.9, "beta2": 0.999, "window": 50,
+             "record_every": 1},
+}
 
-def solve(objective, x0, *, solver, tol=None, max_iter=None, callback=None, options=None):
-    """Run one named solver; returns ``(SolverOutput, runtime_seconds)``."""
-    if solver not in SOLVERS:
+#: Options in depth units: divided by the depth scale together with the depth (see :func:`solve`).
+_DEPTH_UNIT_OPTIONS = {"eps_start", "eps_min", "scale", "learning_rate"}
+#: The type of the options whose default is None.
+_NONE_DEFAULT_TYPES = {"eps_start": float, "eps_min": float, "scale": float, "rho": float, "learning_rate": float,
+                       "maxfun": int}
+_POSITIVE_OPTIONS = {"eps_start", "eps_min", "scale", "rho", "learning_rate", "relaxation", "eps_factor", "decay_steps"}
+_OPTION_CHOICES = {"preconditioner": ("grid", "amg"), "polish_preconditioner": ("jacobi", "amg")}
+
+
+def _is_int(value):
+    return isinstance(value, (numbers.Integral, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def _is_real(value):
+    return isinstance(value, (numbers.Real, np.floating, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def _check_option(solver, key, value):
+    default = SOLVER_OPTIONS[solver][key]
+    kind = _NONE_DEFAULT_TYPES.get(key) if default is None else type(default)
+    if default is None and value is None:
+        return None
+    where = f"options[{key!r}] of solver {solver!r}"
+    if kind is bool:
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{where} must be True or False; got {type(value).__name__} {value!r}")
+        return bool(value)
+    if kind is int:
+        if not _is_int(value):
+            raise TypeError(f"{where} must be an int; got {type(value).__name__} {value!r}: "
+                            f"pass e.g. {key}={int(value) if _is_real(value) and np.isfinite(value) else default}")
+        if value < (0 if key == "adapt_iters" else 1):
+            raise ValueError(f"{where} must be >= {0 if key == 'adapt_iters' else 1}; got {value}")
+        return int(value)
+    if kind is float:
+        if not _is_real(value):
+            raise TypeError(f"{where} must be a number; got {type(value).__name__} {value!r}")
+        value = float(value)
+        positive = key in _POSITIVE_OPTIONS
+        if not (np.isfinite(value) and (value > 0 if positive else value >= 0)):
+            raise ValueError(f"{where} must be finite and {'>' if positive else '>='} 0; got {value!r}")
+        return value
+    if not isinstance(value, str) or value not in _OPTION_CHOICES[key]:
+        raise ValueError(f"{where} must be one of {list(_OPTION_CHOICES[key])}; got {value!r}")
+    return value
+
+
+def check_solver_arguments(solver, tol=None, max_iter=None, options=None):
+    """Check and complete the stopping parameters and options of the named solver.
+
+    Parameters
+    ----------
+    solver : str
+        A key of :data:`SOLVERS`.
+    tol : float, optional
+        Default :data:`DEFAULT_TOL`.
+    max_iter : int, optional
+        Default :data:`DEFAULT_MAX_ITER`; ``bool`` is not an int here.
+    options : dict, optional
+        Keys of :data:`SOLVER_OPTIONS` for ``solver``.
+
+    Returns
+    -------
+    tol : float
+    max_iter : int
+    options : dict
+        Every valid key of the solver, given or default (values in the user's units).
+
+    Raises
+    ------
+    ValueError
+        For an unknown solver or option key (the message lists the valid
+        keys with their defaults), a negative or non-finite ``tol``,
+        ``max_iter < 1`` or an option value out of range.
+    TypeError
+        For a ``tol``, ``max_iter``, ``options`` or option value of the wrong type.
+    """
+    if not isinstance(solver, str) or solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose one of {sorted(SOLVERS)} or 'auto'")
-    tol = DEFAULT_TOL[solver] if tol is None else float(tol)
+    if tol is None:
+        tol = DEFAULT_TOL[solver]
+    elif not _is_real(tol):
+        raise TypeError(f"tol must be a number; got {type(tol).__name__} {tol!r}: pass e.g. tol=1e-6")
+    tol = float(tol)
     if not (np.isfinite(tol) and tol >= 0):
         raise ValueError(f"tol must be finite and >= 0, got {tol!r}")
-    max_iter = DEFAULT_MAX_ITER[solver] if max_iter is None else int(max_iter)
+    if max_iter is None:
+        max_iter = DEFAULT_MAX_ITER[solver]
+    elif not _is_int(max_iter):
+        hint = f"max_iter={int(max_iter)}" if _is_real(max_iter) and np.isfinite(max_iter) else "max_iter=100"
+        raise TypeError(f"max_iter must be an int; got {type(max_iter).__name__} {max_iter!r}: pass e.g. {hint}")
+    max_iter = int(max_iter)
     if max_iter < 1:
         raise ValueError(f"max_iter must be >= 1, got {max_iter}")
-    recorder = _Recorder(objective, callback)
+    if options is None:
+        options = {}
+    elif not isinstance(options, dict):
+        raise TypeError(f"options must be a dict; got {type(options).__name__}: pass e.g. options=dict(...)")
+    valid = SOLVER_OPTIONS[solver]
+    unknown = [key for key in options if key not in valid]
+    if unknown:
+        listing = ", ".join(f"{k}={v!r}" for k, v in valid.items()) if valid else "none"
+        raise ValueError(f"unknown option {unknown[0]!r} for solver {solver!r}; valid options (default): {listing}")
+    return tol, max_iter, {key: _check_option(solver, key, options[key]) if key in options else default
+                           for key, default in valid.items()}
+
+
+def depth_scale(values) -> float:
+    """The power of two nearest (in log) to the median of the positive finite ``values``; 1 without any.
+
+    :func:`solve` divides depth by it: a power of two makes the division and
+    the product back exact (no rounding), so completing ``2ᵏ · depth`` gives
+    exactly ``2ᵏ`` times the result.
+    """
+    v = np.asarray(values, dtype=np.float64).ravel()
+    with np.errstate(invalid="ignore"):
+        v = v[np.isfinite(v) & (v > 0)]
+    if v.size == 0:
+        return 1.0
+    return float(2.0 ** int(np.round(np.log2(float(np.median(v))))))
+
+
+def scaled_objective(objective, scale):
+    """The objective in depth units of ``scale``: ``F_s(z / s) = F(z) / s²``.
+
+    Every quadratic term's target is divided by ``s`` (its weight is
+    unchanged), every L1 weight and the smoothing ``ε`` are divided by ``s``.
+    Returns ``objective`` itself for ``s = 1``.
+    """
+    s = float(scale)
+    if s == 1.0:
+        return objective
+    terms = []
+    for t in objective.terms:
+        if isinstance(t, QuadraticTerm):
+            target = None if t.target is None else np.asarray(t.target, dtype=np.float64) / s
+            terms.append(QuadraticTerm(t.name, t.weight, t.operator, t.row_weights, target))
+        elif isinstance(t, AbsTerm):
+            terms.append(AbsTerm(t.name, t.weight / s, t.operator, t.row_weights))
+        else:
+            raise TypeError(f"objective term {t.name!r} has unknown type {type(t).__name__}")
+    return Objective(objective.shape, terms, l1_smoothing=objective.l1_smoothing / s)
+
+
+#: A solver that stops at its start with converged=True must pass this relative optimality test.
+_START_KKT_RTOL = 1e-6
+
+
+def _start_kkt_residual(objective, z, smoothed):
+    r"""Relative projected-gradient norm at ``z`` (0 certifies optimality over ``z >= 0``).
+
+    The gradient is that of the smoothed objective (``smoothed``) or the
+    subgradient of the exact one with ``sign((Kz)_k)`` (0 where ``(Kz)_k =
+    0``: one element of the subdifferential, so a small value is a
+    sufficient, not a necessary, certificate).  Projected: ``g_i`` where
+    ``z_i > 0``, ``min(g_i, 0)`` where ``z_i = 0``.  Relative to
+    ``2‖Az‖∞ + 2‖b‖∞ + ‖Kᵀ|c|‖∞`` (the sizes of the gradient's parts).
+    """
+    A, b, _ = objective.normal_equations()
+    if smoothed:
+        g = objective.smoothed_value_and_gradient(z)[1]
+    else:
+        g = objective.l1_subgradient(z)
+    size = 2.0 * float(np.max(np.abs(A @ z), initial=0.0)) + 2.0 * float(np.max(np.abs(b), initial=0.0))
+    for t in objective.abs_terms:
+        size += float(np.max(np.abs(t.operator.T @ t.scaled_row_weights()), initial=0.0))
+    pg = np.where(z > 0, g, np.minimum(g, 0.0))
+    return float(np.max(np.abs(pg), initial=0.0)) / max(size, np.finfo(float).tiny)
+
+
+def solve(objective, x0, *, solver, tol=None, max_iter=None, callback=None, options=None):
+    """Run one named solver in normalised units; returns ``(SolverOutput, runtime_seconds)``.
+
+    The depth is divided by ``s = depth_scale(x0)`` (a power of two near the
+    median positive starting value): the solver minimises
+    :func:`scaled_objective` from ``x0 / s`` and sees data of order 1 whatever
+    the unit, so micrometres and kilometres give the same answer.  The
+    output (``z``, the history's objective values, the callback's states) is
+    in the user's units.  Options in depth units (``eps_start``, ``eps_min``,
+    ``scale``, ``learning_rate``) are divided by ``s`` too.  See
+    :func:`check_solver_arguments` for the checks of the arguments.
+
+    A solver that reports convergence after at most one iteration, or at its
+    unchanged start, must pass a projected-gradient check
+    (:func:`_start_kkt_residual` ``<= 1e-6``); otherwise the output says
+    ``converged=False`` and why.
+    """
+    tol, max_iter, options = check_solver_arguments(solver, tol, max_iter, options)
+    x0 = np.asarray(x0, dtype=np.float64).ravel()
+    scale = depth_scale(x0)
+    return _solve_scaled(scaled_objective(objective, scale), x0 / scale, scale=scale, solver=solver, tol=tol,
+                         max_iter=max_iter, callback=callback, options=options)
+
+
+def _solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, options):
+    """:func:`solve` for an objective and start already in units of ``scale`` (checked arguments)."""
+    options = {key: (value / scale if key in _DEPTH_UNIT_OPTIONS and value is not None else value)
+               for key, value in options.items()}
+    recorder = _Recorder(objective, callback, scale)
     try:
-        out = SOLVERS[solver](objective, x0, tol=tol, max_iter=max_iter, recorder=recorder, options=dict(options or {}))
+        out = SOLVERS[solver](objective, x0, tol=tol, max_iter=max_iter, recorder=recorder, options=options)
     except _Stop as stop:
-        out = SolverOutput(stop.z, stop.iteration, False, f"stopped by callback at iteration {stop.iteration}", tuple(recorder.history))
-    return out, recorder.elapsed()
+        out = SolverOutput(stop.z, stop.iteration, False, f"stopped by callback at iteration {stop.iteration}",
+                           tuple(recorder.history))
+    converged, message = out.converged, out.message
+    if converged and solver != "direct" and (out.iterations <= 1 or np.array_equal(out.z, np.maximum(x0, 0.0))):
+        smoothed = solver in ("lbfgsb", "adam")
+        kkt = _start_kkt_residual(objective, np.maximum(out.z, 0.0), smoothed)
+        if not kkt <= _START_KKT_RTOL:
+            converged = False
+            message += (f"; NOT converged: stopped after {out.iterations} iteration(s) at a point whose relative "
+                        f"projected gradient {kkt:.1e} > {_START_KKT_RTOL:.0e}")
+    z = out.z * scale
+    return SolverOutput(z, out.iterations, converged, message, tuple(recorder.history)), recorder.elapsed()
