@@ -33,6 +33,7 @@ import numbers
 import os
 import signal
 import time
+import warnings
 from collections import deque
 from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, CancelledError, Executor, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
@@ -47,7 +48,7 @@ from .completion import complete_depth
 from .holes import FILL_METHODS, fill_holes
 from .io import NYUDepthV2Labeled, _atomic_target, _resolve_scale, read_depth, read_image, read_nyu_h5, write_depth
 from .metrics import DepthMetrics, depth_metrics
-from .result import CompletionResult
+from .result import ClampWarning, CompletionResult
 from .sampling import sample_mask, valid_depth_mask
 from .solvers import SOLVERS
 from .weights import DEFAULT_WEIGHTS, Weights
@@ -79,7 +80,7 @@ TASKS = ("complete", "fill")
 CSV_COLUMNS = (
     "position", "name", "status", "height", "width", "observed", "scored", "method",
     "rmse", "mae", "rel", "delta1", "nn_rmse", "nn_mae", "nn_rel", "nn_delta1",
-    "runtime", "converged", "output", "error",
+    "runtime", "converged", "clamped", "output", "error",
 )
 
 _DEPTH_EXTENSIONS = (".png", ".pgm", ".pnm", ".pfm", ".npy", ".npz", ".h5", ".hdf5")
@@ -784,15 +785,19 @@ def _process(position: int, source, options: BatchOptions) -> dict:
         if step > 1:
             image, depth = image[::step, ::step], depth[::step, ::step]
             truth = None if truth is None else truth[::step, ::step]
-        out = evaluate_frame(
-            image, depth, truth=truth, task=options.task, keep_fraction=options.keep_fraction,
-            keep_count=options.keep_count, seed=np.random.default_rng([options.seed, position]),
-            fill_method=options.fill_method, weights=options.weights, solver=options.solver,
-            tol=options.tol, max_iter=options.max_iter,
-        )
+        with warnings.catch_warnings():
+            # the row's "clamped" column carries it; a worker never prints
+            warnings.simplefilter("ignore", ClampWarning)
+            out = evaluate_frame(
+                image, depth, truth=truth, task=options.task, keep_fraction=options.keep_fraction,
+                keep_count=options.keep_count, seed=np.random.default_rng([options.seed, position]),
+                fill_method=options.fill_method, weights=options.weights, solver=options.solver,
+                tol=options.tol, max_iter=options.max_iter,
+            )
         row.update(height=depth.shape[0], width=depth.shape[1], observed=int(out.observed.sum()),
                    method=out.method, runtime=f"{out.runtime:.3f}",
-                   converged="" if out.result is None else out.result.converged)
+                   converged="" if out.result is None else out.result.converged,
+                   clamped="" if out.result is None else out.result.clamped)
         if out.metrics is not None:
             row.update(scored=out.metrics.count)
             for key in ("rmse", "mae", "rel", "delta1"):

@@ -1,6 +1,7 @@
 """Batch: per-frame pipeline, folder pairing, NYU .mat ranges, CSV rows, failing frames, executors."""
 
 import csv
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 
 import h5py
@@ -221,3 +222,23 @@ def test_nyu_frames_errors(tmp_path):
         nyu_frames(mat, slice(3, 5))
     with pytest.raises(FileNotFoundError):
         nyu_frames(tmp_path / "absent.mat")
+
+
+def test_clamped_pixels_are_a_column_not_a_printed_warning(tmp_path):
+    image, depth = _scene()
+    iio.imwrite(tmp_path / "rgb_a.png", image)
+    sd.write_depth(tmp_path / "depth_a.npy", depth)
+    # the default second-order terms overshoot the observed range at the depth step, so some pixels are clamped
+    options = BatchOptions(keep_fraction=0.05, solver="direct")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        run_batch(find_frames(tmp_path), tmp_path / "m.csv", options=options, executor=ThreadPoolExecutor(1))
+    assert not [w for w in caught if issubclass(w.category, sd.ClampWarning)]
+    (row,) = _read_csv(tmp_path / "m.csv")
+    assert row["status"] == "ok", row
+    # the same frame completed directly: the column holds the count the library reports
+    with pytest.warns(sd.ClampWarning):
+        out = evaluate_frame(image, depth, keep_fraction=0.05, seed=np.random.default_rng([0, 0]),
+                             weights=options.weights, solver="direct")
+    assert out.result.clamped > 0
+    assert int(row["clamped"]) == out.result.clamped
