@@ -523,7 +523,7 @@ def _read_tiff(path: Path, max_pixels: int | None, where: str, label: str) -> np
         raise _decode_error(where, exc) from exc
     with handle:
         try:
-            page = handle.pages.first
+            page = handle.pages[0]
             shape = tuple(int(n) for n in page.shape)
         except MemoryError:
             raise
