@@ -245,8 +245,8 @@ def _check_real_array(array, name: str) -> np.ndarray:
 
 
 def _is_real_dtype(dtype) -> bool:
-    dtype = np.dtype(dtype)
-    return dtype != bool and (np.issubdtype(dtype, np.integer) or np.issubdtype(dtype, np.floating))
+    """Integer or float (not bool, complex, datetime/timedelta, strings or records)."""
+    return np.dtype(dtype).kind in "iuf"
 
 
 def _as_depth(array, source: str, invalid_values=()) -> np.ndarray:
@@ -1724,6 +1724,8 @@ def read_mask(path, *, key: str | None = None, max_pixels: int | None = MAX_PIXE
     else:
         array, source = _read_hdf5_array(path, "mask" if key is None else key, max_pixels, where, label,
                                          allow_bool=True)
+    if array.size == 0:
+        raise ValueError(f"{source}: the mask is empty (shape {array.shape}).")
     if array.dtype != bool:
         if not np.all((array == 0) | (array == 1)):
             raise ValueError(f"{source}: a mask must be boolean or hold only 0 and 1.")
