@@ -195,7 +195,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "on the pixels not observed.")
     inp.add_argument("--depth-scale", type=_scale, metavar="SCALE",
                      help="divisor of stored depth values: nyu or mm (1000), kitti (256), tum (5000), m (1), or a "
-                          "number.  Required for integer images; float files default to 1.")
+                          "number.  Required for integer data (png, pgm, tif, integer npy/npz/h5); float data default "
+                          "to 1, except a pfm, which needs this or --calib.")
     inp.add_argument("--depth-key", metavar="NAME", help="array name in an .npz or dataset in an .h5 depth file.")
     inp.add_argument("--calib", metavar="CALIB_TXT",
                      help="Middlebury/ETH3D calib.txt: --depth holds disparity in pixels, converted to metres; "
