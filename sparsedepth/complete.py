@@ -32,6 +32,7 @@ import platform
 import signal
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +53,17 @@ from .batch import (
 from .datasets import load_motorcycle
 from .holes import FILL_METHODS
 from ._outputs import Named, check_distinct, check_writable, commit
-from .io import DEPTH_SCALES, _depth_writer, _resolve_scale, read_depth, read_image
+from .io import (
+    DEPTH_SCALES,
+    KINECT_NYU,
+    MAX_PIXELS,
+    _depth_writer,
+    _resolve_scale,
+    read_calib,
+    read_depth,
+    read_image,
+    read_mask,
+)
 from .solvers import SOLVERS
 from .weights import DEFAULT_WEIGHTS, Weights
 
@@ -152,6 +163,16 @@ def _nonnegative(text):
     return value
 
 
+def _finite(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
 def _scale(text):
     if text.lower() in DEPTH_SCALES:
         return text.lower()
@@ -195,18 +216,35 @@ def build_parser() -> argparse.ArgumentParser:
     inp.add_argument("--image", metavar="PATH", help="RGB (or grey) image: png, jpg, ppm, pgm, bmp, tif.")
     inp.add_argument("--depth", metavar="PATH",
                      help="sparse or raw depth (0/NaN/inf = unknown), or a dense map with --keep-*: "
-                          "png/pgm (needs --depth-scale), pfm, npy, npz, h5.")
+                          "png/pgm/tif, npy, npz, h5 (integer data need --depth-scale), pfm (disparity: needs "
+                          "--calib, or --depth-scale m if it holds metres).")
     inp.add_argument("--mask", metavar="PATH",
-                     help="optional mask of observed pixels: npy/npz (bool or 0/1) or an image (non-zero = observed).")
+                     help="optional mask of observed pixels: npy/npz/h5 (bool or 0/1) or an image, 1-bit PNG "
+                          "included (non-zero = observed).")
     inp.add_argument("--truth", metavar="PATH",
                      help="optional ground-truth depth (same formats and scale as --depth) to score against, "
                           "on the pixels not observed.")
     inp.add_argument("--depth-scale", type=_scale, metavar="SCALE",
                      help="divisor of stored depth values: nyu or mm (1000), kitti (256), tum (5000), m (1), or a "
-                          "number.  Required for integer images; float files default to 1.")
+                          "number.  Required for integer data (png, pgm, tif, integer npy/npz/h5); float data default "
+                          "to 1, except a pfm, which needs this or --calib.")
     inp.add_argument("--depth-key", metavar="NAME", help="array name in an .npz or dataset in an .h5 depth file.")
     inp.add_argument("--calib", metavar="CALIB_TXT",
-                     help="Middlebury/ETH3D calib.txt: --depth holds disparity in pixels, converted to metres.")
+                     help="Middlebury/ETH3D calib.txt: --depth holds disparity in pixels, converted to metres; "
+                          "or kinect-nyu: --depth holds raw Kinect v1 disparity (NYU Depth V2 raw .pgm, with "
+                          "--byteorder little), metres = 351.3 / (1092.5 - value), 2047 = missing.")
+    inp.add_argument("--byteorder", choices=["big", "little"],
+                     help="byte order of 16-bit binary pgm/ppm (default: big, the standard, refusing rasters that "
+                          "look byte-swapped); NYU Depth V2 raw .pgm files are little.")
+    inp.add_argument("--invalid-value", dest="invalid_values", action="append", type=_finite, metavar="V",
+                     help="stored value meaning 'no measurement' in --depth/--truth (repeatable; Kinect v1 2047, "
+                          "RealSense 65535); 0, NaN and inf always are.")
+    inp.add_argument("--min-depth", type=_nonnegative, metavar="M",
+                     help="depth below M metres (after --depth-scale/--calib) counts as missing.")
+    inp.add_argument("--max-depth", type=_nonnegative, metavar="M",
+                     help="depth above M metres counts as missing.")
+    inp.add_argument("--max-pixels", type=_positive_int, default=MAX_PIXELS, metavar="N",
+                     help=f"refuse input images declaring more than N pixels, from their header (default {MAX_PIXELS}).")
     inp.add_argument("--downsample", type=_positive_int, metavar="N",
                      help=f"keep every N-th row and column (default {DEMO_DOWNSAMPLE} for the demo, 1 otherwise).")
 
@@ -437,46 +475,82 @@ def _warn_scale(depth, what, scale, stream) -> None:
               "check the scale (presets nyu/mm 1000, kitti 256, tum 5000, m 1)", file=stream)
 
 
-def _read_mask(path, shape) -> np.ndarray:
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"--mask: no such file: '{path}'")
-    suffix = path.suffix.lower()
-    if suffix == ".npy":
-        array = np.load(path, allow_pickle=False)
-    elif suffix == ".npz":
-        with np.load(path, allow_pickle=False) as data:
-            array = data[data.files[0]]
-    else:
-        image = read_image(path)
-        array = image != 0 if image.ndim == 2 else np.any(image != 0, axis=2)
-    if array.dtype != bool:
-        if not np.all(np.isin(array, (0, 1))):
-            raise ValueError(f"--mask '{path}' must be boolean or 0/1")
-        array = array.astype(bool)
+_READER_FLAGS = {
+    "scale": "--depth-scale", "key": "--depth-key", "byteorder": "--byteorder",
+    "invalid_values": "--invalid-value", "min_depth": "--min-depth", "max_depth": "--max-depth",
+    "max_pixels": "--max-pixels", "calib": "--calib",
+}
+_KINECT_CALIB = "kinect-nyu"
+
+
+def _validate_reader_options(args, mode) -> None:
+    """Reader options apply to the one-frame mode; check their combinations."""
+    given = [flag for flag, value in (("--byteorder", args.byteorder), ("--invalid-value", args.invalid_values),
+                                      ("--min-depth", args.min_depth), ("--max-depth", args.max_depth))
+             if value is not None]
+    if args.max_pixels != MAX_PIXELS:
+        given.append("--max-pixels")
+    if given and mode != "files":
+        raise _UsageError(f"{', '.join(given)} apply to --image/--depth (one frame)")
+    if args.min_depth is not None and args.max_depth is not None and args.min_depth > args.max_depth:
+        raise _UsageError(f"--min-depth {args.min_depth:g} is larger than --max-depth {args.max_depth:g}")
+
+
+def _check_units(path, flag, args) -> None:
+    """A PFM holds disparity (Middlebury, ETH3D) unless the user says otherwise."""
+    if Path(path).suffix.lower() == ".pfm" and args.calib is None and args.depth_scale is None:
+        raise _UsageError(
+            f"{flag} '{path}' is a PFM, the Middlebury/ETH3D disparity format (pixels, not metres): give --calib "
+            "calib.txt to convert disparity to metres, or --depth-scale m if the file holds depth in metres"
+        )
+
+
+def _read_mask(path, shape, max_pixels) -> np.ndarray:
+    array = read_mask(path, max_pixels=max_pixels, name="--mask", option_names=_READER_FLAGS)
     if array.shape != tuple(shape):
         raise ValueError(f"--mask '{path}' has shape {array.shape} but the depth has shape {tuple(shape)}")
     return array
 
 
+def _read_depth_flag(path, flag, args, calib, stream) -> np.ndarray:
+    """read_depth with the reader options, library warnings printed as one line each."""
+    _check_units(path, flag, args)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        depth = read_depth(path, scale=args.depth_scale, calib=calib, key=args.depth_key, byteorder=args.byteorder,
+                           invalid_values=args.invalid_values or (), min_depth=args.min_depth,
+                           max_depth=args.max_depth, max_pixels=args.max_pixels, name=flag,
+                           option_names=_READER_FLAGS)
+    for record in caught:
+        print(f"warning: {_one_line(record.message)}", file=stream)
+        if "Kinect v1" in str(record.message) and calib is not KINECT_NYU:
+            print(f"warning: raw Kinect v1 disparity (e.g. NYU Depth V2 raw .pgm) is not metres; "
+                  f"--calib {_KINECT_CALIB} converts it", file=stream)
+    return depth
+
+
 def _read_inputs(args, stream):
     """(image, depth, mask, truth, description) of the one-frame mode, in metres."""
-    image = read_image(args.image)
-    depth = read_depth(args.depth, scale=args.depth_scale, calib=args.calib, key=args.depth_key)
+    image = read_image(args.image, max_pixels=args.max_pixels, name="--image", option_names=_READER_FLAGS)
+    calib = None
+    if args.calib is not None:
+        calib = KINECT_NYU if args.calib == _KINECT_CALIB else read_calib(args.calib, name="--calib")
+    depth = _read_depth_flag(args.depth, "--depth", args, calib, stream)
     if image.shape[:2] != depth.shape:
-        raise ValueError(f"image '{args.image}' is {image.shape[0]}x{image.shape[1]} but depth '{args.depth}' is "
+        raise ValueError(f"--image '{args.image}' is {image.shape[0]}x{image.shape[1]} but --depth '{args.depth}' is "
                          f"{depth.shape[0]}x{depth.shape[1]} (H x W); they must have the same size")
     if not np.any(np.isfinite(depth)):
-        raise ValueError(f"depth '{args.depth}' has no valid pixel (all 0, NaN or inf)")
-    _warn_scale(depth, f"depth '{args.depth}'", args.depth_scale, stream)
-    mask = None if args.mask is None else _read_mask(args.mask, depth.shape)
+        raise ValueError(f"--depth '{args.depth}' has no valid pixel (all 0, NaN, inf or excluded by "
+                         "--invalid-value/--min-depth/--max-depth)")
+    _warn_scale(depth, f"--depth '{args.depth}'", args.depth_scale, stream)
+    mask = None if args.mask is None else _read_mask(args.mask, depth.shape, args.max_pixels)
     truth = None
     if args.truth is not None:
-        truth = read_depth(args.truth, scale=args.depth_scale, calib=args.calib, key=args.depth_key)
+        truth = _read_depth_flag(args.truth, "--truth", args, calib, stream)
         if truth.shape != depth.shape:
-            raise ValueError(f"truth '{args.truth}' has shape {truth.shape} but depth '{args.depth}' has "
+            raise ValueError(f"--truth '{args.truth}' has shape {truth.shape} but --depth '{args.depth}' has "
                              f"shape {depth.shape}")
-        _warn_scale(truth, f"truth '{args.truth}'", args.depth_scale, stream)
+        _warn_scale(truth, f"--truth '{args.truth}'", args.depth_scale, stream)
     return image, depth, mask, truth, f"{args.image} + {args.depth}"
 
 
@@ -842,6 +916,7 @@ def main(argv=None) -> int:
     try:
         mode = _validate(args)
         _check_batch_flags(args, mode)
+        _validate_reader_options(args, mode)
         if mode == "batch":
             return _run_batch(args, stderr)
         return _run_one(args, argv, mode, stdout, stderr)

@@ -9,9 +9,18 @@ Conventions shared by every function in this module:
 * Integer depth images store ``depth * scale``; ``scale`` is the divisor used
   when reading (1000 for NYU and other millimetre PNGs, 256 for KITTI, 5000 for
   TUM RGB-D).  Named presets are in :data:`DEPTH_SCALES`.
-* Missing files raise :class:`FileNotFoundError`; unreadable or inconsistent
-  content and unknown formats raise :class:`ValueError` naming the file and
-  what was expected.
+* Integer arrays (PNG, PGM, TIFF, and integer ``.npy``/``.npz``/HDF5 data)
+  need an explicit ``scale``: the library never guesses that integers are
+  metres.  Sensor codes for "no measurement" (Kinect v1 2047, RealSense
+  65535) are removed with ``invalid_values``.
+* Missing files raise :class:`FileNotFoundError`; anything that is not a
+  regular file (directory, FIFO, device), unreadable or inconsistent content,
+  images declaring more than ``max_pixels`` pixels (default
+  :data:`MAX_PIXELS`, checked from the header before decoding) and unknown
+  formats raise :class:`ValueError` naming the file and what was expected.
+* Every reader takes ``name=``, the label of the path in its messages (the
+  command line passes the flag the user typed, e.g. ``"--depth"``); readers
+  with options also take ``option_names=``, a mapping from keyword to label.
 * Every writer is atomic: the data go to a temporary file in the destination
   folder, which then replaces the destination with :func:`os.replace`.  If
   anything fails, the temporary file is removed and the destination is left
@@ -27,6 +36,9 @@ import operator
 import os
 import re
 import secrets
+import stat
+import warnings
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -35,9 +47,14 @@ from typing import Callable, Iterator, Mapping
 import h5py
 import imageio.v3 as iio
 import numpy as np
+import tifffile
+from PIL import Image
 
 __all__ = [
     "DEPTH_SCALES",
+    "KINECT_NYU",
+    "KinectDisparity",
+    "MAX_PIXELS",
     "NYUDepthV2Labeled",
     "StereoCalibration",
     "disparity_to_depth",
@@ -46,6 +63,7 @@ __all__ = [
     "read_depth_array",
     "read_depth_png",
     "read_image",
+    "read_mask",
     "read_nyu_h5",
     "read_pfm",
     "write_depth",
@@ -65,12 +83,23 @@ DEPTH_SCALES: Mapping[str, float] = MappingProxyType(
     }
 )
 
+#: Default ``max_pixels`` of every reader: larger images are refused from their header.
+MAX_PIXELS = 2**27
+
 _IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".pnm", ".bmp", ".tif", ".tiff")
 _NETPBM_EXTENSIONS = (".ppm", ".pgm", ".pnm")
+_TIFF_EXTENSIONS = (".tif", ".tiff")
 _DEPTH_IMAGE_EXTENSIONS = (".png", ".pgm", ".pnm")
 _ARRAY_EXTENSIONS = (".npy", ".npz")
 _HDF5_EXTENSIONS = (".h5", ".hdf5")
-_READ_DEPTH_EXTENSIONS = _DEPTH_IMAGE_EXTENSIONS + (".pfm",) + _ARRAY_EXTENSIONS + _HDF5_EXTENSIONS
+_READ_DEPTH_EXTENSIONS = (
+    _DEPTH_IMAGE_EXTENSIONS + _TIFF_EXTENSIONS + (".pfm",) + _ARRAY_EXTENSIONS + _HDF5_EXTENSIONS
+)
+_MASK_ARRAY_EXTENSIONS = _ARRAY_EXTENSIONS
+_CALIB_MAX_BYTES = 1 << 20
+#: Stored values that sensors use for "no measurement" (warned about when frequent).
+_SENSOR_INVALID_CODES = {2047: "Kinect v1", 65535: "16-bit sensors such as RealSense"}
+_BYTESWAP_RATIO = 4.0
 _WRITE_DEPTH_EXTENSIONS = (".png", ".pfm") + _ARRAY_EXTENSIONS + _HDF5_EXTENSIONS
 _UINT16_MAX = np.iinfo(np.uint16).max
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -79,27 +108,96 @@ _FLOAT32_MAX = float(np.finfo(np.float32).max)
 # --------------------------------------------------------------------------------------
 # small shared checks
 # --------------------------------------------------------------------------------------
+def _label(name: str) -> str:
+    """How a name appears in messages: command-line flags as typed, Python names in backticks."""
+    return name if name.startswith("-") else f"`{name}`"
+
+
+def _where(path, name: str) -> str:
+    return f"{_label(name)} '{path}'"
+
+
+def _labels(option_names) -> Callable[[str], str]:
+    """Label function for option keywords, overridden by the ``option_names`` mapping."""
+    if option_names is None:
+        option_names = {}
+    elif not isinstance(option_names, Mapping):
+        raise TypeError(
+            f"`option_names` must be a mapping from keyword to label, got {type(option_names).__name__}."
+        )
+    return lambda keyword: _label(str(option_names.get(keyword, keyword)))
+
+
+def _check_name(name) -> str:
+    if not isinstance(name, str) or not name:
+        raise TypeError(f"`name` must be a non-empty str (the label of the path in messages), got {name!r}.")
+    return name
+
+
 def _check_file(path, name: str = "path") -> Path:
-    """Return ``path`` as a :class:`Path` after checking that it is an existing file."""
+    """Return ``path`` as a :class:`Path` after checking that it is an existing regular file.
+
+    Only :func:`os.stat` is called, so a FIFO or a device is refused without
+    being opened (opening a FIFO blocks until a writer appears).
+    """
+    name = _check_name(name)
     if not isinstance(path, (str, os.PathLike)):
-        raise TypeError(f"`{name}` must be a str or os.PathLike, got {type(path).__name__}.")
+        raise TypeError(f"{_label(name)} must be a str or os.PathLike, got {type(path).__name__}.")
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"`{name}`: no such file: '{path}'.")
-    if path.is_dir():
-        raise IsADirectoryError(f"`{name}`: '{path}' is a directory, expected a file.")
+    try:
+        mode = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        raise FileNotFoundError(f"{_label(name)}: no such file: '{path}'.") from None
+    except (OSError, ValueError) as exc:  # permission, embedded NUL, name too long, ...
+        raise ValueError(f"{_where(path, name)}: cannot be accessed ({exc}).") from None
+    if not stat.S_ISREG(mode):
+        kind = (
+            "a directory" if stat.S_ISDIR(mode)
+            else "a FIFO (named pipe)" if stat.S_ISFIFO(mode)
+            else "a character device" if stat.S_ISCHR(mode)
+            else "a block device" if stat.S_ISBLK(mode)
+            else "a socket" if stat.S_ISSOCK(mode)
+            else "not a regular file"
+        )
+        raise ValueError(f"{_where(path, name)} is {kind}; expected a regular file.")
     return path
+
+
+def _read_bytes(path: Path, where: str) -> bytes:
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot be read ({exc}).") from None
+
+
+def _check_max_pixels(max_pixels, label: str) -> int | None:
+    if max_pixels is None:
+        return None
+    if isinstance(max_pixels, bool) or not isinstance(max_pixels, numbers.Integral):
+        raise TypeError(f"{label} must be a positive integer or None, got {type(max_pixels).__name__}.")
+    if max_pixels < 1:
+        raise ValueError(f"{label} must be a positive integer or None, got {max_pixels!r}.")
+    return int(max_pixels)
+
+
+def _check_pixels(height: int, width: int, max_pixels: int | None, where: str, label: str) -> None:
+    """Refuse a declared size above the pixel limit (before anything is decoded)."""
+    if max_pixels is not None and height * width > max_pixels:
+        raise ValueError(
+            f"{where} declares {width}x{height} = {height * width} pixels, more than the limit "
+            f"{max_pixels} ({label}); raise {label} if the file is genuine."
+        )
 
 
 def _suffix(path) -> str:
     return Path(path).suffix.lower()
 
 
-def _check_extension(path: Path, allowed: tuple[str, ...], what: str) -> str:
+def _check_extension(path: Path, allowed: tuple[str, ...], what: str, name: str = "path") -> str:
     ext = _suffix(path)
     if ext not in allowed:
         raise ValueError(
-            f"cannot {what} '{path}': unsupported extension '{ext or '(none)'}'. "
+            f"cannot {what} {_where(path, name)}: unsupported extension '{ext or '(none)'}'. "
             f"Supported extensions: {', '.join(allowed)}."
         )
     return ext
@@ -111,18 +209,18 @@ def _resolve_scale(scale, name: str = "scale") -> float:
         key = scale.lower()
         if key not in DEPTH_SCALES:
             raise ValueError(
-                f"`{name}`: unknown preset '{scale}'. Known presets: "
+                f"{_label(name)}: unknown preset '{scale}'. Known presets: "
                 + ", ".join(f"'{k}' ({v:g})" for k, v in DEPTH_SCALES.items())
                 + "; or pass a positive number."
             )
         return float(DEPTH_SCALES[key])
     if isinstance(scale, bool) or not isinstance(scale, numbers.Real):
         raise TypeError(
-            f"`{name}` must be a positive number or a preset name, got {type(scale).__name__}."
+            f"{_label(name)} must be a positive number or a preset name, got {type(scale).__name__}."
         )
     value = float(scale)
     if not math.isfinite(value) or value <= 0:
-        raise ValueError(f"`{name}` must be a finite positive number, got {scale!r}.")
+        raise ValueError(f"{_label(name)} must be a finite positive number, got {scale!r}.")
     return value
 
 
@@ -146,20 +244,27 @@ def _check_real_array(array, name: str) -> np.ndarray:
     return array
 
 
-def _as_depth(array, source: str) -> np.ndarray:
-    """Convert a stored 2-D depth array to float64 with NaN for 0/inf/NaN.
+def _is_real_dtype(dtype) -> bool:
+    """Integer or float (not bool, complex, datetime/timedelta, strings or records)."""
+    return np.dtype(dtype).kind in "iuf"
+
+
+def _as_depth(array, source: str, invalid_values=()) -> np.ndarray:
+    """Convert a stored 2-D depth array to float64 with NaN for 0/inf/NaN and ``invalid_values``.
 
     Raises ValueError for a wrong shape, a non-numeric dtype or negative values.
     """
     array = np.asarray(array)
     if array.ndim != 2:
         raise ValueError(f"{source}: expected a 2-D (H, W) depth map, got shape {array.shape}.")
-    if array.dtype == bool or not (
-        np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)
-    ):
+    if not _is_real_dtype(array.dtype):
         raise ValueError(f"{source}: expected integer or float depth, got dtype {array.dtype}.")
+    if array.size == 0:
+        raise ValueError(f"{source}: the depth map is empty (shape {array.shape}).")
     depth = array.astype(np.float64)  # always a copy
     invalid = ~np.isfinite(depth) | (depth == 0)
+    for code in invalid_values:
+        invalid |= depth == code
     depth[invalid] = np.nan
     if np.any(depth < 0):  # NaN compares False
         raise ValueError(
@@ -167,6 +272,30 @@ def _as_depth(array, source: str) -> np.ndarray:
             "depth must be positive, with 0, inf or NaN for invalid pixels."
         )
     return depth
+
+
+def _check_invalid_values(values, label: str) -> tuple[float, ...]:
+    if values is None:
+        return ()
+    if isinstance(values, (str, bytes)) or not hasattr(values, "__iter__"):
+        values = (values,)
+    checked = []
+    for value in values:
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+            raise ValueError(f"{label} must hold finite numbers (stored codes such as 2047), got {value!r}.")
+        checked.append(float(value))
+    return tuple(checked)
+
+
+def _check_depth_bound(value, label: str) -> float | None:
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{label} must be a number or None, got {type(value).__name__}.")
+    value = float(value)
+    if not math.isfinite(value) or value < 0:
+        raise ValueError(f"{label} must be a finite number >= 0, got {value!r}.")
+    return value
 
 
 # --------------------------------------------------------------------------------------
@@ -227,7 +356,7 @@ def _atomic_target(path) -> Iterator[Path]:
 _WHITESPACE = b" \t\r\n\v\f"
 
 
-def _netpbm_tokens(data: bytes, start: int, count: int, path: Path) -> tuple[list[bytes], int]:
+def _netpbm_tokens(data: bytes, start: int, count: int, where: str) -> tuple[list[bytes], int]:
     """Read ``count`` header tokens (skipping whitespace and ``#`` comments)."""
     tokens = []
     pos = start
@@ -243,66 +372,93 @@ def _netpbm_tokens(data: bytes, start: int, count: int, path: Path) -> tuple[lis
         while pos < n and data[pos] not in _WHITESPACE and data[pos] != ord("#"):
             pos += 1
         if begin == pos:
-            raise ValueError(f"'{path}': truncated Netpbm header.")
+            raise ValueError(f"{where}: truncated Netpbm header.")
         tokens.append(data[begin:pos])
     return tokens, pos
 
 
-def _read_netpbm(path: Path, byteorder: str) -> np.ndarray:
+def _variation(values: np.ndarray) -> float:
+    """Mean absolute difference between vertical and horizontal neighbours."""
+    values = values.astype(np.float64)
+    return float(np.mean(np.abs(np.diff(values, axis=0))) + np.mean(np.abs(np.diff(values, axis=1))))
+
+
+def _check_byte_order(values: np.ndarray, where: str, label: str) -> None:
+    """Refuse 16-bit samples that are much smoother with their two bytes swapped."""
+    if values.shape[0] < 2 or values.shape[1] < 2:
+        return
+    as_read, swapped = _variation(values), _variation(values.byteswap())
+    if swapped * _BYTESWAP_RATIO < as_read:
+        raise ValueError(
+            f"{where}: the 16-bit samples look byte-swapped (neighbouring pixels differ "
+            f"{as_read / max(swapped, 1e-300):.0f} times less with the two bytes of each sample "
+            "swapped). NYU Depth V2 raw Kinect .pgm files are little-endian despite the Netpbm "
+            f"standard: pass {label} little; pass {label} big to read the file as stored."
+        )
+
+
+def _read_netpbm(path: Path, byteorder: str | None, max_pixels: int | None, where: str,
+                 label: Callable[[str], str]) -> np.ndarray:
     """Decode a P2/P3 (ASCII) or P5/P6 (binary) Netpbm grey or RGB image."""
-    data = path.read_bytes()
+    data = _read_bytes(path, where)
     magic = data[:2]
     if magic not in (b"P2", b"P3", b"P5", b"P6"):
         raise ValueError(
-            f"'{path}': not a supported Netpbm image (magic {magic!r}); "
+            f"{where}: not a supported Netpbm image (magic {magic!r}); "
             "expected P2/P5 (grey) or P3/P6 (RGB)."
         )
-    tokens, pos = _netpbm_tokens(data, 2, 3, path)
+    tokens, pos = _netpbm_tokens(data, 2, 3, where)
     try:
         width, height, maxval = (int(t) for t in tokens)
     except ValueError:
-        raise ValueError(f"'{path}': malformed Netpbm header {tokens!r}.") from None
+        raise ValueError(f"{where}: malformed Netpbm header {tokens!r}.") from None
     if width <= 0 or height <= 0 or not 0 < maxval <= _UINT16_MAX:
         raise ValueError(
-            f"'{path}': invalid Netpbm header (width {width}, height {height}, maxval {maxval})."
+            f"{where}: invalid Netpbm header (width {width}, height {height}, maxval {maxval})."
         )
+    _check_pixels(height, width, max_pixels, where, label("max_pixels"))
     channels = 3 if magic in (b"P3", b"P6") else 1
     shape = (height, width, channels) if channels == 3 else (height, width)
     count = width * height * channels
     out_dtype = np.uint8 if maxval < 256 else np.uint16
     if magic in (b"P5", b"P6"):
         if pos >= len(data) or data[pos] not in _WHITESPACE:
-            raise ValueError(f"'{path}': malformed Netpbm header (no whitespace before data).")
+            raise ValueError(f"{where}: malformed Netpbm header (no whitespace before data).")
         pos += 1  # exactly one whitespace character separates header and raster
         if out_dtype == np.uint8:
             dtype = np.dtype(np.uint8)
         else:
-            dtype = np.dtype(">u2" if byteorder == "big" else "<u2")
+            dtype = np.dtype("<u2" if byteorder == "little" else ">u2")
         expected = count * dtype.itemsize
         available = len(data) - pos
         if available != expected:
             raise ValueError(
-                f"'{path}': Netpbm raster has {available} bytes, expected {expected} "
+                f"{where}: Netpbm raster has {available} bytes, expected {expected} "
                 f"for {width}x{height}x{channels} samples of {dtype.itemsize} byte(s) "
                 "(truncated file, or a multi-image file, which is not supported)."
             )
         values = np.frombuffer(data, dtype=dtype, count=count, offset=pos)
-        return values.astype(out_dtype).reshape(shape)
+        values = values.astype(out_dtype).reshape(shape)
+        if out_dtype == np.uint16 and byteorder is None:
+            _check_byte_order(values, where, label("byteorder"))
+        return values
     try:
         values = np.array(data[pos:].split()).astype(np.int64)
-    except ValueError:
-        raise ValueError(f"'{path}': non-integer sample in ASCII Netpbm raster.") from None
+    except (ValueError, OverflowError):
+        raise ValueError(f"{where}: non-integer sample in ASCII Netpbm raster.") from None
     if values.size != count:
-        raise ValueError(f"'{path}': ASCII Netpbm raster has {values.size} samples, expected {count}.")
+        raise ValueError(f"{where}: ASCII Netpbm raster has {values.size} samples, expected {count}.")
     if values.size and (values.min() < 0 or values.max() > maxval):
-        raise ValueError(f"'{path}': ASCII Netpbm samples outside 0..{maxval}.")
+        raise ValueError(f"{where}: ASCII Netpbm samples outside 0..{maxval}.")
     return values.astype(out_dtype).reshape(shape)
 
 
-def _normalise_image(image: np.ndarray, path: Path) -> np.ndarray:
+def _normalise_image(image: np.ndarray, where: str) -> np.ndarray:
+    if image.dtype == bool:  # 1-bit images: black 0, white 255
+        image = image.astype(np.uint8) * np.uint8(255)
     if image.dtype not in (np.uint8, np.uint16):
         raise ValueError(
-            f"'{path}' decodes to dtype {image.dtype}; only 8- and 16-bit images are supported."
+            f"{where} decodes to dtype {image.dtype}; only 1-, 8- and 16-bit images are supported."
         )
     if image.ndim == 3 and image.shape[2] in (1, 2):  # grey (+ alpha)
         image = image[:, :, 0]
@@ -310,37 +466,145 @@ def _normalise_image(image: np.ndarray, path: Path) -> np.ndarray:
         image = image[:, :, :3]
     if not (image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 3)):
         raise ValueError(
-            f"'{path}' decodes to shape {image.shape}; expected a single (H, W) grey "
+            f"{where} decodes to shape {image.shape}; expected a single (H, W) grey "
             "or (H, W, 3) colour image."
         )
+    if image.size == 0:
+        raise ValueError(f"{where} decodes to an empty image (shape {image.shape}).")
     return np.ascontiguousarray(image)
 
 
-def read_image(path, *, byteorder: str = "big") -> np.ndarray:
+def _png_declared_size(path: Path, where: str) -> tuple[int, int] | None:
+    """(height, width) from a PNG's IHDR chunk, or None if the file does not start like a PNG."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(24)
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot be read ({exc}).") from None
+    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    width, height = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    return height, width
+
+
+def _decode_error(where: str, exc: BaseException) -> ValueError:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return ValueError(f"could not decode {where}: {text}")
+
+
+def _read_pillow(path: Path, max_pixels: int | None, where: str, label: str) -> np.ndarray:
+    """Decode with Pillow after checking the declared size (PNG IHDR, else a lazy open)."""
+    if _suffix(path) == ".png":
+        declared = _png_declared_size(path, where)
+        if declared is not None:
+            _check_pixels(*declared, max_pixels, where, label)
+    with warnings.catch_warnings():
+        # the pixel limit is ours; Pillow's own bomb warning would only repeat it
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        try:
+            with Image.open(path) as handle:
+                width, height = handle.size
+        except Image.DecompressionBombError as exc:
+            raise ValueError(
+                f"{where}: declares more pixels than Pillow decodes ({exc}); "
+                "Pillow's limit is PIL.Image.MAX_IMAGE_PIXELS."
+            ) from None
+        except MemoryError:
+            raise
+        except Exception as exc:  # Pillow raises many types on junk (SyntaxError, struct.error, ...)
+            raise _decode_error(where, exc) from exc
+        _check_pixels(height, width, max_pixels, where, label)
+        try:
+            return np.asarray(iio.imread(path, plugin="pillow"))
+        except MemoryError:
+            raise
+        except Exception as exc:
+            raise _decode_error(where, exc) from exc
+
+
+def _read_tiff(path: Path, max_pixels: int | None, where: str, label: str) -> np.ndarray:
+    """First page of a TIFF with tifffile (keeps 16-bit and float32 samples)."""
+    try:
+        handle = tifffile.TiffFile(path)
+    except MemoryError:
+        raise
+    except Exception as exc:
+        raise _decode_error(where, exc) from exc
+    with handle:
+        try:
+            page = handle.pages[0]
+            shape = tuple(int(n) for n in page.shape)
+        except MemoryError:
+            raise
+        except Exception as exc:
+            raise _decode_error(where, exc) from exc
+        if len(shape) < 2:
+            raise ValueError(f"{where}: TIFF page has shape {shape}, expected (H, W) or (H, W, C).")
+        _check_pixels(shape[0], shape[1], max_pixels, where, label)
+        try:
+            return np.asarray(page.asarray())
+        except MemoryError:
+            raise
+        except Exception as exc:
+            raise _decode_error(where, exc) from exc
+
+
+def _check_byteorder(byteorder, label: str) -> str | None:
+    if byteorder not in (None, "big", "little"):
+        raise ValueError(f"{label} must be 'big', 'little' or None, got {byteorder!r}.")
+    return byteorder
+
+
+def read_image(path, *, byteorder: str | None = None, max_pixels: int | None = MAX_PIXELS,
+               name: str = "path", option_names: Mapping[str, str] | None = None) -> np.ndarray:
     """Read a grey or colour image as stored (8 or 16 bit).
 
     Parameters
     ----------
     path : str or os.PathLike
         Image file: PNG, JPEG, PPM/PGM/PNM (ASCII or binary), BMP or TIFF.
-    byteorder : {'big', 'little'}, optional
+    byteorder : {None, 'big', 'little'}, optional
         Byte order of 16-bit binary Netpbm rasters.  The Netpbm standard is
         ``'big'``; some datasets (e.g. the NYU Depth V2 raw ``.pgm`` Kinect
-        frames) store little-endian samples despite the header.  Ignored for
-        other formats.
+        frames) store little-endian samples despite the header.  ``None``
+        (default) reads big-endian but refuses a raster that looks
+        byte-swapped (see Notes).  Ignored for other formats.
+    max_pixels : int or None, optional
+        Largest accepted ``height * width``, checked from the file header
+        before decoding (default :data:`MAX_PIXELS`); None for no limit.
+        Pillow's own limit ``PIL.Image.MAX_IMAGE_PIXELS`` (twice it, in fact)
+        also applies to the formats Pillow decodes.
+    name : str, optional
+        Label of ``path`` in error messages (e.g. the command-line flag).
+    option_names : mapping, optional
+        Labels of the keywords in messages, e.g. ``{"byteorder": "--byteorder"}``.
 
     Returns
     -------
     image : (H, W) or (H, W, 3) ndarray of uint8 or uint16
-        The decoded samples, unscaled.  An alpha channel is dropped.
+        The decoded samples, unscaled.  An alpha channel is dropped; 1-bit
+        images become uint8 0 (black) and 255 (white).
 
     Raises
     ------
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If the extension is not supported, the file cannot be decoded, or it
-        decodes to something other than an 8/16-bit grey or RGB image.
+        If ``path`` is not a regular file, the extension is not supported,
+        the declared size exceeds ``max_pixels``, the file cannot be decoded,
+        or it decodes to something other than a 1/8/16-bit grey or RGB image.
+    TypeError
+        If ``path`` is not a str or os.PathLike.
+
+    Notes
+    -----
+    Byte-swap check (``byteorder=None``, 16-bit binary Netpbm of at least
+    2x2 pixels): with :math:`V(x)` the mean absolute difference between
+    vertical plus horizontal neighbours, the file is refused when
+    :math:`4\\,V(\\mathrm{swap}(x)) < V(x)`.  Depth and photographs vary
+    slowly, so swapping their bytes moves the noisy low byte into the high
+    one and multiplies :math:`V` (by 8.6 to 275 on the frames in the shared
+    data); the NYU raw Kinect frame read big-endian gives a ratio of 0.03.
 
     Examples
     --------
@@ -350,22 +614,21 @@ def read_image(path, *, byteorder: str = "big") -> np.ndarray:
     >>> read_image(fname)
     array([[   0, 1000]], dtype=uint16)
     """
-    path = _check_file(path)
-    if byteorder not in ("big", "little"):
-        raise ValueError(f"`byteorder` must be 'big' or 'little', got {byteorder!r}.")
-    ext = _check_extension(path, _IMAGE_EXTENSIONS, "read image")
+    label = _labels(option_names)
+    path = _check_file(path, name)
+    where = _where(path, name)
+    byteorder = _check_byteorder(byteorder, label("byteorder"))
+    max_pixels = _check_max_pixels(max_pixels, label("max_pixels"))
+    ext = _check_extension(path, _IMAGE_EXTENSIONS, "read image", name)
     if ext in _NETPBM_EXTENSIONS:
-        image = _read_netpbm(path, byteorder)
+        image = _read_netpbm(path, byteorder, max_pixels, where, label)
     else:
-        try:
-            image = iio.imread(path, plugin="pillow")
-        except (OSError, ValueError, SyntaxError) as exc:  # PIL raises SyntaxError on some junk
-            raise ValueError(f"could not decode image '{path}': {exc}") from exc
-        image = np.asarray(image)
-    return _normalise_image(image, path)
+        image = _read_pillow(path, max_pixels, where, label("max_pixels"))
+    return _normalise_image(image, where)
 
 
-def read_depth_png(path, scale) -> np.ndarray:
+def read_depth_png(path, scale, *, byteorder: str | None = None, max_pixels: int | None = MAX_PIXELS,
+                   name: str = "path", option_names: Mapping[str, str] | None = None) -> np.ndarray:
     """Read an integer depth image (16-bit PNG or PGM) as float64 depth.
 
     Parameters
@@ -377,6 +640,8 @@ def read_depth_png(path, scale) -> np.ndarray:
         ``depth = stored / scale``.  1000 for millimetre PNGs (NYU), 256 for
         KITTI, 5000 for TUM RGB-D, or a preset name from :data:`DEPTH_SCALES`
         (``'nyu'``, ``'mm'``, ``'kitti'``, ``'tum'``, ``'m'``).
+    byteorder, max_pixels, name, option_names
+        As in :func:`read_image`.
 
     Returns
     -------
@@ -388,8 +653,9 @@ def read_depth_png(path, scale) -> np.ndarray:
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If the extension is not supported, the image has several channels, or
-        ``scale`` is not a positive number / known preset.
+        If ``path`` is not a regular file, the extension is not supported,
+        the image has several channels, or ``scale`` is not a positive
+        number / known preset.
 
     Examples
     --------
@@ -399,18 +665,26 @@ def read_depth_png(path, scale) -> np.ndarray:
     >>> read_depth_png(fname, "nyu")
     array([[nan, 2.5]])
     """
-    scale = _resolve_scale(scale)
-    path = _check_file(path)
-    _check_extension(path, _DEPTH_IMAGE_EXTENSIONS, "read depth image")
-    stored = read_image(path)
-    if stored.ndim != 2:
-        raise ValueError(
-            f"'{path}' has shape {stored.shape}; a depth image must be single-channel "
-            "(8- or 16-bit grey)."
-        )
+    label = _labels(option_names)
+    scale = _resolve_scale(scale, label("scale"))
+    path = _check_file(path, name)
+    _check_extension(path, _DEPTH_IMAGE_EXTENSIONS, "read depth image", name)
+    stored = _read_depth_image(path, byteorder, max_pixels, name, option_names)
     depth = stored.astype(np.float64) / scale
     depth[stored == 0] = np.nan
     return depth
+
+
+def _read_depth_image(path: Path, byteorder, max_pixels, name: str, option_names) -> np.ndarray:
+    """Stored samples of a single-channel PNG/PGM depth image."""
+    stored = read_image(path, byteorder=byteorder, max_pixels=max_pixels, name=name,
+                        option_names=option_names)
+    if stored.ndim != 2:
+        raise ValueError(
+            f"{_where(path, name)} has shape {stored.shape}; a depth image must be single-channel "
+            "(8- or 16-bit grey)."
+        )
+    return stored
 
 
 # --------------------------------------------------------------------------------------
@@ -419,7 +693,8 @@ def read_depth_png(path, scale) -> np.ndarray:
 _PFM_HEADER = re.compile(rb"\A(PF|Pf)\s+(\d+)\s+(\d+)\s+(\S+)\s")
 
 
-def read_pfm(path) -> np.ndarray:
+def read_pfm(path, *, max_pixels: int | None = MAX_PIXELS, name: str = "path",
+             option_names: Mapping[str, str] | None = None) -> np.ndarray:
     """Read a Portable Float Map (PFM) file.
 
     Parameters
@@ -428,6 +703,13 @@ def read_pfm(path) -> np.ndarray:
         ``.pfm`` file: header ``Pf`` (grey) or ``PF`` (colour), ``width height``
         and a scale whose sign gives the byte order (negative = little endian),
         followed by float32 rows stored bottom-to-top.
+    max_pixels : int or None, optional
+        Largest accepted ``width * height`` (checked from the header before
+        the data are read); default :data:`MAX_PIXELS`, None for no limit.
+    name : str, optional
+        Label of ``path`` in error messages.
+    option_names : mapping, optional
+        Labels of the keywords in messages, e.g. ``{"max_pixels": "--max-pixels"}``.
 
     Returns
     -------
@@ -440,8 +722,9 @@ def read_pfm(path) -> np.ndarray:
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If the header is malformed, the scale is zero or not finite, or the
-        pixel data are shorter or longer than the header announces.
+        If ``path`` is not a regular file, the header is malformed, the scale
+        is zero or not finite, the size exceeds ``max_pixels``, or the pixel
+        data are shorter or longer than the header announces.
 
     Examples
     --------
@@ -452,36 +735,46 @@ def read_pfm(path) -> np.ndarray:
     array([[ 1.,  2.],
            [ 3., inf]], dtype=float32)
     """
-    path = _check_file(path)
-    data = path.read_bytes()
-    match = _PFM_HEADER.match(data[:256])
-    if match is None:
-        raise ValueError(
-            f"'{path}': not a PFM file (expected a header 'Pf' or 'PF', width, height, scale)."
-        )
-    channels = 3 if match.group(1) == b"PF" else 1
-    width, height = int(match.group(2)), int(match.group(3))
+    label = _labels(option_names)
+    path = _check_file(path, name)
+    where = _where(path, name)
+    max_pixels = _check_max_pixels(max_pixels, label("max_pixels"))
     try:
-        scale = float(match.group(4))
-    except ValueError:
-        raise ValueError(f"'{path}': PFM scale {match.group(4)!r} is not a number.") from None
-    if width <= 0 or height <= 0:
-        raise ValueError(f"'{path}': PFM dimensions must be positive, got {width}x{height}.")
-    if not math.isfinite(scale) or scale == 0:
-        raise ValueError(
-            f"'{path}': PFM scale must be a finite non-zero number (its sign gives the "
-            f"byte order), got {scale!r}."
-        )
+        with open(path, "rb") as fh:
+            head = fh.read(256)
+            match = _PFM_HEADER.match(head)
+            if match is None:
+                raise ValueError(
+                    f"{where}: not a PFM file (expected a header 'Pf' or 'PF', width, height, scale)."
+                )
+            channels = 3 if match.group(1) == b"PF" else 1
+            width, height = int(match.group(2)), int(match.group(3))
+            try:
+                scale = float(match.group(4))
+            except ValueError:
+                raise ValueError(f"{where}: PFM scale {match.group(4)!r} is not a number.") from None
+            if width <= 0 or height <= 0:
+                raise ValueError(f"{where}: PFM dimensions must be positive, got {width}x{height}.")
+            if not math.isfinite(scale) or scale == 0:
+                raise ValueError(
+                    f"{where}: PFM scale must be a finite non-zero number (its sign gives the "
+                    f"byte order), got {scale!r}."
+                )
+            _check_pixels(height, width, max_pixels, where, label("max_pixels"))
+            offset = match.end()
+            fh.seek(offset)
+            data = fh.read()
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot be read ({exc}).") from None
     dtype = np.dtype("<f4" if scale < 0 else ">f4")
-    offset = match.end()
     count = width * height * channels
     expected = count * dtype.itemsize
-    if len(data) - offset != expected:
+    if len(data) != expected:
         raise ValueError(
-            f"'{path}': PFM pixel data has {len(data) - offset} bytes, expected {expected} "
+            f"{where}: PFM pixel data has {len(data)} bytes, expected {expected} "
             f"for {width}x{height}x{channels} float32 values."
         )
-    values = np.frombuffer(data, dtype=dtype, count=count, offset=offset)
+    values = np.frombuffer(data, dtype=dtype, count=count)
     shape = (height, width, 3) if channels == 3 else (height, width)
     return np.ascontiguousarray(values.reshape(shape)[::-1], dtype=np.float32)
 
@@ -643,20 +936,70 @@ class StereoCalibration:
         return disparity_to_depth(disparity, self.focal_px, self.baseline_mm, doffs=self.doffs)
 
 
-def _parse_matrix(text: str, key: str, path: Path) -> np.ndarray:
+@dataclass(frozen=True)
+class KinectDisparity:
+    """Conversion of raw Kinect v1 disparity units to metres.
+
+    The Kinect v1 stores an 11-bit "disparity" code per pixel; 2047 means no
+    measurement.  The NYU Depth V2 toolbox (``depth_rel2depth_abs.m``) turns
+    it into metres with the constants of :data:`KINECT_NYU`.
+
+    Attributes
+    ----------
+    numerator : float
+        :math:`a` in the formula below (metres times disparity units).
+    offset : float
+        :math:`b`, the raw value at which depth would become infinite.
+    invalid : int
+        Raw code for "no measurement".
+
+    Notes
+    -----
+    .. math:: Z\\,[\\mathrm{m}] = \\frac{a}{b - r}
+
+    for a raw value :math:`r`; pixels with :math:`r \\ge b`, :math:`r` equal
+    to ``invalid`` or not finite are NaN.  Unlike the toolbox, depth is not
+    clamped to 10 m (use ``max_depth`` of :func:`read_depth`).  Raw NYU
+    frames are not registered to the colour camera: the toolbox projects
+    them with the camera parameters, which this conversion does not do.
+
+    References
+    ----------
+    .. [1] N. Silberman et al., "Indoor segmentation and support inference
+       from RGBD images", ECCV 2012 (NYU Depth V2 toolbox, camera_params.m).
+    """
+
+    numerator: float = 351.3
+    offset: float = 1092.5
+    invalid: int = 2047
+
+    def depth_from_disparity(self, disparity) -> np.ndarray:
+        """Metres from raw disparity (any shape); NaN where invalid."""
+        raw = _check_real_array(disparity, "disparity").astype(np.float64)
+        valid = np.isfinite(raw) & (raw < self.offset) & (raw != self.invalid)
+        depth = np.full(raw.shape, np.nan)
+        depth[valid] = self.numerator / (self.offset - raw[valid])
+        return depth
+
+
+#: Kinect v1 constants of the NYU Depth V2 toolbox: metres = 351.3 / (1092.5 - raw).
+KINECT_NYU = KinectDisparity()
+
+
+def _parse_matrix(text: str, key: str, where: str) -> np.ndarray:
     body = text.strip()
     if not (body.startswith("[") and body.endswith("]")):
-        raise ValueError(f"'{path}': `{key}` must look like [f 0 cx; 0 f cy; 0 0 1], got {text!r}.")
+        raise ValueError(f"{where}: `{key}` must look like [f 0 cx; 0 f cy; 0 0 1], got {text!r}.")
     try:
         rows = [[float(v) for v in row.split()] for row in body[1:-1].split(";")]
     except ValueError:
-        raise ValueError(f"'{path}': `{key}` has a non-numeric entry: {text!r}.") from None
+        raise ValueError(f"{where}: `{key}` has a non-numeric entry: {text!r}.") from None
     if len(rows) != 3 or any(len(row) != 3 for row in rows):
-        raise ValueError(f"'{path}': `{key}` must be a 3x3 matrix, got {text!r}.")
+        raise ValueError(f"{where}: `{key}` must be a 3x3 matrix, got {text!r}.")
     return np.array(rows, dtype=np.float64)
 
 
-def read_calib(path) -> StereoCalibration:
+def read_calib(path, *, name: str = "path") -> StereoCalibration:
     """Read a Middlebury 2014 / ETH3D two-view ``calib.txt`` file.
 
     Parameters
@@ -674,6 +1017,8 @@ def read_calib(path) -> StereoCalibration:
 
         ``cam0`` and ``baseline`` (millimetres) are required; ``doffs``
         defaults to 0.
+    name : str, optional
+        Label of ``path`` in error messages.
 
     Returns
     -------
@@ -684,14 +1029,23 @@ def read_calib(path) -> StereoCalibration:
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If a line is not ``key=value``, a value does not parse, a key is
-        repeated or a required key is missing.
+        If ``path`` is not a regular file or larger than 1 MiB, a line is not
+        ``key=value``, a value does not parse, a key is repeated or a required
+        key is missing.
     """
-    path = _check_file(path)
+    path = _check_file(path, name)
+    where = _where(path, name)
     try:
-        text = path.read_text(encoding="ascii")
+        with open(path, "rb") as fh:
+            raw = fh.read(_CALIB_MAX_BYTES + 1)
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot be read ({exc}).") from None
+    if len(raw) > _CALIB_MAX_BYTES:
+        raise ValueError(f"{where}: larger than {_CALIB_MAX_BYTES} bytes; not a calib.txt file.")
+    try:
+        text = raw.decode("ascii")
     except UnicodeDecodeError:
-        raise ValueError(f"'{path}': calibration file is not ASCII text.") from None
+        raise ValueError(f"{where}: calibration file is not ASCII text.") from None
     entries: dict[str, str] = {}
     for number, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
@@ -700,26 +1054,26 @@ def read_calib(path) -> StereoCalibration:
         key, sep, value = line.partition("=")
         key = key.strip()
         if not sep or not key:
-            raise ValueError(f"'{path}', line {number}: expected 'key=value', got {line!r}.")
+            raise ValueError(f"{where}, line {number}: expected 'key=value', got {line!r}.")
         if key in entries:
-            raise ValueError(f"'{path}', line {number}: `{key}` is given twice.")
+            raise ValueError(f"{where}, line {number}: `{key}` is given twice.")
         entries[key] = value.strip()
     for required in ("cam0", "baseline"):
         if required not in entries:
-            raise ValueError(f"'{path}': required entry `{required}` is missing.")
+            raise ValueError(f"{where}: required entry `{required}` is missing.")
 
     def number(key: str) -> float:
         try:
             return float(entries[key])
         except ValueError:
-            raise ValueError(f"'{path}': `{key}` is not a number: {entries[key]!r}.") from None
+            raise ValueError(f"{where}: `{key}` is not a number: {entries[key]!r}.") from None
 
     def integer(key: str) -> int | None:
         if key not in entries:
             return None
         value = number(key)
         if not value.is_integer() or value < 0:
-            raise ValueError(f"'{path}': `{key}` must be a non-negative integer, got {entries[key]!r}.")
+            raise ValueError(f"{where}: `{key}` must be a non-negative integer, got {entries[key]!r}.")
         return int(value)
 
     extra: dict[str, float | str] = {}
@@ -732,8 +1086,8 @@ def read_calib(path) -> StereoCalibration:
             extra[key] = value
     try:
         return StereoCalibration(
-            cam0=_parse_matrix(entries["cam0"], "cam0", path),
-            cam1=_parse_matrix(entries["cam1"], "cam1", path) if "cam1" in entries else None,
+            cam0=_parse_matrix(entries["cam0"], "cam0", where),
+            cam1=_parse_matrix(entries["cam1"], "cam1", where) if "cam1" in entries else None,
             baseline_mm=number("baseline"),
             doffs=number("doffs") if "doffs" in entries else 0.0,
             width=integer("width"),
@@ -742,7 +1096,7 @@ def read_calib(path) -> StereoCalibration:
             extra=extra,
         )
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"'{path}': {exc}") from None
+        raise ValueError(f"{where}: {exc}") from None
 
 
 def disparity_to_depth(disparity, focal_px, baseline_mm, *, doffs=0.0) -> np.ndarray:
@@ -798,7 +1152,99 @@ def disparity_to_depth(disparity, focal_px, baseline_mm, *, doffs=0.0) -> np.nda
 # --------------------------------------------------------------------------------------
 # NPY / NPZ / HDF5
 # --------------------------------------------------------------------------------------
-def read_depth_array(path, *, key: str | None = None) -> np.ndarray:
+def _load_error(where: str, exc: BaseException) -> ValueError:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return ValueError(f"could not load {where}: {text}")
+
+
+def _check_stored_array(shape, dtype, where: str, max_pixels, label: str, *, allow_bool=False) -> None:
+    """Shape and dtype checks made from a header, before the data are read."""
+    dtype = np.dtype(dtype)
+    if dtype.hasobject:
+        raise ValueError(
+            f"could not load {where}: it holds Python objects (dtype {dtype}); pickled data are refused."
+        )
+    if len(shape) != 2:
+        raise ValueError(f"{where}: expected a 2-D (H, W) depth map, got shape {tuple(shape)}.")
+    if not (_is_real_dtype(dtype) or (allow_bool and dtype == bool)):
+        kinds = "boolean, integer or float" if allow_bool else "integer or float depth"
+        raise ValueError(f"{where}: expected {kinds}, got dtype {dtype}.")
+    _check_pixels(int(shape[0]), int(shape[1]), max_pixels, where, label)
+
+
+def _read_npy_stream(fh, where: str, max_pixels, label: str, *, allow_bool=False) -> np.ndarray:
+    """Read one ``.npy`` array from an open binary stream, checking its header first."""
+    try:
+        version = np.lib.format.read_magic(fh)
+        if version == (1, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+        elif version == (2, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+        else:
+            raise ValueError(f"unsupported .npy format version {version}")
+    except MemoryError:
+        raise
+    except Exception as exc:  # bad magic, malformed header dict, pickled (object) dtype, ...
+        raise _load_error(where, exc) from exc
+    _check_stored_array(shape, dtype, where, max_pixels, label, allow_bool=allow_bool)
+    count = int(shape[0]) * int(shape[1])
+    nbytes = count * dtype.itemsize
+    try:
+        data = fh.read(nbytes)
+    except MemoryError:
+        raise
+    except Exception as exc:  # OSError, zipfile.BadZipFile (CRC), zlib.error, ...
+        raise _load_error(where, exc) from exc
+    if len(data) != nbytes:
+        raise ValueError(f"could not load {where}: {len(data)} bytes of data, expected {nbytes} (truncated).")
+    array = np.frombuffer(data, dtype=dtype, count=count)
+    return array.reshape(shape, order="F" if fortran else "C").copy()
+
+
+def _load_array(path: Path, key: str | None, max_pixels, where: str, label: Callable[[str], str],
+                *, allow_bool=False) -> tuple[np.ndarray, str]:
+    """The stored (H, W) array of a ``.npy`` or ``.npz`` file and a description of its source."""
+    limit = label("max_pixels")
+    if _suffix(path) == ".npy":
+        if key is not None:
+            raise ValueError(f"{label('key')} only applies to .npz archives; omit it for a .npy file.")
+        try:
+            with open(path, "rb") as fh:
+                return _read_npy_stream(fh, where, max_pixels, limit, allow_bool=allow_bool), where
+        except OSError as exc:
+            raise ValueError(f"{where}: cannot be read ({exc}).") from None
+    try:
+        archive = zipfile.ZipFile(path)
+    except MemoryError:
+        raise
+    except Exception as exc:
+        raise _load_error(where, exc) from exc
+    with archive:
+        members = [m for m in archive.namelist() if m.endswith(".npy")]
+        names = [m[:-4] for m in members]
+        if key is None:
+            if len(names) == 1:
+                key = names[0]
+            elif "depth" in names:
+                key = "depth"
+            elif not names:
+                raise ValueError(f"could not load {where}: the archive holds no .npy array.")
+            else:
+                raise ValueError(f"{where} holds several arrays {names}; choose one with {label('key')}.")
+        elif key not in names:
+            raise ValueError(f"{label('key')}: '{key}' is not in {where}; available arrays: {names}.")
+        source = f"{where} array '{key}'"
+        try:
+            with archive.open(key + ".npy") as fh:
+                return _read_npy_stream(fh, source, max_pixels, limit, allow_bool=allow_bool), source
+        except (ValueError, MemoryError):
+            raise
+        except Exception as exc:
+            raise _load_error(source, exc) from exc
+
+
+def read_depth_array(path, *, key: str | None = None, max_pixels: int | None = MAX_PIXELS,
+                     name: str = "path", option_names: Mapping[str, str] | None = None) -> np.ndarray:
     """Read a depth map stored with NumPy (``.npy`` or ``.npz``).
 
     Parameters
@@ -808,70 +1254,74 @@ def read_depth_array(path, *, key: str | None = None) -> np.ndarray:
     key : str, optional
         Array name inside an ``.npz``.  If omitted, the archive's only array
         is used, or else the one called ``'depth'``.
+    max_pixels : int or None, optional
+        Largest accepted ``H * W``, checked from the array header before the
+        data are read; default :data:`MAX_PIXELS`, None for no limit.
+    name : str, optional
+        Label of ``path`` in error messages.
+    option_names : mapping, optional
+        Labels of the keywords in messages, e.g. ``{"key": "--depth-key"}``.
 
     Returns
     -------
     depth : (H, W) ndarray of float64
-        Stored values (no unit conversion), with NaN where they are 0, inf or
-        NaN.
+        Stored values (no unit conversion: :func:`read_depth` requires a
+        ``scale`` for integer arrays), with NaN where they are 0, inf or NaN.
 
     Raises
     ------
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If the file cannot be loaded (pickled objects are refused), ``key`` is
-        missing or ambiguous, or the array is not a non-negative 2-D real array.
+        If ``path`` is not a regular file, the file cannot be loaded
+        (pickled objects are refused), ``key`` is missing or ambiguous, or
+        the array is not a non-negative 2-D real array within ``max_pixels``.
     """
-    path = _check_file(path)
-    ext = _check_extension(path, _ARRAY_EXTENSIONS, "read depth array")
-    if ext == ".npy" and key is not None:
-        raise ValueError("`key` only applies to .npz archives; omit it for a .npy file.")
-    try:
-        loaded = np.load(path, allow_pickle=False)
-    except Exception as exc:  # corrupt archive, pickled content, ...
-        raise ValueError(f"could not load '{path}': {exc}") from exc
-    if ext == ".npy":
-        return _as_depth(loaded, f"'{path}'")
-    with loaded:
-        names = list(loaded.files)
-        if key is None:
-            if len(names) == 1:
-                key = names[0]
-            elif "depth" in names:
-                key = "depth"
-            else:
-                raise ValueError(
-                    f"'{path}' holds several arrays {names}; choose one with `key=`."
-                )
-        elif key not in names:
-            raise ValueError(f"`key`: '{key}' is not in '{path}'; available arrays: {names}.")
-        try:
-            array = loaded[key]
-        except Exception as exc:
-            raise ValueError(f"could not load array '{key}' from '{path}': {exc}") from exc
-    return _as_depth(array, f"'{path}' array '{key}'")
+    label = _labels(option_names)
+    path = _check_file(path, name)
+    _check_extension(path, _ARRAY_EXTENSIONS, "read depth array", name)
+    max_pixels = _check_max_pixels(max_pixels, label("max_pixels"))
+    stored, source = _load_array(path, key, max_pixels, _where(path, name), label)
+    return _as_depth(stored, source)
 
 
-def _open_hdf5(path: Path) -> h5py.File:
+def _open_hdf5(path: Path, where: str | None = None) -> h5py.File:
+    where = f"'{path}'" if where is None else where
     try:
         return h5py.File(path, "r")
-    except OSError as exc:
+    except MemoryError:
+        raise
+    except Exception as exc:  # OSError for non-HDF5 content; other types on corrupt superblocks
         raise ValueError(
-            f"'{path}' is not a readable HDF5 file ({exc}). MATLAB .mat files must be "
+            f"{where} is not a readable HDF5 file ({exc}). MATLAB .mat files must be "
             "version 7.3 (HDF5); older ones need scipy.io.loadmat."
         ) from exc
 
 
-def _hdf5_dataset(handle: h5py.File, key: str, path: Path) -> h5py.Dataset:
-    item = handle.get(key)
-    if not isinstance(item, h5py.Dataset):
-        available = sorted(k for k in handle.keys() if isinstance(handle[k], h5py.Dataset))
-        raise ValueError(f"'{path}' has no dataset '{key}'; available datasets: {available}.")
+def _hdf5_dataset(handle: h5py.File, key: str, where) -> h5py.Dataset:
+    try:
+        item = handle.get(key)
+        if not isinstance(item, h5py.Dataset):
+            available = sorted(k for k in handle.keys() if isinstance(handle.get(k), h5py.Dataset))
+            raise ValueError(f"{where} has no dataset '{key}'; available datasets: {available}.")
+        item.shape, item.dtype  # noqa: B018 - reading the metadata may fail on corrupt files
+    except (ValueError, MemoryError):
+        raise
+    except Exception as exc:
+        raise _load_error(f"{where} dataset '{key}'", exc) from exc
     return item
 
 
-def read_nyu_h5(path) -> tuple[np.ndarray, np.ndarray]:
+def _hdf5_read(dset: h5py.Dataset, source: str, index=()):
+    try:
+        return dset[index]
+    except MemoryError:
+        raise
+    except Exception as exc:  # OSError / RuntimeError / KeyError from corrupt chunks or filters
+        raise _load_error(source, exc) from exc
+
+
+def read_nyu_h5(path, *, max_pixels: int | None = MAX_PIXELS, name: str = "path") -> tuple[np.ndarray, np.ndarray]:
     """Read one frame of the preprocessed NYU Depth V2 HDF5 layout.
 
     This is the one-file-per-frame layout used by most depth-completion code
@@ -882,6 +1332,11 @@ def read_nyu_h5(path) -> tuple[np.ndarray, np.ndarray]:
     ----------
     path : str or os.PathLike
         The ``.h5`` file.
+    max_pixels : int or None, optional
+        Largest accepted ``H * W`` (checked before reading); default
+        :data:`MAX_PIXELS`, None for no limit.
+    name : str, optional
+        Label of ``path`` in error messages.
 
     Returns
     -------
@@ -894,32 +1349,39 @@ def read_nyu_h5(path) -> tuple[np.ndarray, np.ndarray]:
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If the file is not HDF5, lacks ``rgb`` or ``depth``, or their shapes or
-        dtypes do not match the layout above.
+        If ``path`` is not a regular file, not HDF5, lacks ``rgb`` or
+        ``depth``, or their shapes or dtypes do not match the layout above.
     """
-    path = _check_file(path)
-    with _open_hdf5(path) as handle:
-        rgb = _hdf5_dataset(handle, "rgb", path)
-        dset = _hdf5_dataset(handle, "depth", path)
+    path = _check_file(path, name)
+    where = _where(path, name)
+    max_pixels = _check_max_pixels(max_pixels, "`max_pixels`")
+    with _open_hdf5(path, where) as handle:
+        rgb = _hdf5_dataset(handle, "rgb", where)
+        dset = _hdf5_dataset(handle, "depth", where)
         if rgb.ndim != 3 or rgb.shape[0] != 3 or rgb.dtype != np.uint8:
             raise ValueError(
-                f"'{path}': dataset 'rgb' must be (3, H, W) uint8, got {rgb.shape} {rgb.dtype}."
+                f"{where}: dataset 'rgb' must be (3, H, W) uint8, got {rgb.shape} {rgb.dtype}."
             )
         if dset.shape != rgb.shape[1:]:
             raise ValueError(
-                f"'{path}': dataset 'depth' has shape {dset.shape}, expected {rgb.shape[1:]} "
+                f"{where}: dataset 'depth' has shape {dset.shape}, expected {rgb.shape[1:]} "
                 "to match 'rgb'."
             )
-        image = np.ascontiguousarray(np.transpose(rgb[()], (1, 2, 0)))
-        depth = _as_depth(dset[()], f"'{path}' dataset 'depth'")
+        _check_stored_array(dset.shape, dset.dtype, f"{where} dataset 'depth'", max_pixels, "`max_pixels`")
+        image = np.ascontiguousarray(np.transpose(_hdf5_read(rgb, f"{where} dataset 'rgb'"), (1, 2, 0)))
+        depth = _as_depth(_hdf5_read(dset, f"{where} dataset 'depth'"), f"{where} dataset 'depth'")
     return image, depth
 
 
-def _read_hdf5_depth(path: Path, key: str | None) -> np.ndarray:
+def _read_hdf5_array(path: Path, key: str | None, max_pixels, where: str,
+                     label: Callable[[str], str], *, allow_bool=False) -> tuple[np.ndarray, str]:
     key = "depth" if key is None else key
-    with _open_hdf5(path) as handle:
-        data = _hdf5_dataset(handle, key, path)[()]
-    return _as_depth(data, f"'{path}' dataset '{key}'")
+    with _open_hdf5(path, where) as handle:
+        dset = _hdf5_dataset(handle, key, where)
+        source = f"{where} dataset '{key}'"
+        _check_stored_array(dset.shape, dset.dtype, source, max_pixels, label("max_pixels"),
+                            allow_bool=allow_bool)
+        return np.asarray(_hdf5_read(dset, source)), source
 
 
 class NYUDepthV2Labeled:
@@ -936,13 +1398,16 @@ class NYUDepthV2Labeled:
     path : str or os.PathLike
         Path of ``nyu_depth_v2_labeled.mat`` (or any HDF5 file with the same
         layout).  ``rawDepths`` is optional.
+    name : str, optional
+        Label of ``path`` in error messages.
 
     Raises
     ------
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If the file is not HDF5 or the datasets are missing or inconsistent.
+        If ``path`` is not a regular file, not HDF5, or the datasets are
+        missing or inconsistent.
 
     Examples
     --------
@@ -952,13 +1417,16 @@ class NYUDepthV2Labeled:
     1449
     """
 
-    def __init__(self, path):
-        self.path = _check_file(path)
-        self._file = _open_hdf5(self.path)
+    def __init__(self, path, *, name: str = "path"):
+        self.path = _check_file(path, name)
+        self._where = _where(self.path, name)
+        self._file = _open_hdf5(self.path, self._where)
         try:
-            self._images = _hdf5_dataset(self._file, "images", self.path)
-            self._depths = _hdf5_dataset(self._file, "depths", self.path)
-            self._raw = self._file.get("rawDepths")
+            self._images = _hdf5_dataset(self._file, "images", self._where)
+            self._depths = _hdf5_dataset(self._file, "depths", self._where)
+            self._raw = None
+            if "rawDepths" in self._file:
+                self._raw = _hdf5_dataset(self._file, "rawDepths", self._where)
             images, depths = self._images, self._depths
             if images.ndim != 4 or images.shape[1] != 3 or images.dtype != np.uint8:
                 raise ValueError(
@@ -975,9 +1443,12 @@ class NYUDepthV2Labeled:
                     f"'{self.path}': dataset 'rawDepths' has shape {self._raw.shape}, "
                     f"expected {expected}."
                 )
-        except BaseException:
+        except (ValueError, MemoryError, KeyboardInterrupt):
             self._file.close()
             raise
+        except Exception as exc:  # corrupt metadata
+            self._file.close()
+            raise _load_error(self._where, exc) from exc
 
     def __len__(self) -> int:
         return int(self._images.shape[0])
@@ -1019,11 +1490,11 @@ class NYUDepthV2Labeled:
         if self._file.id is None or not self._file.id.valid:
             raise ValueError(f"'{self.path}' has been closed.")
         i = self._index(index)
-        image = np.ascontiguousarray(self._images[i].transpose(2, 1, 0))
-        depth = _as_depth(self._depths[i].T, f"'{self.path}' depths[{i}]")
+        image = np.ascontiguousarray(_hdf5_read(self._images, f"{self._where} images[{i}]", i).transpose(2, 1, 0))
+        depth = _as_depth(_hdf5_read(self._depths, f"{self._where} depths[{i}]", i).T, f"{self._where} depths[{i}]")
         raw = None
         if self._raw is not None:
-            raw = _as_depth(self._raw[i].T, f"'{self.path}' rawDepths[{i}]")
+            raw = _as_depth(_hdf5_read(self._raw, f"{self._where} rawDepths[{i}]", i).T, f"{self._where} rawDepths[{i}]")
         return image, depth, raw
 
     def __iter__(self):
@@ -1051,40 +1522,84 @@ class NYUDepthV2Labeled:
 # --------------------------------------------------------------------------------------
 # dispatchers
 # --------------------------------------------------------------------------------------
-def read_depth(path, *, scale=None, calib=None, key: str | None = None) -> np.ndarray:
+def read_depth(path, *, scale=None, calib=None, key: str | None = None, byteorder: str | None = None,
+               invalid_values=(), min_depth=None, max_depth=None, max_pixels: int | None = MAX_PIXELS,
+               name: str = "path", option_names: Mapping[str, str] | None = None) -> np.ndarray:
     """Read a depth (or disparity) map, choosing the reader from the extension.
 
     Parameters
     ----------
     path : str or os.PathLike
-        One of ``.png``, ``.pgm``, ``.pnm`` (integer image), ``.pfm``, ``.npy``,
-        ``.npz``, ``.h5`` / ``.hdf5``.
+        One of ``.png``, ``.pgm``, ``.pnm`` (integer image), ``.tif`` /
+        ``.tiff`` (16-bit integer or float32, first page), ``.pfm``,
+        ``.npy``, ``.npz``, ``.h5`` / ``.hdf5``.
     scale : float or str, optional
         Divisor applied to the stored values, or a preset name from
-        :data:`DEPTH_SCALES`.  **Required** for integer images (1000 for NYU,
-        256 for KITTI, 5000 for TUM); defaults to 1 for float formats.
-    calib : StereoCalibration or str or os.PathLike, optional
-        If given, the file holds disparity in pixels (after dividing by
-        ``scale``), converted to metric depth with
-        :meth:`StereoCalibration.depth_from_disparity`.  A path is read with
-        :func:`read_calib`.
+        :data:`DEPTH_SCALES`.  **Required** whenever the stored values are
+        integers, whatever the format (1000 for NYU millimetres, 256 for
+        KITTI, 5000 for TUM, 1 for integers that really are metres); defaults
+        to 1 for float data and for a :class:`KinectDisparity` ``calib``.
+    calib : StereoCalibration or KinectDisparity or str or os.PathLike, optional
+        If given, the file holds disparity (after dividing by ``scale``),
+        converted to metric depth with the object's
+        ``depth_from_disparity``.  A path is read with :func:`read_calib`;
+        :data:`KINECT_NYU` converts raw Kinect v1 disparity.
     key : str, optional
         Array name in an ``.npz`` or dataset name in an HDF5 file (HDF5
         default ``'depth'``).
+    byteorder : {None, 'big', 'little'}, optional
+        Byte order of 16-bit binary Netpbm files; see :func:`read_image`.
+    invalid_values : sequence of float, optional
+        Stored values (before ``scale``) that mean "no measurement", e.g.
+        ``[2047]`` for raw Kinect v1 frames or ``[65535]`` for sensors that
+        saturate.  They become NaN like 0, inf and NaN.
+    min_depth, max_depth : float, optional
+        Valid range of the result (metres for the presets and calibrations):
+        values outside become NaN.
+    max_pixels : int or None, optional
+        Largest accepted ``H * W``, checked from the header before decoding;
+        default :data:`MAX_PIXELS`, None for no limit.
+    name : str, optional
+        Label of ``path`` in error messages (the command line passes the
+        flag, e.g. ``"--depth"``).
+    option_names : mapping, optional
+        Labels of the keywords in messages, e.g. ``{"scale": "--depth-scale"}``;
+        default the keyword names.
 
     Returns
     -------
     depth : (H, W) ndarray of float64
-        NaN where invalid (stored 0, inf or NaN; non-positive disparity).
+        NaN where invalid (stored 0, inf, NaN or one of ``invalid_values``;
+        non-positive disparity; outside ``[min_depth, max_depth]``).
 
     Raises
     ------
     FileNotFoundError
         If ``path`` (or a ``calib`` path) does not exist.
     ValueError
-        If the extension is not supported, ``scale`` is missing for an integer
-        image, ``key`` is given for a format without names, or the content is
-        invalid (see the format-specific readers).
+        If ``path`` is not a regular file, the extension is not supported,
+        ``scale`` is missing for integer data, ``key`` is given for a format
+        without names, the declared size exceeds ``max_pixels``, an option
+        is out of range, or the content is invalid (see the format-specific
+        readers).
+    TypeError
+        If ``path``, ``calib`` or a numeric option has the wrong type.
+
+    Warns
+    -----
+    UserWarning
+        If more than 1 % of the pixels of integer data hold 2047 or 65535
+        (the "no measurement" codes of Kinect v1 and of 16-bit sensors) and
+        ``invalid_values`` is empty: they are read as depth.
+
+    Notes
+    -----
+    With stored values :math:`s`, the result is
+    :math:`Z = c(s / \\mathrm{scale})` where :math:`c` is the calibration's
+    disparity-to-depth conversion (the identity without ``calib``), and NaN
+    where :math:`s \\in \\{0, \\pm\\infty, \\mathrm{NaN}\\} \\cup`
+    ``invalid_values`` or :math:`Z \\notin [\\mathrm{min\\_depth},
+    \\mathrm{max\\_depth}]`.
 
     See Also
     --------
@@ -1098,40 +1613,133 @@ def read_depth(path, *, scale=None, calib=None, key: str | None = None) -> np.nd
     >>> read_depth(fname, scale="mm")
     array([[1.5, nan]])
     """
-    path = _check_file(path)
-    ext = _check_extension(path, _READ_DEPTH_EXTENSIONS, "read depth")
+    label = _labels(option_names)
+    path = _check_file(path, name)
+    where = _where(path, name)
+    ext = _check_extension(path, _READ_DEPTH_EXTENSIONS, "read depth", name)
     if key is not None and ext not in (".npz",) + _HDF5_EXTENSIONS:
-        raise ValueError(f"`key` only applies to .npz and HDF5 files, not '{ext}'.")
-    if calib is not None and not isinstance(calib, StereoCalibration):
+        raise ValueError(f"{label('key')} only applies to .npz and HDF5 files, not '{ext}'.")
+    divisor = None if scale is None else _resolve_scale(scale, label("scale"))
+    byteorder = _check_byteorder(byteorder, label("byteorder"))
+    invalid_values = _check_invalid_values(invalid_values, label("invalid_values"))
+    min_depth = _check_depth_bound(min_depth, label("min_depth"))
+    max_depth = _check_depth_bound(max_depth, label("max_depth"))
+    if min_depth is not None and max_depth is not None and min_depth > max_depth:
+        raise ValueError(
+            f"{label('min_depth')} ({min_depth:g}) is larger than {label('max_depth')} ({max_depth:g})."
+        )
+    max_pixels = _check_max_pixels(max_pixels, label("max_pixels"))
+    if calib is not None and not isinstance(calib, (StereoCalibration, KinectDisparity)):
         if isinstance(calib, (str, os.PathLike)):
-            calib = read_calib(calib)
+            calib = read_calib(calib, name=str((option_names or {}).get("calib", "calib")))
         else:
             raise TypeError(
-                f"`calib` must be a StereoCalibration or a path to calib.txt, got {type(calib).__name__}."
+                f"{label('calib')} must be a StereoCalibration, a KinectDisparity or a path to calib.txt, "
+                f"got {type(calib).__name__}."
             )
+
+    source = where
     if ext in _DEPTH_IMAGE_EXTENSIONS:
-        if scale is None:
-            raise ValueError(
-                f"`scale` is required for integer depth images such as '{path.name}': e.g. "
-                "scale='nyu' (1000, millimetres), 'kitti' (256), 'tum' (5000) or 1 (stored metres)."
-            )
-        values = read_depth_png(path, scale)
+        stored = _read_depth_image(path, byteorder, max_pixels, name, option_names)
+    elif ext in _TIFF_EXTENSIONS:
+        stored = _read_tiff(path, max_pixels, where, label("max_pixels"))
+        if stored.ndim == 3 and stored.shape[2] == 1:
+            stored = stored[:, :, 0]
+        if stored.ndim != 2:
+            raise ValueError(f"{where} has shape {stored.shape}; a depth TIFF must be single-channel.")
+    elif ext == ".pfm":
+        stored = read_pfm(path, max_pixels=max_pixels, name=name, option_names=option_names)
+        if stored.ndim != 2:
+            raise ValueError(f"{where} is a colour PFM (shape {stored.shape}); depth must be grey ('Pf').")
+    elif ext in _ARRAY_EXTENSIONS:
+        stored, source = _load_array(path, key, max_pixels, where, label)
     else:
-        divisor = 1.0 if scale is None else _resolve_scale(scale)
-        if ext == ".pfm":
-            stored = read_pfm(path)
-            if stored.ndim != 2:
-                raise ValueError(f"'{path}' is a colour PFM (shape {stored.shape}); depth must be grey ('Pf').")
-            values = _as_depth(stored, f"'{path}'")
-        elif ext in _ARRAY_EXTENSIONS:
-            values = read_depth_array(path, key=key)
-        else:
-            values = _read_hdf5_depth(path, key)
-        if divisor != 1.0:
-            values /= divisor
+        stored, source = _read_hdf5_array(path, key, max_pixels, where, label)
+    if not _is_real_dtype(stored.dtype):
+        raise ValueError(f"{source}: expected integer or float depth, got dtype {stored.dtype}.")
+
+    integer = np.issubdtype(stored.dtype, np.integer)
+    if integer and divisor is None:
+        if not isinstance(calib, KinectDisparity):
+            raise ValueError(
+                f"{label('scale')} is required for integer depth ({stored.dtype}) such as {source}: e.g. "
+                "'nyu' (1000, millimetres), 'kitti' (256), 'tum' (5000) or 1 (integers that are metres)."
+            )
+    if integer and not invalid_values and not isinstance(calib, KinectDisparity) and stored.size:
+        for code, sensor in _SENSOR_INVALID_CODES.items():
+            share = float(np.count_nonzero(stored == code)) / stored.size
+            if share > 0.01:
+                warnings.warn(
+                    f"{source}: {share:.1%} of the pixels hold {code}, the 'no measurement' code of "
+                    f"{sensor}; they are read as depth. Pass {label('invalid_values')} {code} "
+                    "to mark them missing.",
+                    UserWarning,
+                    stacklevel=2,
+                )
+    values = _as_depth(stored, source, invalid_values)
+    if divisor is not None and divisor != 1.0:
+        values /= divisor
     if calib is not None:
-        return calib.depth_from_disparity(values)
+        values = calib.depth_from_disparity(values)
+    with np.errstate(invalid="ignore"):
+        if min_depth is not None:
+            values[values < min_depth] = np.nan
+        if max_depth is not None:
+            values[values > max_depth] = np.nan
     return values
+
+
+def read_mask(path, *, key: str | None = None, max_pixels: int | None = MAX_PIXELS,
+              name: str = "path", option_names: Mapping[str, str] | None = None) -> np.ndarray:
+    """Read a mask of observed pixels.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.npy`` / ``.npz`` (boolean, or integers / floats equal to 0 or 1),
+        ``.h5`` / ``.hdf5`` (same), or any image :func:`read_image` reads
+        (non-zero = observed; 1-bit PNG masks included).
+    key : str, optional
+        Array name in an ``.npz`` or dataset in an HDF5 file (HDF5 default
+        ``'mask'``).
+    max_pixels, name, option_names
+        As in :func:`read_depth`.
+
+    Returns
+    -------
+    mask : (H, W) ndarray of bool
+        True where depth is observed.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If ``path`` is not a regular file, its format is unsupported, it does
+        not hold a 2-D array, or an array holds values other than 0 and 1.
+    """
+    label = _labels(option_names)
+    path = _check_file(path, name)
+    where = _where(path, name)
+    ext = _check_extension(path, _MASK_ARRAY_EXTENSIONS + _HDF5_EXTENSIONS + _IMAGE_EXTENSIONS, "read mask", name)
+    max_pixels = _check_max_pixels(max_pixels, label("max_pixels"))
+    if key is not None and ext not in (".npz",) + _HDF5_EXTENSIONS:
+        raise ValueError(f"{label('key')} only applies to .npz and HDF5 files, not '{ext}'.")
+    if ext in _IMAGE_EXTENSIONS:
+        image = read_image(path, max_pixels=max_pixels, name=name, option_names=option_names)
+        return image != 0 if image.ndim == 2 else np.any(image != 0, axis=2)
+    if ext in _ARRAY_EXTENSIONS:
+        array, source = _load_array(path, key, max_pixels, where, label, allow_bool=True)
+    else:
+        array, source = _read_hdf5_array(path, "mask" if key is None else key, max_pixels, where, label,
+                                         allow_bool=True)
+    if array.size == 0:
+        raise ValueError(f"{source}: the mask is empty (shape {array.shape}).")
+    if array.dtype != bool:
+        if not np.all((array == 0) | (array == 1)):
+            raise ValueError(f"{source}: a mask must be boolean or hold only 0 and 1.")
+        array = array != 0
+    return array
 
 
 def _write_png_file(path: Path, stored: np.ndarray) -> None:
