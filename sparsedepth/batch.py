@@ -157,6 +157,7 @@ def evaluate_frame(
     tol: float | None = None,
     max_iter: int | None = None,
     callback=None,
+    clip_to_observed: bool = True,
 ) -> FrameOutcome:
     """Complete (or hole-fill) one frame and score it and the nearest-neighbour baseline.
 
@@ -182,7 +183,7 @@ def evaluate_frame(
         Seed of the sampling.
     fill_method : {"colorization", "complete"}
         ``"fill"`` only.
-    weights, solver, tol, max_iter, callback
+    weights, solver, tol, max_iter, callback, clip_to_observed
         Passed to :func:`~sparsedepth.complete_depth` (not used by the
         colorization fill).
 
@@ -239,7 +240,8 @@ def evaluate_frame(
     else:
         # fill_holes(method="complete") is exactly this call; calling it here keeps the solver result
         result = complete_depth(
-            image, sparse, observed, weights=weights, solver=solver, tol=tol, max_iter=max_iter, callback=callback
+            image, sparse, observed, weights=weights, solver=solver, tol=tol, max_iter=max_iter, callback=callback,
+            clip_to_observed=clip_to_observed,
         )
         dense = result.depth
         method = f"{'fill complete' if task == 'fill' else 'complete'} ({result.solver})"
@@ -599,6 +601,10 @@ class BatchOptions:
         ``".png"`` (16-bit, stored value = depth x ``out_scale``).
     out_scale : float > 0 or str
         PNG output scale.
+    clip_to_observed : bool
+        Passed to :func:`~sparsedepth.complete_depth`: keep each completed
+        map within the range of its observed depths (the CSV's ``clamped``
+        column counts the pixels this moved).
 
     Raises
     ------
@@ -623,6 +629,7 @@ class BatchOptions:
     out_dir: str | None = None
     out_format: str = ".npy"
     out_scale: float | str = 1000.0
+    clip_to_observed: bool = True
 
     def __post_init__(self):
         if self.task not in TASKS:
@@ -671,6 +678,9 @@ class BatchOptions:
             _resolve_scale(self.out_scale, "out_scale")
         except (TypeError, ValueError) as exc:
             raise _option_error("out_scale", str(exc), type(exc)) from None
+        if not isinstance(self.clip_to_observed, bool):
+            raise _option_error("clip_to_observed", f"clip_to_observed must be True or False, got "
+                                f"{self.clip_to_observed!r}", TypeError)
         if self.out_dir is not None:
             if not isinstance(self.out_dir, (str, os.PathLike)):
                 raise _option_error("out_dir", f"out_dir must be a str or os.PathLike, got "
@@ -792,7 +802,7 @@ def _process(position: int, source, options: BatchOptions) -> dict:
                 image, depth, truth=truth, task=options.task, keep_fraction=options.keep_fraction,
                 keep_count=options.keep_count, seed=np.random.default_rng([options.seed, position]),
                 fill_method=options.fill_method, weights=options.weights, solver=options.solver,
-                tol=options.tol, max_iter=options.max_iter,
+                tol=options.tol, max_iter=options.max_iter, clip_to_observed=options.clip_to_observed,
             )
         row.update(height=depth.shape[0], width=depth.shape[1], observed=int(out.observed.sum()),
                    method=out.method, runtime=f"{out.runtime:.3f}",

@@ -23,6 +23,7 @@ written all or nothing (see :func:`sparsedepth._outputs.commit`).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import datetime
 import io as _io
@@ -64,6 +65,7 @@ from .io import (
     read_image,
     read_mask,
 )
+from .result import ClampWarning
 from .solvers import SOLVERS
 from .weights import DEFAULT_WEIGHTS, Weights
 
@@ -266,6 +268,9 @@ def build_parser() -> argparse.ArgumentParser:
         )
     method.add_argument("--tol", type=float, metavar="TOL", help="solver tolerance (meaning per solver).")
     method.add_argument("--max-iter", type=_positive_int, metavar="N", help="maximum solver iterations.")
+    method.add_argument("--no-clip", dest="clip_to_observed", action="store_false",
+                        help="keep completed depth outside the range of the observed depth (by default the map is "
+                             "clamped to [smallest, largest] observed value and the clamped pixels are counted).")
     method.add_argument("--fill-holes", action="store_true",
                         help="hole filling: every valid pixel of --depth is observed, the output is dense.")
     method.add_argument("--fill-method", choices=FILL_METHODS, default="colorization",
@@ -512,17 +517,31 @@ def _read_mask(path, shape, max_pixels) -> np.ndarray:
     return array
 
 
+@contextlib.contextmanager
+def _warnings_as_lines(stream):
+    """Library warnings raised inside the block become one ``warning:`` line each on ``stream``.
+
+    Yields the list of caught warnings, complete once the block has ended.
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield caught
+    for record in caught:
+        text = _one_line(record.message)
+        if issubclass(record.category, ClampWarning):
+            text += "; --no-clip keeps them"
+        print(f"warning: {text}", file=stream)
+
+
 def _read_depth_flag(path, flag, args, calib, stream) -> np.ndarray:
     """read_depth with the reader options, library warnings printed as one line each."""
     _check_units(path, flag, args)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with _warnings_as_lines(stream) as caught:
         depth = read_depth(path, scale=args.depth_scale, calib=calib, key=args.depth_key, byteorder=args.byteorder,
                            invalid_values=args.invalid_values or (), min_depth=args.min_depth,
                            max_depth=args.max_depth, max_pixels=args.max_pixels, name=flag,
                            option_names=_READER_FLAGS)
     for record in caught:
-        print(f"warning: {_one_line(record.message)}", file=stream)
         if "Kinect v1" in str(record.message) and calib is not KINECT_NYU:
             print(f"warning: raw Kinect v1 disparity (e.g. NYU Depth V2 raw .pgm) is not metres; "
                   f"--calib {_KINECT_CALIB} converts it", file=stream)
@@ -686,13 +705,15 @@ def _run_one(args, argv, mode, stdout, stderr) -> int:
 
     complete_fill = args.fill_holes and args.fill_method == "complete"
     use_solver = not args.fill_holes or complete_fill
-    outcome = evaluate_frame(
-        image, depth, mask=mask, truth=truth, task="fill" if args.fill_holes else "complete",
-        keep_fraction=keep_fraction, keep_count=args.keep_count, seed=args.seed,
-        fill_method=args.fill_method, weights=weights if use_solver else None,
-        solver=args.solver or "auto", tol=args.tol, max_iter=args.max_iter,
-        callback=_Progress(stderr, not args.quiet) if use_solver else None,
-    )
+    with _warnings_as_lines(stderr):
+        outcome = evaluate_frame(
+            image, depth, mask=mask, truth=truth, task="fill" if args.fill_holes else "complete",
+            keep_fraction=keep_fraction, keep_count=args.keep_count, seed=args.seed,
+            fill_method=args.fill_method, weights=weights if use_solver else None,
+            solver=args.solver or "auto", tol=args.tol, max_iter=args.max_iter,
+            callback=_Progress(stderr, not args.quiet) if use_solver else None,
+            clip_to_observed=args.clip_to_observed,
+        )
 
     # every output is encoded and checked before any file is touched; commit writes all or none
     _check_png_range(outcome.depth, png_scale, png_targets, "the completed depth")
@@ -734,7 +755,7 @@ _OPTION_FLAGS = {
     "task": "--fill-holes", "keep_fraction": "--keep-fraction", "keep_count": "--keep-count", "seed": "--seed",
     "fill_method": "--fill-method", "weights": "the weight options", "solver": "--solver", "tol": "--tol",
     "max_iter": "--max-iter", "depth_scale": "--depth-scale", "downsample": "--downsample", "out_dir": "--outdir",
-    "out_format": "--out-format", "out_scale": "--out-scale",
+    "out_format": "--out-format", "out_scale": "--out-scale", "clip_to_observed": "--no-clip",
 }
 
 
@@ -760,6 +781,7 @@ def _batch_options(args, weights) -> BatchOptions:
             tol=args.tol, max_iter=args.max_iter, depth_scale=args.depth_scale,
             downsample=args.downsample or 1, out_dir=args.outdir, out_format="." + args.out_format,
             out_scale=args.out_scale if args.out_scale is not None else (args.depth_scale or 1000.0),
+            clip_to_observed=args.clip_to_observed,
         )
     except (ValueError, TypeError, OSError) as exc:
         flag = _OPTION_FLAGS.get(getattr(exc, "option", None))

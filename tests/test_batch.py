@@ -242,3 +242,22 @@ def test_clamped_pixels_are_a_column_not_a_printed_warning(tmp_path):
                              weights=options.weights, solver="direct")
     assert out.result.clamped > 0
     assert int(row["clamped"]) == out.result.clamped
+
+
+def test_clip_to_observed_option_is_checked_and_passed_on(tmp_path):
+    with pytest.raises(TypeError, match="clip_to_observed"):
+        BatchOptions(clip_to_observed="no")
+    image, depth = _scene()
+    iio.imwrite(tmp_path / "rgb_a.png", image)
+    sd.write_depth(tmp_path / "depth_a.npy", depth)
+    out = tmp_path / "out"
+    out.mkdir()
+    options = BatchOptions(keep_fraction=0.05, solver="direct", clip_to_observed=False, out_dir=str(out))
+    run_batch(find_frames(tmp_path), tmp_path / "m.csv", options=options, executor=ThreadPoolExecutor(1))
+    (row,) = _read_csv(tmp_path / "m.csv")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", sd.ClampWarning)  # unclamped: nothing to warn about
+        expected = evaluate_frame(image, depth, keep_fraction=0.05, seed=np.random.default_rng([0, 0]),
+                                  solver="direct", clip_to_observed=False)
+    np.testing.assert_allclose(np.load(row["output"]), expected.depth, rtol=0, atol=1e-12)
+    assert int(row["clamped"]) == expected.result.clamped

@@ -378,3 +378,29 @@ def test_batch_needs_csv(tmp_path, capsys):
 def test_nyu_mat_missing(tmp_path, capsys):
     _run_bad(["--nyu-mat", tmp_path / "absent.mat", "--fill-holes", "--csv", tmp_path / "m.csv"], capsys,
              tmp_path, "no such file")
+
+
+# ----------------------------------------------------------------------------- range clamp
+def test_clamp_is_one_warning_line_and_no_clip_keeps_the_unclamped_map(files, capsys):
+    """The default second-order weights overshoot the observed range at the scene's depth step."""
+    image = sd.read_image(files / "rgb.png")
+    sparse = sd.read_depth(files / "sparse.png", scale=1000)
+    argv = ["--image", str(files / "rgb.png"), "--depth", str(files / "sparse.png"), "--depth-scale", "mm",
+            "--solver", "direct"]
+    clamped = sd.complete_depth(image, sparse, solver="direct", clip_to_observed=False)
+    lo, hi = np.nanmin(sparse), np.nanmax(sparse)
+    outside = int(np.count_nonzero((clamped.depth < lo) | (clamped.depth > hi)))
+    assert outside > 0  # the scene exercises the clamp
+
+    assert main([*argv, "--out", str(files / "a.npy"), "--json", str(files / "a.json")]) == 0
+    err = capsys.readouterr().err
+    warnings_printed = [line for line in err.splitlines() if line.startswith("warning:")]
+    assert len(warnings_printed) == 1 and "clamped" in warnings_printed[0] and "--no-clip" in warnings_printed[0]
+    a = np.load(files / "a.npy")
+    np.testing.assert_allclose(a, np.clip(clamped.depth, lo, hi), rtol=0, atol=1e-9)
+    report = json.loads((files / "a.json").read_text())
+    assert 0 < report["clamped"] <= outside
+
+    assert main([*argv, "--no-clip", "--out", str(files / "b.npy")]) == 0
+    assert "warning:" not in capsys.readouterr().err
+    np.testing.assert_allclose(np.load(files / "b.npy"), clamped.depth, rtol=0, atol=1e-9)
