@@ -37,9 +37,11 @@ def test_grid_pcg_reaches_direct_solution_on_13_point_problem(problem):
     # error bound: ‖z − z*‖ ≤ ‖A⁻¹‖ ‖r‖, and the objective matches the direct one
     assert np.abs(z - z_ref).max() < 1e-4
     assert res.objective == pytest.approx(obj.value(z_ref), rel=1e-9)
-    # few iterations: the multigrid preconditioner is working (Jacobi-CG needs hundreds)
-    assert res.iterations <= 30
+    # the multigrid preconditioner is working: Jacobi-CG reaches the same point in far more iterations
+    # (a loose bound on purpose: measured 12 vs 214 and 11 vs 195, far from rounding's iteration or two)
     cg = complete_depth(image, sparse, mask, weights=QUAD13, solver="cg", tol=1e-8)
+    assert cg.converged
+    assert np.linalg.norm(b - A @ cg.depth.ravel()) <= 1e-8 * np.linalg.norm(b) * (1 + 1e-6)
     assert cg.iterations > 3 * res.iterations
 
 
@@ -102,8 +104,9 @@ def test_pcg_stopping_rule_is_the_true_residual():
     assert ok and np.linalg.norm(b - A @ x) <= 0.1 * r0
     # maxiter reached: converged is False and the residual is reported honestly
     x, it, ok, rel = pcg(A, b, rtol=1e-14, maxiter=2)
-    assert not ok and it == 2 and rel > 1e-14
-    # b = 0
+    assert not ok and it == 2 and rel > 1e-14  # the count is the limit itself, not a rounding-dependent one
+    assert rel == pytest.approx(np.linalg.norm(b - A @ x) / np.linalg.norm(b), rel=1e-9)
+    # b = 0: solved before any iteration
     x, it, ok, rel = pcg(A, np.zeros_like(b))
     assert ok and it == 0 and not x.any()
 

@@ -346,7 +346,13 @@ def test_admm_keeping_only_s_reaches_the_same_point(monkeypatch):
     with_a = complete_depth(image, sparse, mask, weights=L1, solver="admm")
     monkeypatch.setattr(solvers, "_ADMM_KEEP_A_PIXELS", 0)
     s_only = complete_depth(image, sparse, mask, weights=L1, solver="admm")
-    assert s_only.iterations == with_a.iterations
+    assert s_only.converged and with_a.converged
+    # the same ADMM iterates, not only the same end point (compared by value: counts are not, as rounding
+    # can move the stopping iteration)
+    F_s, F_a = s_only.history_array("objective"), with_a.history_array("objective")
+    k = min(len(F_s), len(F_a))
+    assert k >= 2
+    np.testing.assert_allclose(F_s[:k], F_a[:k], rtol=1e-6)
     assert s_only.objective == pytest.approx(with_a.objective, rel=1e-10)
     np.testing.assert_allclose(s_only.depth, with_a.depth, atol=1e-8)
     assert _kkt_gap_bound(obj, s_only.depth.ravel()) <= 1e-7 * s_only.objective
