@@ -325,7 +325,7 @@ def test_absurd_scale_warns(files, capsys):
     # millimetre PNG read as metres: median ~1500 m
     rc = main(["--image", str(files / "rgb.png"), "--depth", str(files / "sparse.png"), "--depth-scale", "m",
                "--out", str(files / "o.npy"), "-q", *FAST])
-    err = capsys.readouterr().err
+    err = _without_clamp_warning(capsys.readouterr().err)
     assert rc == 0
     assert err.count("\n") == 1 and err.startswith("warning:") and "median depth" in err
     assert (files / "o.npy").is_file()
@@ -333,7 +333,13 @@ def test_absurd_scale_warns(files, capsys):
 
 def test_sensible_scale_does_not_warn(files, capsys):
     rc = main([*map(str, _base(files)), "-q", *FAST])
-    assert rc == 0 and capsys.readouterr().err == ""
+    assert rc == 0 and _without_clamp_warning(capsys.readouterr().err) == ""
+
+
+def _without_clamp_warning(err):
+    """stderr less the range clamp's warning line (the default weights overshoot this scene's depth step)."""
+    return "".join(line for line in err.splitlines(keepends=True)
+                   if not (line.startswith("warning: ") and "--no-clip" in line))
 
 
 # ----------------------------------------------------------------------------- batch
