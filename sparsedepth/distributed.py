@@ -22,6 +22,7 @@ import inspect
 import json
 import os
 import re
+import warnings
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -267,6 +268,12 @@ def run_batch_on_cluster(
         ``client`` together with ``address``/``scheduler_file``, and the
         errors of :func:`connect` and :func:`~sparsedepth.batch.run_batch`.
 
+    Warns
+    -----
+    RuntimeWarning
+        If workers run with ``MALLOC_TRIM_THRESHOLD_`` set, as the Dask
+        nanny does by default (see ``docs/cluster.md``).
+
     Notes
     -----
     Tasks are submitted with ``pure=False`` (a frame is never taken from a
@@ -294,6 +301,7 @@ def run_batch_on_cluster(
         client = connect(address, scheduler_file=scheduler_file, timeout=timeout)
     executor = None
     try:
+        _warn_malloc_trim(client)
         threads = max(cluster_threads(client), 1)
         executor = client.get_executor(pure=False)
         window = {"max_in_flight": 2 * threads} if _takes("max_in_flight") else {"max_workers": threads}
@@ -306,6 +314,25 @@ def run_batch_on_cluster(
     if options.out_dir is not None:
         remove_stale_outputs(options.out_dir, [frame.name for frame in frames], options.out_format)
     return summary
+
+
+def _malloc_trim_threshold():
+    """On a worker: its MALLOC_TRIM_THRESHOLD_ (None when unset)."""
+    return os.environ.get("MALLOC_TRIM_THRESHOLD_")
+
+
+def _warn_malloc_trim(client) -> None:
+    """Warn if workers run with MALLOC_TRIM_THRESHOLD_ set (the Dask nanny sets it to 65536)."""
+    values = {value for value in client.run(_malloc_trim_threshold).values() if value is not None}
+    if values:
+        warnings.warn(
+            f"Dask workers run with MALLOC_TRIM_THRESHOLD_={', '.join(sorted(values))} (the Dask nanny's default), "
+            "which pins glibc's mmap threshold and made frames about 2x slower in bench/batch_scale.py; start "
+            "workers with 'dask worker --no-nanny' or without it in distributed.nanny.pre-spawn-environ "
+            "(docs/cluster.md)",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 def _takes(name: str) -> bool:

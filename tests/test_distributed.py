@@ -167,6 +167,23 @@ def test_cluster_batch_matches_the_local_batch(cluster, tmp_path, monkeypatch):
     np.testing.assert_allclose(np.load(rows["03"]["output"]), expected.depth, rtol=0, atol=1e-9)
 
 
+def test_workers_with_malloc_trim_threshold_are_warned_about(cluster, tmp_path, monkeypatch):
+    import warnings
+
+    from sparsedepth.distributed import run_batch_on_cluster
+
+    frames = find_frames(_write_frames(tmp_path / "frames", 1))
+    options = BatchOptions(keep_fraction=0.1, weights=FAST, solver="direct")
+    with distributed.Client(cluster, set_as_default=False) as client:
+        monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)  # in-process workers share this environment
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            assert run_batch_on_cluster(frames, tmp_path / "a.csv", options=options, client=client).succeeded == 1
+        monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
+        with pytest.warns(RuntimeWarning, match="MALLOC_TRIM_THRESHOLD_=65536"):
+            assert run_batch_on_cluster(frames, tmp_path / "b.csv", options=options, client=client).succeeded == 1
+
+
 def test_cli_batch_on_scheduler_address_file_and_environment(cluster, tmp_path, monkeypatch, capsys):
     from sparsedepth.complete import main
 
