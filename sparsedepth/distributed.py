@@ -155,13 +155,7 @@ def cluster_threads(client) -> int:
     int
         0 when the cluster has no worker.
     """
-    workers = client.scheduler_info(n_workers=-1)["workers"] if _takes_n_workers(client) else \
-        client.scheduler_info()["workers"]
-    return int(sum(info.get("nthreads", 0) for info in workers.values()))
-
-
-def _takes_n_workers(client) -> bool:
-    return "n_workers" in inspect.signature(client.scheduler_info).parameters
+    return int(sum(client.nthreads().values()))  # asks the scheduler (scheduler_info() may be a cached copy)
 
 
 def absolute_frames(frames: Sequence) -> list:

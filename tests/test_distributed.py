@@ -264,6 +264,9 @@ def test_a_worker_killed_mid_frame_costs_a_retry_not_a_frame(tmp_path, monkeypat
             client.wait_for_workers(2, timeout=120)
             killed = {}
 
+            def worker_names(dask_scheduler=None):
+                return {addr: ws.name for addr, ws in dask_scheduler.workers.items()}
+
             def suspicious(keys, dask_scheduler=None):  # local, so pickled by value for the scheduler
                 """How many workers died while running each task (None: the task is already gone)."""
                 return {key: getattr(dask_scheduler.tasks.get(key), "suspicious", None) for key in keys}
@@ -271,7 +274,7 @@ def test_a_worker_killed_mid_frame_costs_a_retry_not_a_frame(tmp_path, monkeypat
             def kill_a_busy_worker(done, total, row):
                 if killed:
                     return
-                names = {addr: info["name"] for addr, info in client.scheduler_info()["workers"].items()}
+                names = client.run_on_scheduler(worker_names)  # scheduler_info() may be a cached copy
                 while True:
                     busy = [(addr, keys) for addr, keys in client.processing().items() if keys]
                     if busy:
@@ -282,7 +285,7 @@ def test_a_worker_killed_mid_frame_costs_a_retry_not_a_frame(tmp_path, monkeypat
                 keys = client.processing([addr])[addr]
                 workers[names[addr]].send_signal(signal.SIGKILL)
                 killed.update(name=names[addr], keys=list(keys), done=done)
-                while len(client.scheduler_info()["workers"]) > 1:  # the scheduler notices the lost worker
+                while len(client.run_on_scheduler(worker_names)) > 1:  # the scheduler notices the lost worker
                     time.sleep(0.05)
                 killed["suspicious"] = client.run_on_scheduler(suspicious, keys=killed["keys"])
 
