@@ -26,9 +26,11 @@ import argparse
 import contextlib
 import dataclasses
 import datetime
+import importlib.util
 import io as _io
 import json
 import math
+import os
 import platform
 import signal
 import sys
@@ -323,7 +325,57 @@ def build_parser() -> argparse.ArgumentParser:
     bat.add_argument("--overwrite", action="store_true",
                      help="start the batch afresh: replace an existing --csv (even one written with other "
                           "settings) and recompute every frame.")
+    _add_cluster_options(parser)
     return parser
+
+
+def _add_cluster_options(parser) -> None:
+    """--scheduler, --scheduler-file, --scheduler-timeout: a batch on a Dask cluster (sparsedepth.distributed)."""
+    cluster = parser.add_argument_group(
+        "batch on a Dask cluster (pip install 'sparsedepth[distributed]'; frames and --outdir on a file system "
+        "the workers share)")
+    where = cluster.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run the frames on the Dask scheduler at ADDRESS (e.g. tcp://10.0.0.5:8786); default "
+                            "$DASK_SCHEDULER_ADDRESS unless --workers is given.  The CSV is written here.")
+    where.add_argument("--scheduler-file", metavar="PATH",
+                       help="the JSON file of 'dask scheduler --scheduler-file PATH' (e.g. on SLURM).")
+    cluster.add_argument("--scheduler-timeout", type=_positive_float, metavar="SECONDS",
+                         help="wait this long for the scheduler, then for its first worker, before exit code 2 "
+                              "(default 15).")
+
+
+def _positive_float(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds > 0, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number of seconds > 0, got {text!r}")
+    return value
+
+
+def _check_cluster_options(args, mode) -> None:
+    given = [name for name, value in (("--scheduler", args.scheduler), ("--scheduler-file", args.scheduler_file),
+                                      ("--scheduler-timeout", args.scheduler_timeout)) if value is not None]
+    if given and mode != "batch":
+        raise _UsageError(f"{', '.join(given)} run a batch on a Dask cluster: they need --batch/--nyu-mat")
+    if args.workers is not None and (args.scheduler is not None or args.scheduler_file is not None):
+        raise _UsageError("--workers sizes the local process pool; with --scheduler/--scheduler-file the "
+                          "cluster's workers run the frames")
+    if mode == "batch" and _cluster_address(args) is not None and importlib.util.find_spec("distributed") is None:
+        raise _UsageError("a batch on a Dask cluster needs dask.distributed, which is not installed: "
+                          "pip install 'sparsedepth[distributed]'")
+
+
+def _cluster_address(args):
+    """(address, scheduler_file) of the Dask scheduler of a batch, or None for the local process pool."""
+    if args.scheduler_file is not None:
+        return None, args.scheduler_file
+    address = args.scheduler
+    if address is None and args.workers is None:
+        address = os.environ.get("DASK_SCHEDULER_ADDRESS") or None
+    return (address, None) if address is not None else None
 
 
 # --------------------------------------------------------------------------------------
@@ -452,6 +504,7 @@ def _validate(args) -> str:
         if args.figure and _matplotlib() is None:
             raise _UsageError("--figure needs matplotlib, which is not installed: "
                               "pip install 'sparsedepth[plot]' (or matplotlib)")
+    _check_cluster_options(args, mode)
     return mode
 
 
@@ -899,8 +952,17 @@ def _run_batch(args, stderr) -> int:
     except ValueError:  # not the main thread: signals stay as they are
         pass
     try:
-        summary = run_batch(frames, args.csv, options=options, max_workers=args.workers, progress=reporter,
-                            overwrite=args.overwrite)
+        cluster = _cluster_address(args)
+        if cluster is not None:
+            from .distributed import DEFAULT_TIMEOUT, run_batch_on_cluster
+            with _warnings_as_lines(stderr):
+                summary = run_batch_on_cluster(frames, args.csv, options=options, progress=reporter,
+                                               address=cluster[0], scheduler_file=cluster[1],
+                                               timeout=args.scheduler_timeout or DEFAULT_TIMEOUT,
+                                               overwrite=args.overwrite)
+        else:
+            summary = run_batch(frames, args.csv, options=options, max_workers=args.workers, progress=reporter,
+                                overwrite=args.overwrite)
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted; the rows of finished frames are in {args.csv}: run the same command to resume",
               file=stderr)
