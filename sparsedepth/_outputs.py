@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
-from .io import _create_temporary
+from .io import _create_temporary, _fsync
 
 __all__ = ["Named", "OutputError", "check_distinct", "check_writable", "commit"]
 
@@ -171,15 +171,6 @@ def _make_folders(folder: Path) -> list[Path]:
         path.mkdir()
         created.append(path)
     return created
-
-
-def _fsync(path: Path) -> None:
-    with contextlib.suppress(OSError):  # durability is best effort (e.g. Windows)
-        fd = os.open(path, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
 
 
 def _keep_old(path: Path) -> tuple[bool, Path | None]:

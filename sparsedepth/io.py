@@ -301,6 +301,16 @@ def _check_depth_bound(value, label: str) -> float | None:
 # --------------------------------------------------------------------------------------
 # atomic writes
 # --------------------------------------------------------------------------------------
+def _fsync(path) -> None:
+    """Flush ``path`` to disk before it is renamed into place (best effort: some systems cannot)."""
+    with contextlib.suppress(OSError):
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
 def _create_temporary(path: Path, kind: str = "tmp") -> Path:
     """Create a new empty file ``.<name>.<random>.<kind><suffix>`` next to ``path``; return its path.
 
@@ -337,12 +347,7 @@ def _atomic_target(path) -> Iterator[Path]:
     tmp = _create_temporary(path)
     try:
         yield tmp
-        with contextlib.suppress(OSError):  # durability is best effort (e.g. Windows)
-            fd = os.open(tmp, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
+        _fsync(tmp)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
