@@ -23,6 +23,7 @@ prints: progress goes to an optional callback.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import csv
 import dataclasses
 import glob
@@ -735,7 +736,8 @@ def _init_worker() -> None:
     the workers), SIGTERM gets its default action back (a forked worker
     inherits the driver's handler), and BLAS thread pools are pinned to one
     thread: the environment variables for libraries loaded from now on, and
-    ``threadpoolctl`` (if installed) for those already loaded.
+    for those already loaded (a forked worker has the driver's) ``threadpoolctl``
+    if installed, else the thread-count function of every loaded OpenBLAS.
     """
     global _thread_limit
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -745,8 +747,58 @@ def _init_worker() -> None:
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:
+        _set_openblas_threads(1)
         return
     _thread_limit = threadpool_limits(limits=1)
+
+
+#: The thread-count functions of the OpenBLAS builds numpy and scipy wheels ship (symbol prefixes and suffixes vary).
+_OPENBLAS_PREFIXES = ("openblas", "scipy_openblas")
+_OPENBLAS_SUFFIXES = ("", "64_")
+
+
+def _loaded_openblas():
+    """The OpenBLAS libraries mapped into this process (from /proc/self/maps; empty elsewhere)."""
+    try:
+        with open("/proc/self/maps", encoding="utf-8", errors="replace") as maps:
+            paths = {line.split()[-1] for line in maps if "openblas" in line.lower() and "/" in line}
+    except OSError:
+        return []
+    libraries = []
+    for path in sorted(paths):
+        try:
+            libraries.append(ctypes.CDLL(path))
+        except OSError:
+            continue
+    return libraries
+
+
+def _openblas_function(library, action):
+    for prefix in _OPENBLAS_PREFIXES:
+        for suffix in _OPENBLAS_SUFFIXES:
+            function = getattr(library, f"{prefix}_{action}_num_threads{suffix}", None)
+            if function is not None:
+                return function
+    return None
+
+
+def _set_openblas_threads(count: int) -> None:
+    """Set the thread count of every loaded OpenBLAS (what threadpoolctl does for it, without the dependency)."""
+    for library in _loaded_openblas():
+        function = _openblas_function(library, "set")
+        if function is not None:
+            function(ctypes.c_int(count))
+
+
+def _openblas_threads() -> list[int]:
+    """The thread count of every loaded OpenBLAS that reports one."""
+    counts = []
+    for library in _loaded_openblas():
+        function = _openblas_function(library, "get")
+        if function is not None:
+            function.restype = ctypes.c_int
+            counts.append(int(function()))
+    return counts
 
 
 def _read_frame(source, options: BatchOptions):

@@ -261,3 +261,17 @@ def test_clip_to_observed_option_is_checked_and_passed_on(tmp_path):
                                   solver="direct", clip_to_observed=False)
     np.testing.assert_allclose(np.load(row["output"]), expected.depth, rtol=0, atol=1e-12)
     assert int(row["clamped"]) == expected.result.clamped
+
+
+def test_default_pool_workers_run_blas_on_one_thread():
+    from concurrent.futures import ProcessPoolExecutor
+
+    from sparsedepth import batch
+
+    before = batch._openblas_threads()
+    if not before:
+        pytest.skip("no OpenBLAS loaded in this process (another BLAS build): nothing to check")
+    with ProcessPoolExecutor(max_workers=1, initializer=batch._init_worker) as pool:
+        in_worker = pool.submit(batch._openblas_threads).result()
+    assert in_worker and all(count == 1 for count in in_worker), in_worker
+    assert batch._openblas_threads() == before  # the driver's own pools are left as they were
