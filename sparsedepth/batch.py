@@ -47,7 +47,7 @@ from ._validation import check_same_shape
 from .baselines import nearest_fill
 from .completion import complete_depth
 from .holes import FILL_METHODS, fill_holes
-from .io import NYUDepthV2Labeled, _atomic_target, _resolve_scale, read_depth, read_image, read_nyu_h5, write_depth
+from .io import MAX_PIXELS, NYUDepthV2Labeled, _atomic_target, _resolve_scale, read_depth, read_image, read_nyu_h5, write_depth
 from .metrics import DepthMetrics, depth_metrics
 from .result import ClampWarning, CompletionResult
 from .sampling import sample_mask, valid_depth_mask
@@ -602,6 +602,13 @@ class BatchOptions:
         ``".png"`` (16-bit, stored value = depth x ``out_scale``).
     out_scale : float > 0 or str
         PNG output scale.
+    byteorder, invalid_values, min_depth, max_depth, max_pixels
+        Passed to :func:`~sparsedepth.io.read_depth` for every depth and
+        truth file (and ``max_pixels`` to :func:`~sparsedepth.io.read_image`):
+        byte order of 16-bit binary Netpbm, stored values that mean "no
+        measurement" (e.g. Kinect 2047, RealSense 65535), the metric range
+        outside which depth counts as missing, and the largest image a header
+        may declare.
     clip_to_observed : bool
         Passed to :func:`~sparsedepth.complete_depth`: keep each completed
         map within the range of its observed depths (the CSV's ``clamped``
@@ -630,6 +637,11 @@ class BatchOptions:
     out_dir: str | None = None
     out_format: str = ".npy"
     out_scale: float | str = 1000.0
+    byteorder: str | None = None
+    invalid_values: tuple = ()
+    min_depth: float | None = None
+    max_depth: float | None = None
+    max_pixels: int | None = MAX_PIXELS
     clip_to_observed: bool = True
 
     def __post_init__(self):
@@ -679,6 +691,20 @@ class BatchOptions:
             _resolve_scale(self.out_scale, "out_scale")
         except (TypeError, ValueError) as exc:
             raise _option_error("out_scale", str(exc), type(exc)) from None
+        if self.byteorder not in (None, "big", "little"):
+            raise _option_error("byteorder", f"byteorder must be 'big', 'little' or None, got {self.byteorder!r}")
+        if not isinstance(self.invalid_values, tuple) or not all(_is_real(v) for v in self.invalid_values):
+            raise _option_error("invalid_values", f"invalid_values must be a tuple of numbers, got "
+                                f"{self.invalid_values!r}", TypeError)
+        for name in ("min_depth", "max_depth"):
+            value = getattr(self, name)
+            if value is not None and not (_is_real(value) and math.isfinite(value) and value >= 0):
+                raise _option_error(name, f"{name} must be a finite number >= 0 (metres) or None, got {value!r}")
+        if self.min_depth is not None and self.max_depth is not None and self.min_depth > self.max_depth:
+            raise _option_error("min_depth", f"min_depth {self.min_depth:g} is larger than max_depth "
+                                f"{self.max_depth:g}")
+        if self.max_pixels is not None and not (_is_int(self.max_pixels) and self.max_pixels >= 1):
+            raise _option_error("max_pixels", f"max_pixels must be an integer >= 1 or None, got {self.max_pixels!r}")
         if not isinstance(self.clip_to_observed, bool):
             raise _option_error("clip_to_observed", f"clip_to_observed must be True or False, got "
                                 f"{self.clip_to_observed!r}", TypeError)
@@ -816,9 +842,11 @@ def _read_frame(source, options: BatchOptions):
         return image, depth, None
     if source.depth is None:
         raise ValueError(f"no (unique) depth file for image '{source.image}'")
-    image = read_image(source.image)
-    depth = read_depth(source.depth, scale=options.depth_scale)
-    truth = None if source.truth is None else read_depth(source.truth, scale=options.depth_scale)
+    image = read_image(source.image, max_pixels=options.max_pixels)
+    reader = dict(scale=options.depth_scale, byteorder=options.byteorder, invalid_values=options.invalid_values,
+                  min_depth=options.min_depth, max_depth=options.max_depth, max_pixels=options.max_pixels)
+    depth = read_depth(source.depth, **reader)
+    truth = None if source.truth is None else read_depth(source.truth, **reader)
     return image, depth, truth
 
 

@@ -542,14 +542,14 @@ _KINECT_CALIB = "kinect-nyu"
 
 
 def _validate_reader_options(args, mode) -> None:
-    """Reader options apply to the one-frame mode; check their combinations."""
+    """Reader options apply to the user's files (one frame or a batch); check their combinations."""
     given = [flag for flag, value in (("--byteorder", args.byteorder), ("--invalid-value", args.invalid_values),
                                       ("--min-depth", args.min_depth), ("--max-depth", args.max_depth))
              if value is not None]
     if args.max_pixels != MAX_PIXELS:
         given.append("--max-pixels")
-    if given and mode != "files":
-        raise _UsageError(f"{', '.join(given)} apply to --image/--depth (one frame)")
+    if given and mode == "demo":
+        raise _UsageError(f"{', '.join(given)} apply to your files (--image/--depth or a batch), not the demo")
     if args.min_depth is not None and args.max_depth is not None and args.min_depth > args.max_depth:
         raise _UsageError(f"--min-depth {args.min_depth:g} is larger than --max-depth {args.max_depth:g}")
 
@@ -809,6 +809,8 @@ _OPTION_FLAGS = {
     "fill_method": "--fill-method", "weights": "the weight options", "solver": "--solver", "tol": "--tol",
     "max_iter": "--max-iter", "depth_scale": "--depth-scale", "downsample": "--downsample", "out_dir": "--outdir",
     "out_format": "--out-format", "out_scale": "--out-scale", "clip_to_observed": "--no-clip",
+    "byteorder": "--byteorder", "invalid_values": "--invalid-value", "min_depth": "--min-depth",
+    "max_depth": "--max-depth", "max_pixels": "--max-pixels",
 }
 
 
@@ -834,7 +836,8 @@ def _batch_options(args, weights) -> BatchOptions:
             tol=args.tol, max_iter=args.max_iter, depth_scale=args.depth_scale,
             downsample=args.downsample or 1, out_dir=args.outdir, out_format="." + args.out_format,
             out_scale=args.out_scale if args.out_scale is not None else (args.depth_scale or 1000.0),
-            clip_to_observed=args.clip_to_observed,
+            byteorder=args.byteorder, invalid_values=tuple(args.invalid_values or ()), min_depth=args.min_depth,
+            max_depth=args.max_depth, max_pixels=args.max_pixels, clip_to_observed=args.clip_to_observed,
         )
     except (ValueError, TypeError, OSError) as exc:
         flag = _OPTION_FLAGS.get(getattr(exc, "option", None))

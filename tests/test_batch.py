@@ -275,3 +275,39 @@ def test_default_pool_workers_run_blas_on_one_thread():
         in_worker = pool.submit(batch._openblas_threads).result()
     assert in_worker and all(count == 1 for count in in_worker), in_worker
     assert batch._openblas_threads() == before  # the driver's own pools are left as they were
+
+
+def test_batch_applies_the_reader_options_to_every_frame(tmp_path, capsys):
+    """--invalid-value / --min-depth / --max-depth in a batch: each frame reads as read_depth with those options."""
+    from sparsedepth.complete import main
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for key, seed in (("a", 0), ("b", 1)):
+        image, depth = _scene(seed=seed)
+        stored = np.rint(depth * 1000).astype(np.uint16)
+        stored[0, :6] = 2047  # a sensor's "no measurement" code
+        iio.imwrite(frames / f"rgb_{key}.png", image)
+        iio.imwrite(frames / f"depth_{key}.png", stored)
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = ["--batch", frames, "--depth-scale", "mm", "--fill-holes", "--invalid-value", "2047", "--min-depth", "1.1",
+            "--max-depth", "2.5", "--csv", tmp_path / "m.csv", "--outdir", out, "--workers", "1", "-q"]
+    assert main([str(a) for a in argv]) == 0, capsys.readouterr().err
+    rows = {row["name"]: row for row in _read_csv(tmp_path / "m.csv")}
+    for key in ("a", "b"):
+        raw = sd.read_depth(frames / f"depth_{key}.png", scale="mm", invalid_values=(2047,), min_depth=1.1,
+                            max_depth=2.5)
+        expected = evaluate_frame(sd.read_image(frames / f"rgb_{key}.png"), raw, task="fill")
+        assert int(rows[key]["observed"]) == int(np.isfinite(raw).sum()) < raw.size - 6
+        np.testing.assert_allclose(np.load(out / f"{key}.npy"), expected.depth, rtol=0, atol=1e-9)
+    # the same command resumes (the options are part of the settings); other options are refused
+    capsys.readouterr()
+    assert main([str(a) for a in argv]) == 0
+    assert "2 skipped" in capsys.readouterr().out
+    assert main([str(a) for a in argv] + ["--max-depth", "2.4"]) == 2  # the last --max-depth counts
+    assert "--overwrite" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="min_depth"):
+        BatchOptions(min_depth=3.0, max_depth=2.0)
+    with pytest.raises(TypeError, match="invalid_values"):
+        BatchOptions(invalid_values=[2047])
