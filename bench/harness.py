@@ -30,6 +30,7 @@ import os
 import platform
 import sys
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -136,14 +137,21 @@ class Method:
     key: tuple = ()
 
 
-def ours(name="ours", *, weights=None, solver="auto", tol=None, max_iter=None) -> Method:
-    """``sparsedepth.complete_depth``; ``weights=None`` reads ``sd.DEFAULT_WEIGHTS`` now."""
+def ours(name="ours", *, weights=None, solver="auto", tol=None, max_iter=None, clip_to_observed=True) -> Method:
+    """``sparsedepth.complete_depth``; ``weights=None`` reads ``sd.DEFAULT_WEIGHTS`` now.
+
+    ``clip_to_observed=False`` keeps the solver's minimiser as it is (the solver table compares optimisers, not
+    the range clamp that follows them); the range clamp's warning is not shown (its count is in the result).
+    """
     w = sd.DEFAULT_WEIGHTS if weights is None else weights
 
     def run(image, sparse, mask):
-        return sd.complete_depth(image, sparse, mask, weights=w, solver=solver, tol=tol, max_iter=max_iter)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", sd.ClampWarning)
+            return sd.complete_depth(image, sparse, mask, weights=w, solver=solver, tol=tol, max_iter=max_iter,
+                                     clip_to_observed=clip_to_observed)
 
-    return Method(name, run, ("complete", w, solver, tol, max_iter))
+    return Method(name, run, ("complete", w, solver, tol, max_iter, clip_to_observed))
 
 
 NEAREST = Method("nearest", lambda image, sparse, mask: sd.nearest_fill(sparse, mask), ("nearest",))
