@@ -9,7 +9,13 @@ in :data:`SOLVERS`, their options (with defaults) in :data:`SOLVER_OPTIONS`.
 :func:`solve` works in normalised units: the depth is divided by a power of
 two ``s`` near its median (:func:`depth_scale`) and the objective becomes
 ``F / s²`` (:func:`scaled_objective`), so every solver, its defaults and its
-tolerances see data of order 1 whatever the unit.  Every relative stopping
+tolerances see data of order 1 whatever the unit.  Every solver's output
+carries a duality gap (:mod:`sparsedepth.certificate`), a bound on
+``F(z) − F*``; ``converged`` needs the solver's own rule (below) and ``gap
+<= gap_tol · max(F, 1e-7 F(0))`` (option ``gap_tol``: 1e-6 for ``direct``,
+``cg``, ``amg`` and ``admm``, 1e-4 for ``irls``, 1e-2 for ``lbfgsb``, 1e-1
+for ``adam``, whose smoothed objective is ~1e-4 to 1e-3 above the exact
+optimum).  Every relative stopping
 test on ``F`` has an absolute floor (:func:`_objective_floor`), so ``F* = 0``
 converges; a solver that claims convergence at its start must pass a
 projected-gradient check.
@@ -456,13 +462,19 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     further wait twice the previous one, at most ``4 check_every``, so that
     a slowly converging run is not dominated by polishes); the solver stops
     when a polish changes the best polished ``F`` by at most ``check_rtol ·
-    F`` (default 2e-7).  This is a heuristic, not a
-    certificate: the polished ``F`` can stall while ADMM slowly releases a
-    wrongly tied edge.  The best polished point is returned if it is below the
+    F`` (default 2e-7) AND the duality gap of the best polished point
+    (:class:`~sparsedepth.certificate.Certificate`, dual point ``ρλ`` on the
+    tied rows) is at most ``gap_tol · max(F, 1e-7 F(0))`` (option
+    ``gap_tol``, default 1e-6).  The agreement alone is a heuristic (two
+    polishes can land on the same wrong tied set); when the certificate
+    refuses it, ADMM goes on iterating and polishing until it passes or
+    ``max_iter``, and the message says so.  The best polished point is returned if it is below the
     last ADMM iterate, so the reported ``F`` is exact and ``z >= 0``.  With
     ``polish=False``, or when the reduced model is singular (a component
     without any quadratic term), it is plain ADMM stopped by
-    ``r_k, s_k <= tol``.
+    ``r_k, s_k <= tol``, converged when its duality gap (tied rows: ``u =
+    0``) passes ``gap_tol`` too.  The result carries the gap of the
+    returned point.
 
     ρ (option ``rho``; default :func:`_default_rho`) may be adapted by
     residual balancing (factor 2 when one residual exceeds 10× the other,
@@ -483,7 +495,8 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     Options: ``rho``, ``relaxation`` (1.9), ``inner_rtol``, ``inner_factor``,
     ``inner_max_iter``, ``adapt_iters``, ``preconditioner``, ``polish``,
     ``polish_rounds``, ``check_every``, ``check_rtol``, ``polish_rtol``
-    (1e-7), ``polish_preconditioner`` (``"jacobi"``; or ``"amg"``).
+    (1e-7), ``polish_preconditioner`` (``"jacobi"``; or ``"amg"``),
+    ``gap_tol`` (1e-6).
 
     References
     ----------
