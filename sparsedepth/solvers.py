@@ -473,7 +473,8 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     ``polish=False``, or when the reduced model is singular (a component
     without any quadratic term), it is plain ADMM stopped by
     ``r_k, s_k <= tol``, converged when its duality gap (tied rows: ``u =
-    0``) passes ``gap_tol`` too.  The result carries the gap of the
+    0``) passes ``gap_tol`` too.  Where the gap cannot be computed (NaN:
+    the quadratic part's matrix is singular) the solver's own rules decide.  The result carries the gap of the
     returned point.
 
     ρ (option ``rho``; default :func:`_default_rho`) may be adapted by
@@ -606,7 +607,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
             certificate = Certificate(objective, nonnegative=True, fit_max_iter=0)
             gap = certificate.gap(z_stop, p=rho * lam, tied=u == 0)
             certified = (z_stop, gap)
-            if not gap <= _gap_threshold(objective, objective.value(z_stop), gap_tol):
+            if not (np.isnan(gap) or gap <= _gap_threshold(objective, objective.value(z_stop), gap_tol)):
                 converged = False
                 message += (f"; NOT converged: duality gap {_relative(gap, objective.value(z_stop)):.1e} (relative) "
                             f"> gap_tol {gap_tol:.1e}")
@@ -632,7 +633,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
                     certificate = Certificate(objective, nonnegative=True, fit_max_iter=0)
                 gap = certificate.gap(best[1], p=rho * lam)
                 certified = (best[1], gap)
-                if gap <= _gap_threshold(objective, best[0], gap_tol):
+                if np.isnan(gap) or gap <= _gap_threshold(objective, best[0], gap_tol):
                     converged = True
                     message = (f"active-set polish at iteration {k} changed the best polished F by "
                                f"{_relative(F_prev - F_pol, F_pol):.1e} (relative), |.| <= check_rtol "

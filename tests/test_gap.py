@@ -181,3 +181,19 @@ def test_converged_admm_is_within_its_gap_of_the_reference(problem):
     if out.converged:
         assert out.gap <= 1e-6 * F * (1 + 1e-12)
         assert F - out.gap <= F_ref + rounding
+
+
+def test_gap_is_nan_where_the_quadratic_part_is_singular():
+    """delta = 0 and no quadratic smoothness: A = alpha M is singular, no bound; the solvers' own rules decide."""
+    rng = np.random.default_rng(1)
+    image = rng.random((6, 7, 3))
+    depth = rng.uniform(1, 3, (6, 7))
+    mask = rng.random((6, 7)) < 0.4
+    mask[0, 0] = True
+    w = Weights(alpha=1.0, beta=0.0, gamma=0.1, delta=0.0, kappa=0.0, beta_image=0.0, beta_second=0.0,
+                beta_second_image=0.0)
+    for solver in ("admm", "irls"):
+        res = sd.complete_depth(image, np.where(mask, depth, np.nan), mask, weights=w, solver=solver,
+                                clip_to_observed=False)
+        assert np.isnan(res.gap) and "not available" in res.message
+        assert res.converged, res.message
