@@ -197,4 +197,5 @@ def complete_depth(
         weights=weights,
         runtime=runtime,
         depth_range=depth_range,
+        gap=out.gap,
     )

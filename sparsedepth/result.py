@@ -95,6 +95,20 @@ class CompletionResult:
     depth_range : tuple of float
         ``(low, high)`` the depth was clamped to: the smallest and largest
         observed depth with ``clip_to_observed=True``, else ``(0, inf)``.
+    gap : float
+        Duality gap: an upper bound on ``F(z) − F*`` in the units of
+        :attr:`objective`, for the solver's point ``z`` before the range clamp
+        (the same point when :attr:`clamped` is 0) and ``F*`` the minimum
+        over ``z >= 0`` (over all ``z`` for the γ = 0 solvers ``direct``,
+        ``cg`` and ``amg``); see :func:`sparsedepth.certificate.duality_gap`.
+        A proven bound when the quadratic part has a positive lower bound on
+        its curvature (``delta > 0``, or every pixel observed); otherwise
+        (``delta = 0``) the error term of the inexact linear solve is left
+        out and it is an estimate accurate to that solve's tolerance
+        (relative residual 1e-10).  NaN when it cannot be computed: the
+        quadratic part's matrix is singular (``delta = 0`` with no quadratic
+        smoothness term).  ``converged`` requires ``gap <= gap_tol ·
+        max(F, 1e-7 F(0))`` (solver option ``gap_tol``).
     """
 
     depth: np.ndarray
@@ -109,6 +123,7 @@ class CompletionResult:
     weights: Optional[Weights] = None
     runtime: float = 0.0
     depth_range: tuple = (0.0, float("inf"))
+    gap: float = float("nan")
 
     def history_array(self, name: str) -> np.ndarray:
         """One field of :attr:`history` as an array (``None`` becomes NaN)."""

@@ -1,0 +1,199 @@
+"""The duality-gap certificate: result.gap bounds F(z) − F* for every solver; ADMM converges only when it is small."""
+
+import warnings
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from scipy.sparse.linalg import spsolve
+
+import sparsedepth as sd
+from sparsedepth import Weights, build_objective
+from sparsedepth.certificate import curvature_lower_bound, duality_gap
+from sparsedepth.solvers import SOLVER_OPTIONS, check_solver_arguments, solve
+
+from conftest import make_problem
+
+L1 = Weights.paper(alpha=1.0, beta=0.2, gamma=0.05, delta=0.01, kappa=5.0)
+#: the ADMM false-convergence example: delta = 0, kappa = 0 (before the certificate: F = 53.14, converged=True)
+FALSE_W = Weights(alpha=4.853213859737187, beta=0.001753763688944511, gamma=0.2302580400763616, delta=0, kappa=0,
+                  beta_image=0.0061036840889917435, beta_second=0, beta_second_image=0.003532944157929304)
+
+
+def _false_convergence_problem():
+    rng = np.random.default_rng(0)
+    h, w = rng.integers(2, 13, 2)
+    image = rng.random((h, w, 3))
+    depth = rng.uniform(0.5, 10, (h, w))
+    mask = rng.random((h, w)) < rng.uniform(0, 0.6)
+    mask.flat[rng.choice(h * w, 2, replace=False)] = True
+    return image, np.where(mask, depth, np.nan), mask
+
+
+def _reference(obj, coarse):
+    """F* from two independent runs that must agree: a long plain ADMM run (no polish) and a polished one."""
+    plain, _ = solve(obj, coarse.ravel(), solver="admm", tol=1e-10, max_iter=20000, options={"polish": False})
+    polished, _ = solve(obj, coarse.ravel(), solver="admm", options={"polish_rtol": 1e-12})
+    F_plain, F_pol = obj.value(plain.z), obj.value(polished.z)
+    assert abs(F_plain - F_pol) <= 1e-7 * F_pol, (F_plain, F_pol)
+    return min(F_plain, F_pol)
+
+
+@pytest.fixture(scope="module")
+def l1_problem():
+    image, sparse, mask, _ = make_problem((14, 18))
+    obj, coarse, _ = build_objective(image, sparse, mask, weights=L1)
+    return obj, coarse, _reference(obj, coarse)
+
+
+@pytest.mark.parametrize("solver,max_iter", [("irls", None), ("irls", 3), ("admm", None), ("admm", 4),
+                                             ("lbfgsb", None), ("lbfgsb", 15), ("adam", None), ("adam", 200)])
+def test_gap_bounds_the_true_gap_for_every_l1_solver(l1_problem, solver, max_iter):
+    obj, coarse, F_ref = l1_problem
+    out, _ = solve(obj, coarse.ravel(), solver=solver, max_iter=max_iter)
+    F = obj.value(out.z)
+    assert np.isfinite(out.gap) and out.gap >= 0
+    # F_ref >= F*, so F − F_ref <= F − F* <= gap; capped runs are far from the optimum and test the bound there
+    assert out.gap >= F - F_ref - 1e-12 * F_ref, (solver, out.gap, F - F_ref)
+    if out.converged:
+        assert out.gap <= SOLVER_OPTIONS[solver]["gap_tol"] * F * (1 + 1e-12)
+
+
+def test_gap_is_tight_at_a_converged_admm_result(l1_problem):
+    obj, coarse, F_ref = l1_problem
+    out, _ = solve(obj, coarse.ravel(), solver="admm")
+    assert out.converged, out.message
+    assert out.gap <= 1e-6 * obj.value(out.z)
+    assert obj.value(out.z) - out.gap <= F_ref * (1 + 1e-12)
+
+
+def test_gap_is_in_user_units():
+    image, sparse, mask, _ = make_problem((10, 12))
+    base = sd.complete_depth(image, sparse, mask, weights=L1, solver="admm", max_iter=5, clip_to_observed=False)
+    # depth x 1000 with gamma x 1000 is the same problem with F x 1e6 (the normalised units are identical)
+    big = sd.complete_depth(image, sparse * 1000.0, mask, weights=L1.replace(gamma=L1.gamma * 1000.0), solver="admm",
+                            max_iter=5, clip_to_observed=False)
+    assert big.objective == pytest.approx(1e6 * base.objective, rel=1e-9)
+    assert big.gap == pytest.approx(1e6 * base.gap, rel=1e-6)
+    assert base.gap > 0
+
+
+@pytest.mark.parametrize("solver,max_iter", [("direct", None), ("cg", 3), ("amg", None), ("cg", None), ("admm", None)])
+def test_quadratic_gap_equals_the_true_gap(solver, max_iter):
+    image, sparse, mask, _ = make_problem((12, 15))
+    obj, coarse, _ = build_objective(image, sparse, mask, weights=L1.replace(gamma=0.0))
+    A, b, c = obj.normal_equations()
+    F_star = obj.value(spsolve(sp.csc_matrix(A), b))  # the unconstrained minimum
+    out, _ = solve(obj, coarse.ravel(), solver=solver, max_iter=max_iter)
+    true_gap = obj.value(out.z) - F_star
+    # for a quadratic the certificate is exact: gap = ¼ rᵀA⁻¹r = F(z) − F*
+    assert out.gap == pytest.approx(true_gap, rel=1e-6, abs=1e-12 * F_star)
+    if max_iter is not None:
+        assert true_gap > 1e-6 * F_star  # a capped run leaves a gap to measure
+
+
+def test_dual_point_from_admm_multiplier_and_the_nonnegativity_multiplier():
+    """Independent check of the bound at an arbitrary point: against F(z) − F* computed from a reference."""
+    image, sparse, mask, _ = make_problem((10, 11))
+    obj, coarse, _ = build_objective(image, sparse, mask, weights=L1)
+    F_ref = _reference(obj, coarse)
+    rng = np.random.default_rng(3)
+    z = np.maximum(coarse.ravel() + 0.3 * rng.standard_normal(obj.size), 0.0)
+    z[:5] = 0.0  # points on the bound z >= 0
+    gap = duality_gap(obj, z)
+    assert gap >= obj.value(z) - F_ref
+    assert curvature_lower_bound(obj) == pytest.approx(L1.delta)
+
+
+def test_false_convergence_example_is_no_longer_reported_converged():
+    image, sparse, mask = _false_convergence_problem()
+    obj, coarse, _ = build_objective(image, sparse, mask, weights=FALSE_W)
+    ref, _ = solve(obj, coarse.ravel(), solver="admm", tol=1e-10, max_iter=20000, options={"polish": False})
+    F_ref = obj.value(ref.z)
+    lb, _ = solve(obj, coarse.ravel(), solver="lbfgsb")
+    assert abs(obj.value(lb.z) - F_ref) <= 1e-4 * F_ref  # the two references agree (lbfgsb: smoothed problem)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = sd.complete_depth(image, sparse, mask, weights=FALSE_W, solver="admm", clip_to_observed=False)
+    assert res.objective == pytest.approx(obj.value(res.depth.ravel()))
+    if res.converged:
+        assert res.objective <= F_ref * (1 + 1e-6), res.message
+    else:
+        assert "gap" in res.message
+    assert res.objective - res.gap <= F_ref * (1 + 1e-9)
+
+
+def test_other_solvers_report_a_refused_certificate():
+    image, sparse, mask, _ = make_problem((10, 12))
+    res = sd.complete_depth(image, sparse, mask, weights=L1, solver="lbfgsb", options={"gap_tol": 1e-12})
+    assert not res.converged and "duality gap" in res.message and "gap_tol" in res.message
+    ok = sd.complete_depth(image, sparse, mask, weights=L1, solver="lbfgsb")
+    assert ok.converged, ok.message
+
+
+def test_admm_keeps_iterating_while_the_certificate_refuses():
+    image, sparse, mask, _ = make_problem((12, 14))
+    default = sd.complete_depth(image, sparse, mask, weights=L1, solver="admm")
+    assert default.converged and "duality gap" in default.message, default.message
+    strict = sd.complete_depth(image, sparse, mask, weights=L1, solver="admm", max_iter=400,
+                               options={"gap_tol": 1e-30})
+    # the polishes agreed (as in the default run) but the certificate refused: it went on to max_iter
+    assert not strict.converged and "polishes agreed" in strict.message, strict.message
+    assert strict.message.startswith("reached max_iter = 400")
+
+
+def test_gap_tol_is_a_checked_option():
+    for solver in ("direct", "cg", "amg", "irls", "admm", "lbfgsb", "adam"):
+        assert check_solver_arguments(solver, options={"gap_tol": 0.5})[2]["gap_tol"] == 0.5
+        with pytest.raises(ValueError, match="gap_tol"):
+            check_solver_arguments(solver, options={"gap_tol": -1.0})
+
+
+@st.composite
+def _problems(draw):
+    h = draw(st.integers(2, 7))
+    w = draw(st.integers(2, 7))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    image = rng.random((h, w, 3))
+    depth = rng.uniform(0.5, 10.0, (h, w))
+    mask = rng.random((h, w)) < draw(st.floats(0.1, 0.6))
+    mask.flat[rng.choice(h * w, 2, replace=False)] = True
+    weights = Weights(alpha=draw(st.floats(0.5, 5.0)), beta=draw(st.floats(1e-3, 0.3)),
+                      gamma=draw(st.floats(0.01, 0.3)), delta=draw(st.sampled_from([0.0, 1e-3, 1e-2])),
+                      kappa=draw(st.floats(0.0, 10.0)), beta_image=draw(st.sampled_from([0.0, 0.01])))
+    return image, np.where(mask, depth, np.nan), mask, weights
+
+
+@settings(derandomize=True, database=None, deadline=None, max_examples=12,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(problem=_problems())
+def test_converged_admm_is_within_its_gap_of_the_reference(problem):
+    image, sparse, mask, weights = problem
+    obj, coarse, _ = build_objective(image, sparse, mask, weights=weights)
+    ref, _ = solve(obj, coarse.ravel(), solver="lbfgsb", tol=1e-15, max_iter=20000)
+    F_ref = obj.value(ref.z)
+    out, _ = solve(obj, coarse.ravel(), solver="admm")
+    F = obj.value(out.z)
+    rounding = 1e-10 * F_ref
+    assert out.gap >= F - F_ref - rounding  # gap >= F − F_ref >= ... (F* <= F_ref)
+    if out.converged:
+        assert out.gap <= 1e-6 * F * (1 + 1e-12)
+        assert F - out.gap <= F_ref + rounding
+
+
+def test_gap_is_nan_where_the_quadratic_part_is_singular():
+    """delta = 0 and no quadratic smoothness: A = alpha M is singular, no bound; the solvers' own rules decide."""
+    rng = np.random.default_rng(1)
+    image = rng.random((6, 7, 3))
+    depth = rng.uniform(1, 3, (6, 7))
+    mask = rng.random((6, 7)) < 0.4
+    mask[0, 0] = True
+    w = Weights(alpha=1.0, beta=0.0, gamma=0.1, delta=0.0, kappa=0.0, beta_image=0.0, beta_second=0.0,
+                beta_second_image=0.0)
+    for solver in ("admm", "irls"):
+        res = sd.complete_depth(image, np.where(mask, depth, np.nan), mask, weights=w, solver=solver,
+                                clip_to_observed=False)
+        assert np.isnan(res.gap) and "not available" in res.message
+        assert res.converged, res.message
