@@ -1203,9 +1203,10 @@ def _certify(objective, z, solver, options):
     Rows of ``K`` with ``|(Kz)_k| <= ε`` count as tied, with ``ε`` the
     smoothing of L-BFGS-B and Adam (:attr:`Objective.l1_smoothing`, 1e-4 at
     depth ~1), the same for IRLS (whose iterates leave differences of ~1e-5
-    on edges that the optimum ties: with its final ``ε`` of 1e-7 the bound
-    was ~800 times larger on a 24x30 test problem) and exact ties otherwise
-    (ADMM's polished points, the γ = 0 solvers).
+    on edges that the optimum ties, far above its final ``ε``) and exact
+    ties otherwise (ADMM's polished points, the γ = 0 solvers).  For the
+    γ = 0 solvers the one-product bound ``¼ ‖r‖² / λ_min(A)`` is returned
+    when it already meets ``gap_tol``.
     """
     if solver in _QUADRATIC_SOLVERS and not objective.has_l1:
         # unconstrained quadratic problem: F(z) − F* = ¼ rᵀA⁻¹r <= ¼ ‖r‖² / λ_min(A), r = 2(Az − b); this costs one
