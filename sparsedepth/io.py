@@ -492,6 +492,20 @@ def _png_declared_size(path: Path, where: str) -> tuple[int, int] | None:
     return height, width
 
 
+@contextlib.contextmanager
+def _as_value_error(where: str, error) -> Iterator[None]:
+    """Exceptions raised in the block by a third-party decoder become ``error(where, exc)``, a ValueError.
+
+    ``MemoryError`` passes through: running out of memory says nothing about the file.
+    """
+    try:
+        yield
+    except MemoryError:
+        raise
+    except Exception as exc:
+        raise error(where, exc) from exc
+
+
 def _decode_error(where: str, exc: BaseException) -> ValueError:
     text = " ".join(str(exc).split()) or type(exc).__name__
     return ValueError(f"could not decode {where}: {text}")
@@ -519,39 +533,23 @@ def _read_pillow(path: Path, max_pixels: int | None, where: str, label: str) -> 
         except Exception as exc:  # Pillow raises many types on junk (SyntaxError, struct.error, ...)
             raise _decode_error(where, exc) from exc
         _check_pixels(height, width, max_pixels, where, label)
-        try:
+        with _as_value_error(where, _decode_error):
             return np.asarray(iio.imread(path, plugin="pillow"))
-        except MemoryError:
-            raise
-        except Exception as exc:
-            raise _decode_error(where, exc) from exc
 
 
 def _read_tiff(path: Path, max_pixels: int | None, where: str, label: str) -> np.ndarray:
     """First page of a TIFF with tifffile (keeps 16-bit and float32 samples)."""
-    try:
+    with _as_value_error(where, _decode_error):
         handle = tifffile.TiffFile(path)
-    except MemoryError:
-        raise
-    except Exception as exc:
-        raise _decode_error(where, exc) from exc
     with handle:
-        try:
+        with _as_value_error(where, _decode_error):
             page = handle.pages[0]
             shape = tuple(int(n) for n in page.shape)
-        except MemoryError:
-            raise
-        except Exception as exc:
-            raise _decode_error(where, exc) from exc
         if len(shape) < 2:
             raise ValueError(f"{where}: TIFF page has shape {shape}, expected (H, W) or (H, W, C).")
         _check_pixels(shape[0], shape[1], max_pixels, where, label)
-        try:
+        with _as_value_error(where, _decode_error):
             return np.asarray(page.asarray())
-        except MemoryError:
-            raise
-        except Exception as exc:
-            raise _decode_error(where, exc) from exc
 
 
 def _check_byteorder(byteorder, label: str) -> str | None:
@@ -1179,7 +1177,7 @@ def _check_stored_array(shape, dtype, where: str, max_pixels, label: str, *, all
 
 def _read_npy_stream(fh, where: str, max_pixels, label: str, *, allow_bool=False) -> np.ndarray:
     """Read one ``.npy`` array from an open binary stream, checking its header first."""
-    try:
+    with _as_value_error(where, _load_error):  # bad magic, malformed header dict, pickled (object) dtype, ...
         version = np.lib.format.read_magic(fh)
         if version == (1, 0):
             shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
@@ -1187,19 +1185,11 @@ def _read_npy_stream(fh, where: str, max_pixels, label: str, *, allow_bool=False
             shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
         else:
             raise ValueError(f"unsupported .npy format version {version}")
-    except MemoryError:
-        raise
-    except Exception as exc:  # bad magic, malformed header dict, pickled (object) dtype, ...
-        raise _load_error(where, exc) from exc
     _check_stored_array(shape, dtype, where, max_pixels, label, allow_bool=allow_bool)
     count = int(shape[0]) * int(shape[1])
     nbytes = count * dtype.itemsize
-    try:
+    with _as_value_error(where, _load_error):  # OSError, zipfile.BadZipFile (CRC), zlib.error, ...
         data = fh.read(nbytes)
-    except MemoryError:
-        raise
-    except Exception as exc:  # OSError, zipfile.BadZipFile (CRC), zlib.error, ...
-        raise _load_error(where, exc) from exc
     if len(data) != nbytes:
         raise ValueError(f"could not load {where}: {len(data)} bytes of data, expected {nbytes} (truncated).")
     array = np.frombuffer(data, dtype=dtype, count=count)
@@ -1218,12 +1208,8 @@ def _load_array(path: Path, key: str | None, max_pixels, where: str, label: Call
                 return _read_npy_stream(fh, where, max_pixels, limit, allow_bool=allow_bool), where
         except OSError as exc:
             raise ValueError(f"{where}: cannot be read ({exc}).") from None
-    try:
+    with _as_value_error(where, _load_error):
         archive = zipfile.ZipFile(path)
-    except MemoryError:
-        raise
-    except Exception as exc:
-        raise _load_error(where, exc) from exc
     with archive:
         members = [m for m in archive.namelist() if m.endswith(".npy")]
         names = [m[:-4] for m in members]
@@ -1318,12 +1304,8 @@ def _hdf5_dataset(handle: h5py.File, key: str, where) -> h5py.Dataset:
 
 
 def _hdf5_read(dset: h5py.Dataset, source: str, index=()):
-    try:
+    with _as_value_error(source, _load_error):  # OSError / RuntimeError / KeyError from corrupt chunks or filters
         return dset[index]
-    except MemoryError:
-        raise
-    except Exception as exc:  # OSError / RuntimeError / KeyError from corrupt chunks or filters
-        raise _load_error(source, exc) from exc
 
 
 def read_nyu_h5(path, *, max_pixels: int | None = MAX_PIXELS, name: str = "path") -> tuple[np.ndarray, np.ndarray]:
@@ -1499,7 +1481,8 @@ class NYUDepthV2Labeled:
         depth = _as_depth(_hdf5_read(self._depths, f"{self._where} depths[{i}]", i).T, f"{self._where} depths[{i}]")
         raw = None
         if self._raw is not None:
-            raw = _as_depth(_hdf5_read(self._raw, f"{self._where} rawDepths[{i}]", i).T, f"{self._where} rawDepths[{i}]")
+            source = f"{self._where} rawDepths[{i}]"
+            raw = _as_depth(_hdf5_read(self._raw, source, i).T, source)
         return image, depth, raw
 
     def __iter__(self):
