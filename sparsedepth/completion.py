@@ -147,8 +147,8 @@ def complete_depth(
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     observed_values = depth[observed]
     depth_range = (float(observed_values.min()), float(observed_values.max())) if clip_to_observed else (0.0, np.inf)
+    scale = depth_scale(observed_values)
     del observed_values
-    scale = depth_scale(depth[observed])
     # the objective is built in units of `scale` (depth / s, gamma / s, eps / s: F / s²), see Notes
     depth /= scale
     objective, coarse, observed = build_objective(
