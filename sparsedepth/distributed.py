@@ -25,7 +25,7 @@ import warnings
 from pathlib import Path
 from typing import Callable, Sequence
 
-from .batch import BatchOptions, BatchSummary, FileFrame, NYUFrame, run_batch
+from .batch import BatchOptions, BatchSummary, _absolute, run_batch
 
 __all__ = [
     "DEFAULT_TIMEOUT",
@@ -162,27 +162,20 @@ def absolute_frames(frames: Sequence) -> list:
 
     Parameters
     ----------
-    frames : sequence of FileFrame or NYUFrame
+    frames : sequence of FileFrame, NYUFrame or NYUH5Frame
 
     Returns
     -------
     list
-        New frame objects; the given ones are not modified.  Other objects
-        are passed through unchanged.
+        New frame objects (:func:`sparsedepth.batch.run_batch`'s own rule);
+        the given ones are not modified.
+
+    Raises
+    ------
+    TypeError
+        For an object that is not a frame of :mod:`sparsedepth.batch`.
     """
-    out = []
-    for frame in frames:
-        if isinstance(frame, FileFrame):
-            frame = dataclasses.replace(
-                frame,
-                image=os.path.abspath(frame.image),
-                depth=None if frame.depth is None else os.path.abspath(frame.depth),
-                truth=None if frame.truth is None else os.path.abspath(frame.truth),
-            )
-        elif isinstance(frame, NYUFrame):
-            frame = dataclasses.replace(frame, path=os.path.abspath(frame.path))
-        out.append(frame)
-    return out
+    return [_absolute(frame) for frame in frames]
 
 
 def remove_stale_outputs(out_dir, names, out_format: str) -> list[Path]:
