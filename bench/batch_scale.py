@@ -7,7 +7,7 @@ when that folder is absent) go through ``sparsedepth.batch.run_batch`` twice
 per round:
 
 * ``pool`` - a ``ProcessPoolExecutor(max_workers=W)``;
-* ``dask`` - ``sparsedepth.distributed.run_batch_on_cluster`` on a
+* ``dask`` - ``sparsedepth.batch.distributed.run_batch_on_cluster`` on a
   ``LocalCluster(n_workers=W, threads_per_worker=1, processes=True)`` over
   TCP on 127.0.0.1.
 
@@ -84,7 +84,7 @@ def _run(engine, frames, csv_path, options, workers, executor=None, client=None)
     if engine == "pool":
         summary = run_batch(frames, csv_path, options=options, executor=executor, max_workers=workers)
     else:
-        from sparsedepth.distributed import run_batch_on_cluster
+        from sparsedepth.batch.distributed import run_batch_on_cluster
 
         summary = run_batch_on_cluster(frames, csv_path, options=options, client=client)
     elapsed = time.perf_counter() - start

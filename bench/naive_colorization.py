@@ -4,7 +4,7 @@ This is a deliberately straightforward, loop-per-pixel Python translation of
 the MATLAB function (Silberman et al., NYU Depth V2 toolbox; itself a slight
 adaptation of Levin, Lischinski & Weiss, "Colorization using optimization",
 SIGGRAPH 2004).  It is the correctness and speed *reference* for
-:mod:`sparsedepth.colorization` and lives in ``bench/`` because it is slow on
+:mod:`sparsedepth.holes.colorization` and lives in ``bench/`` because it is slow on
 purpose: tens of seconds for a 640x480 frame, like the Python ports of the
 toolbox in common use.
 
@@ -18,7 +18,7 @@ Differences from the MATLAB text, all of which leave the solution unchanged:
   ``0.2989 R + 0.5870 G + 0.1140 B`` (MATLAB internally uses the unrounded
   ``0.298936021293775, 0.587043074451121, 0.114020904255103``; the difference
   is below 1e-4 and is shared with the fast implementation, see
-  :data:`sparsedepth.colorization.GREY_WEIGHTS`).
+  :data:`sparsedepth.holes.colorization.GREY_WEIGHTS`).
 * The set of known pixels is ``depth != 0`` by default (the NYU toolbox also
   treats ``depth == 10`` -- the clipped Kinect maximum -- as missing; pass
   ``known=(depth != 0) & (depth != 10)`` for that behaviour).

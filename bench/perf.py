@@ -36,7 +36,7 @@ Problems (frame ``nyu_metric3d/00000``, 5 % of the valid pixels observed,
    history; if it never does, the ratio is reported as a lower bound
    ``budget / ours``.
 3. *Hole filling*: the raw depth of the same frame (holes = NaN → 0) with
-   :func:`sparsedepth.colorization.colorization_fill` vs the per-pixel port
+   :func:`sparsedepth.holes.colorization.colorization_fill` vs the per-pixel port
    ``bench/naive_colorization.py`` (loop assembly + spsolve); best of 7
    fills against best of 2 naive runs, interleaved (the fill uses two
    threads, the naive port one).
@@ -73,8 +73,8 @@ import scipy.sparse.linalg as spla  # noqa: E402
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 import sparsedepth as sd  # noqa: E402
-from sparsedepth.colorization import colorization_fill  # noqa: E402
-from sparsedepth.solvers import solve  # noqa: E402
+from sparsedepth.holes.colorization import colorization_fill  # noqa: E402
+from sparsedepth.solvers.core import solve  # noqa: E402
 
 FRAME = "nyu_metric3d/00000"
 FRACTION = 0.05
@@ -147,7 +147,7 @@ def bench_quadratic(image, sparse, mask, weights, label, rows, *, run_spsolve=Tr
                F_ours=obj.value(out.z))
     # the parts of one solve: set-up, one V-cycle, one product with A (best of 5 each); the 0.3 s goal
     # leaves (0.3 - set-up) / (V-cycle + product) PCG iterations
-    from sparsedepth.multigrid import GridMultigrid
+    from sparsedepth.linalg.multigrid import GridMultigrid
 
     row["setup"] = min(timed(GridMultigrid, A, obj.shape, interpolation="auto")[1] for _ in range(3))
     mg = GridMultigrid(A, obj.shape, interpolation="auto")

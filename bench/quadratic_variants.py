@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import perf  # noqa: E402
 
 import sparsedepth as sd  # noqa: E402
-from sparsedepth.multigrid import GridMultigrid  # noqa: E402
+from sparsedepth.linalg.multigrid import GridMultigrid  # noqa: E402
 
 
 def _interp_1d(n, cubic):

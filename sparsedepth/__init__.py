@@ -9,11 +9,11 @@ from . import datasets, io
 from .baselines import biharmonic_fill, colorization_baseline, linear_fill, nearest_fill
 from .completion import choose_solver, complete_depth
 from .metrics import DepthMetrics, depth_metrics
-from .objective import AbsTerm, Objective, QuadraticTerm, build_objective, edge_weights
+from .objective.objective import AbsTerm, Objective, QuadraticTerm, build_objective, edge_weights
 from .result import ClampWarning, CompletionResult, IterationRecord, SolverState
 from .sampling import sample_depth, sample_mask, valid_depth_mask
-from .solvers import SOLVER_OPTIONS, SOLVERS
-from .weights import DEFAULT_WEIGHTS, Weights
+from .solvers.core import SOLVER_OPTIONS, SOLVERS
+from .objective.weights import DEFAULT_WEIGHTS, Weights
 from .datasets import (
     Frame,
     list_embedded_frames,
@@ -23,7 +23,7 @@ from .datasets import (
     load_shared_frame,
     shared_data_dir,
 )
-from .io import DEPTH_SCALES, read_depth, read_image, write_depth
+from .io.formats import DEPTH_SCALES, read_depth, read_image, write_depth
 
 __version__ = "0.1.0"
 
@@ -67,6 +67,6 @@ __all__ = [
     "datasets",
 ]
 from . import batch, holes  # noqa: E402
-from .holes import FILL_METHODS, fill_holes  # noqa: E402
+from .holes.fill import FILL_METHODS, fill_holes  # noqa: E402
 
 __all__ += ["fill_holes", "FILL_METHODS", "holes", "batch"]

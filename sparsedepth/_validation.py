@@ -2,14 +2,38 @@
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 
-__all__ = ["as_float_image", "as_depth_and_mask", "check_same_shape", "check_weights"]
+__all__ = ["as_float_image", "as_depth_and_mask", "check_same_shape", "check_weights", "check_grid_shape",
+           "is_int", "is_real"]
+
+
+def is_int(value) -> bool:
+    """True for a Python or NumPy integer that is not a bool."""
+    return isinstance(value, (numbers.Integral, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def is_real(value) -> bool:
+    """True for a Python or NumPy real number (integers included) that is not a bool."""
+    return isinstance(value, (numbers.Real, np.floating, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def check_grid_shape(shape, *, name: str = "shape") -> tuple[int, int]:
+    """Return ``shape`` as ``(H, W)`` of Python ints; ``ValueError`` unless it is two integers ``>= 1``."""
+    try:
+        values = tuple(shape)
+    except TypeError:
+        raise ValueError(f"{name} must be a pair (H, W) of integers >= 1, got {shape!r}") from None
+    if len(values) != 2 or not all(is_int(v) for v in values) or min(values) < 1:
+        raise ValueError(f"{name} must be a pair (H, W) of integers >= 1, got {shape!r}")
+    return int(values[0]), int(values[1])
 
 
 def check_weights(weights, *, name: str = "weights") -> None:
     """Raise ``TypeError`` unless ``weights`` is a :class:`sparsedepth.Weights`."""
-    from .weights import Weights
+    from .objective.weights import Weights
 
     if not isinstance(weights, Weights):
         hint = "use sd.Weights(**d)" if isinstance(weights, dict) else "use sd.Weights(alpha=..., gamma=...)"

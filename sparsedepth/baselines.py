@@ -159,7 +159,7 @@ def biharmonic_fill(sparse_depth, mask=None) -> np.ndarray:
 def colorization_baseline(image, sparse_depth, mask=None, **options) -> np.ndarray:
     """Levin/NYU-toolbox colorization fill of the sparse observations.
 
-    A thin wrapper over :func:`sparsedepth.colorization.colorization_fill`
+    A thin wrapper over :func:`sparsedepth.holes.colorization.colorization_fill`
     with the sparse depth as the known pixels, so that it is called like the
     other baselines.
 
@@ -187,7 +187,7 @@ def colorization_baseline(image, sparse_depth, mask=None, **options) -> np.ndarr
         As :func:`linear_fill`, or an image whose height and width differ
         from the depth's.
     """
-    from .colorization import colorization_fill
+    from .holes.colorization import colorization_fill
 
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     check_same_shape(np.shape(image)[:2], depth.shape, "image", "sparse_depth")

@@ -7,10 +7,10 @@ import warnings
 import numpy as np
 
 from ._validation import as_depth_and_mask, check_weights
-from .objective import DEFAULT_L1_SMOOTHING, build_objective
+from .objective.objective import DEFAULT_L1_SMOOTHING, build_objective
 from .result import ClampWarning, CompletionResult
-from .solvers import SOLVERS, _solve_scaled, check_solver_arguments, depth_scale
-from .weights import DEFAULT_WEIGHTS, Weights
+from .solvers.core import SOLVERS, solve_scaled, check_solver_arguments, depth_scale
+from .objective.weights import DEFAULT_WEIGHTS, Weights
 
 __all__ = ["complete_depth", "choose_solver"]
 
@@ -43,7 +43,7 @@ def complete_depth(
              + γ Σ w (|∂x z| + |∂y z|) + δ Σ (z − z_c)²   (+ optional terms)
 
     with ``w = exp(−κ ‖∇I‖)`` and ``z_c`` the nearest-neighbour fill of the
-    observations (see :class:`~sparsedepth.weights.Weights`).
+    observations (see :class:`~sparsedepth.objective.weights.Weights`).
 
     Parameters
     ----------
@@ -55,7 +55,7 @@ def complete_depth(
         True where depth is observed.  Default: finite and ``> 0`` (0 and NaN
         mean "no measurement"; a negative value is then an error).
     weights : Weights
-        Term weights; default :data:`~sparsedepth.weights.DEFAULT_WEIGHTS`.
+        Term weights; default :data:`~sparsedepth.objective.weights.DEFAULT_WEIGHTS`.
     solver : {"auto", "direct", "cg", "amg", "irls", "admm", "lbfgsb", "adam"}
         ``"auto"`` is ``"amg"`` for γ = 0 and ``"admm"`` otherwise.  The stopping
         rule of each is in :mod:`sparsedepth.solvers`.
@@ -165,7 +165,7 @@ def complete_depth(
         if not np.all(np.isfinite(start)):
             raise ValueError("x0 contains NaN or infinite values")
         start = np.maximum(start.ravel(), 0.0) / scale
-    out, runtime = _solve_scaled(objective, start, scale=scale, solver=name, tol=tol, max_iter=max_iter,
+    out, runtime = solve_scaled(objective, start, scale=scale, solver=name, tol=tol, max_iter=max_iter,
                                  callback=callback, options=options)
     z = out.z  # in the user's units
     low, high = depth_range

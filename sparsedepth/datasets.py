@@ -28,7 +28,7 @@ from typing import Callable
 
 import numpy as np
 
-from .io import (
+from .io.formats import (
     NYUDepthV2Labeled,
     StereoCalibration,
     read_calib,

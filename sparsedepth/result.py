@@ -7,7 +7,7 @@ from typing import Optional
 
 import numpy as np
 
-from .weights import Weights
+from .objective.weights import Weights
 
 __all__ = ["IterationRecord", "SolverState", "CompletionResult", "ClampWarning"]
 
@@ -100,7 +100,7 @@ class CompletionResult:
         :attr:`objective`, for the solver's point ``z`` before the range clamp
         (the same point when :attr:`clamped` is 0) and ``F*`` the minimum
         over ``z >= 0`` (over all ``z`` for the γ = 0 solvers ``direct``,
-        ``cg`` and ``amg``); see :func:`sparsedepth.certificate.duality_gap`.
+        ``cg`` and ``amg``); see :func:`sparsedepth.solvers.certificate.duality_gap`.
         A proven bound when the quadratic part has a positive lower bound on
         its curvature (``delta > 0``, or every pixel observed); otherwise
         (``delta = 0``) the error term of the inexact linear solve is left

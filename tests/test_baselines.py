@@ -73,8 +73,8 @@ def test_biharmonic_fill_much_better_than_nearest_on_plane():
 
 
 def test_colorization_baseline_matches_colorization_fill_and_constant():
-    pytest.importorskip("sparsedepth.colorization")
-    from sparsedepth.colorization import colorization_fill
+    pytest.importorskip("sparsedepth.holes.colorization")
+    from sparsedepth.holes.colorization import colorization_fill
 
     rng = np.random.default_rng(3)
     image = rng.random((20, 30, 3))

@@ -266,7 +266,7 @@ def test_clip_to_observed_option_is_checked_and_passed_on(tmp_path):
 def test_default_pool_workers_run_blas_on_one_thread():
     from concurrent.futures import ProcessPoolExecutor
 
-    from sparsedepth import batch
+    from sparsedepth.batch import run as batch
 
     before = batch._openblas_threads()
     if not before:

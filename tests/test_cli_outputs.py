@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import sparsedepth as sd
-import sparsedepth.complete as cli
+import sparsedepth.cli.command as cli
 
 from conftest import make_scene as _scene
-from sparsedepth.complete import PROG, main
+from sparsedepth.cli.command import PROG, main
 
 FAST = ["--gamma", "0", "--solver", "direct"]  # quadratic objective, exact direct solve
 
@@ -317,7 +317,7 @@ def test_demo_outdir_that_is_a_file_is_refused(tmp_path, capsys):
 
 
 def test_commit_removes_everything_when_a_writer_raises(tmp_path):
-    from sparsedepth._outputs import Named, commit
+    from sparsedepth.cli.outputs import Named, commit
 
     (tmp_path / "old.txt").write_bytes(b"old")
     targets = [Named("--a", str(tmp_path / "old.txt"), tmp_path / "old.txt"),

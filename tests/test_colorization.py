@@ -8,7 +8,7 @@ import pytest
 import scipy.sparse
 import scipy.sparse.linalg
 
-from sparsedepth.colorization import colorization_fill, colorization_weights
+from sparsedepth.holes.colorization import colorization_fill, colorization_weights
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -174,8 +174,8 @@ def test_input_not_modified():
 
 
 def test_every_public_name_exists():
-    # ``from sparsedepth.colorization import *`` must not fail on a stale ``__all__`` entry
-    import sparsedepth.colorization as module
+    # ``from sparsedepth.holes.colorization import *`` must not fail on a stale ``__all__`` entry
+    import sparsedepth.holes.colorization as module
 
     missing = [name for name in module.__all__ if not hasattr(module, name)]
     assert missing == []
@@ -183,7 +183,7 @@ def test_every_public_name_exists():
 
 @pytest.mark.parametrize("shape", [(1, 1), (1, 9), (9, 1), (2, 2), (5, 7), (33, 20)])
 def test_nested_dissection_order_is_a_permutation(shape):
-    from sparsedepth.colorization import _nested_dissection_keys, _nested_dissection_order
+    from sparsedepth.holes.colorization import _nested_dissection_keys, _nested_dissection_order
 
     keys = _nested_dissection_keys(*shape)
     np.testing.assert_array_equal(np.sort(keys), np.arange(shape[0] * shape[1]))
@@ -209,7 +209,7 @@ def _window_count(mask, radius):
 
 @pytest.mark.parametrize("window_radius", [1, 2])
 def test_eliminated_sets_definition(window_radius):
-    from sparsedepth.colorization import _LAYER_MIN_UNKNOWN, _STRIP_WIDTH, _eliminated_sets
+    from sparsedepth.holes.colorization import _LAYER_MIN_UNKNOWN, _STRIP_WIDTH, _eliminated_sets
 
     _, _, known = _hand_made_frame()
     elim, strip, rim = _eliminated_sets(known, window_radius)
@@ -226,7 +226,7 @@ def test_eliminated_sets_definition(window_radius):
 def test_schur_solve_matches_spsolve(use_strip, window_radius):
     # the elimination of E = holes + coupled known pixels, with and without the strip
     # preconditioner, against a sparse LU of the same system built from colorization_weights
-    from sparsedepth.colorization import _eliminated_sets, _nested_dissection_order, _solve_schur
+    from sparsedepth.holes.colorization import _eliminated_sets, _nested_dissection_order, _solve_schur
 
     grey, depth, known = _hand_made_frame()
     alpha = 0.7
@@ -257,7 +257,7 @@ def test_schur_solve_matches_spsolve(use_strip, window_radius):
 @pytest.mark.parametrize("height", [48, 61])
 def test_weights_in_two_threads_equal_one_pass(window_radius, height, monkeypatch):
     # the halves carry a halo of window_radius rows: every plane equals the one-pass result exactly
-    from sparsedepth import colorization
+    from sparsedepth.holes import colorization
 
     monkeypatch.setattr(colorization, "_available_cpus", lambda: 2)
     grey = np.random.default_rng(3).random((height, 37))

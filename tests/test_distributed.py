@@ -44,14 +44,14 @@ def _write_frames(folder, count, shape=(40, 60)):
 
 # ----------------------------------------------------------------------------- no dask needed
 def test_importing_sparsedepth_never_imports_dask():
-    code = ("import sys, sparsedepth, sparsedepth.complete, sparsedepth.distributed; "
+    code = ("import sys, sparsedepth, sparsedepth.complete, sparsedepth.batch.distributed; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('dask', 'distributed')))")
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 
 
 def test_absolute_frames_resolve_in_the_current_folder(tmp_path, monkeypatch):
-    from sparsedepth.distributed import absolute_frames
+    from sparsedepth.batch.distributed import absolute_frames
 
     monkeypatch.chdir(tmp_path)
     given = [FileFrame("a", "rgb_a.png", "depth_a.npy", "sub/truth_a.npy"), FileFrame("b", "/x/rgb_b.png", None),
@@ -65,7 +65,7 @@ def test_absolute_frames_resolve_in_the_current_folder(tmp_path, monkeypatch):
 
 
 def test_remove_stale_outputs_removes_only_temporaries_of_the_batch(tmp_path):
-    from sparsedepth.distributed import remove_stale_outputs
+    from sparsedepth.batch.distributed import remove_stale_outputs
 
     stale = [tmp_path / ".f1.npy.0123456789ab.tmp.npy", tmp_path / ".f2.npy.abcdefabcdef.tmp.npy"]
     kept = [tmp_path / "f1.npy", tmp_path / ".other.npy.0123456789ab.tmp.npy",  # not a frame of the batch
@@ -79,7 +79,7 @@ def test_remove_stale_outputs_removes_only_temporaries_of_the_batch(tmp_path):
 
 
 def test_connect_checks_its_arguments(tmp_path, monkeypatch):
-    from sparsedepth.distributed import connect
+    from sparsedepth.batch.distributed import connect
 
     monkeypatch.delenv("DASK_SCHEDULER_ADDRESS", raising=False)
     with pytest.raises(ValueError, match="DASK_SCHEDULER_ADDRESS"):
@@ -124,7 +124,7 @@ def cluster():
 
 
 def test_cluster_threads_sum_the_workers_threads():
-    from sparsedepth.distributed import cluster_threads
+    from sparsedepth.batch.distributed import cluster_threads
 
     with distributed.LocalCluster(n_workers=2, threads_per_worker=3, processes=False, dashboard_address=None,
                                   silence_logs=40) as local, distributed.Client(local, set_as_default=False) as c:
@@ -132,7 +132,7 @@ def test_cluster_threads_sum_the_workers_threads():
 
 
 def test_cluster_batch_matches_the_local_batch(cluster, tmp_path, monkeypatch):
-    from sparsedepth.distributed import run_batch_on_cluster
+    from sparsedepth.batch.distributed import run_batch_on_cluster
 
     _write_frames(tmp_path / "frames", 5)
     (tmp_path / "out").mkdir()
@@ -170,7 +170,7 @@ def test_cluster_batch_matches_the_local_batch(cluster, tmp_path, monkeypatch):
 def test_workers_with_malloc_trim_threshold_are_warned_about(cluster, tmp_path, monkeypatch):
     import warnings
 
-    from sparsedepth.distributed import run_batch_on_cluster
+    from sparsedepth.batch.distributed import run_batch_on_cluster
 
     frames = find_frames(_write_frames(tmp_path / "frames", 1))
     options = BatchOptions(keep_fraction=0.1, weights=FAST, solver="direct")
@@ -232,7 +232,7 @@ def _stop(processes):
 
 def test_a_worker_killed_mid_frame_costs_a_retry_not_a_frame(tmp_path, monkeypatch):
     """Real `dask scheduler` and two `dask worker` processes; one is SIGKILLed while it runs a frame."""
-    from sparsedepth.distributed import run_batch_on_cluster
+    from sparsedepth.batch.distributed import run_batch_on_cluster
 
     folder = _write_frames(tmp_path / "frames", 6, shape=(48, 64))
     out = tmp_path / "out"

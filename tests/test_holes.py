@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import sparsedepth as sd
-from sparsedepth.colorization import colorization_fill
+from sparsedepth.holes.colorization import colorization_fill
 
 
 def _raw_frame(shape=(24, 32), seed=0):

@@ -8,7 +8,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from sparsedepth import io as sio
+from sparsedepth.io import formats as sio
 
 
 # ------------------------------------------------------------------------------------

@@ -6,10 +6,10 @@ import scipy.sparse as sp
 from scipy.optimize import lsq_linear
 
 from sparsedepth import Weights, build_objective, complete_depth
-from sparsedepth._l1 import StackedL1, is_grid_gradient
+from sparsedepth.objective.l1 import StackedL1, is_grid_gradient
 from sparsedepth.objective import AbsTerm, Objective, QuadraticTerm
-from sparsedepth.operators import forward_diff, gradient, hessian_operator
-from sparsedepth.solvers import _polish_active_set, solve
+from sparsedepth.grid.operators import forward_diff, gradient, hessian_operator
+from sparsedepth.solvers.core import _polish_active_set, solve
 
 from conftest import make_problem
 
@@ -40,7 +40,7 @@ def test_gradient_by_slicing_equals_the_sparse_product(shape):
 
 
 def test_matrix_free_operators_are_accepted():
-    from sparsedepth.operators import gradient_stencil
+    from sparsedepth.grid.operators import gradient_stencil
 
     rng = np.random.default_rng(3)
     shape = (4, 6)
@@ -54,8 +54,8 @@ def test_matrix_free_operators_are_accepted():
 @pytest.mark.parametrize("shape", [(1, 1), (1, 7), (6, 1), (5, 8)])
 def test_grid_gradient_pairs_gram_and_value_match_the_matrix(shape):
     """The grid fast paths (no CSR matrix) against quantities read from the CSR gradient itself."""
-    from sparsedepth.operators import gradient_stencil
-    from sparsedepth.stencil import stencil_to_csr
+    from sparsedepth.grid.operators import gradient_stencil
+    from sparsedepth.grid.stencil import stencil_to_csr
 
     rng = np.random.default_rng(4)
     l1 = StackedL1(_objective_with(shape, gradient_stencil(shape), rng))
@@ -229,7 +229,7 @@ def test_polish_declines_a_singular_reduced_model():
 
 
 def test_merge_sums_entries_per_pair_of_components():
-    from sparsedepth.solvers import _merge
+    from sparsedepth.solvers.core import _merge
 
     rng = np.random.default_rng(4)
     M = sp.random(30, 30, density=0.2, random_state=5, format="csr")
@@ -247,8 +247,8 @@ def test_merge_sums_entries_per_pair_of_components():
 
 @pytest.mark.parametrize("shape", [(1, 6), (5, 1), (2, 2), (3, 3), (6, 7)])
 def test_gram_entries_are_the_laplacian_on_a_wider_pattern(shape):
-    from sparsedepth.operators import gradient_stencil
-    from sparsedepth.stencil import stencil_to_csr
+    from sparsedepth.grid.operators import gradient_stencil
+    from sparsedepth.grid.stencil import stencil_to_csr
 
     rng = np.random.default_rng(5)
     l1 = StackedL1(_objective_with(shape, gradient_stencil(shape), rng))
@@ -280,8 +280,8 @@ def test_gram_entries_on_a_dense_block(shape):
 
 
 def test_weight_chunks_and_stack_rows():
-    from sparsedepth import _l1
-    from sparsedepth.solvers import _stack_rows
+    from sparsedepth.objective import l1 as _l1
+    from sparsedepth.solvers.core import _stack_rows
 
     rng = np.random.default_rng(6)
     shape = (7, 9)
@@ -300,7 +300,7 @@ def test_weight_chunks_and_stack_rows():
 
 def test_polish_with_the_admm_matrix_equals_the_polish_with_A(optimal_signs):
     """penalty=ρ: the polish reduces S = 2A + ρKᵀK block by block and must find the same point."""
-    from sparsedepth.solvers import _combine
+    from sparsedepth.solvers.core import _combine
 
     obj, coarse, ref, (A, b, const), l1, u = optimal_signs
     rho = 2.5
@@ -318,7 +318,7 @@ def test_polish_with_the_admm_matrix_equals_the_polish_with_A(optimal_signs):
 
 
 def test_combine_same_and_different_patterns():
-    from sparsedepth.solvers import _combine
+    from sparsedepth.solvers.core import _combine
 
     A = sp.random(20, 20, density=0.3, random_state=1, format="csr")
     same = sp.csr_matrix((np.arange(1.0, A.nnz + 1), A.indices, A.indptr), shape=A.shape)
@@ -339,7 +339,7 @@ def test_admm_options_reach_the_same_optimum(options):
 
 def test_admm_keeping_only_s_reaches_the_same_point(monkeypatch):
     """Large frames keep S = 2A + ρKᵀK only (the polish reduces S); forced here on a small frame."""
-    from sparsedepth import solvers
+    from sparsedepth.solvers import core as solvers
 
     image, sparse, mask, _ = make_problem((24, 30))
     obj, _, _ = build_objective(image, sparse, mask, weights=L1)
@@ -360,8 +360,8 @@ def test_admm_keeping_only_s_reaches_the_same_point(monkeypatch):
 
 def test_weights_shared_by_the_gradient_blocks_equal_the_stacked_ones():
     """AbsTerm row weights of shape (N,) stand for the same weights on the x and the y edges."""
-    from sparsedepth import _l1
-    from sparsedepth.operators import gradient_stencil
+    from sparsedepth.objective import l1 as _l1
+    from sparsedepth.grid.operators import gradient_stencil
 
     rng = np.random.default_rng(7)
     shape = (6, 5)
@@ -402,8 +402,8 @@ def _admm_step_by_formula(Kz, u, lam, c, relax, scale):
 @pytest.mark.parametrize("weights", ["shared", "stacked", "none"])
 def test_admm_step_equals_the_update_written_out(monkeypatch, chunk, weights):
     """The fused chunked edge step against the textbook update (shrinkage, clipped multiplier, sums)."""
-    from sparsedepth import _l1
-    from sparsedepth.operators import gradient_stencil
+    from sparsedepth.objective import l1 as _l1
+    from sparsedepth.grid.operators import gradient_stencil
 
     monkeypatch.setattr(_l1, "_STEP_CHUNK", chunk)  # 5 and 7 do not divide the blocks of 2 * 30 rows
     rng = np.random.default_rng(8)

@@ -1,4 +1,4 @@
-"""Tests for sparsedepth.multigrid: hierarchy algebra, symmetry, PCG, update()."""
+"""Tests for sparsedepth.linalg.multigrid: hierarchy algebra, symmetry, PCG, update()."""
 
 import warnings
 
@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from sparsedepth.multigrid import (
+from sparsedepth.linalg.multigrid import (
     GridMultigrid,
     SolveInfo,
     grid_multigrid,
@@ -110,7 +110,7 @@ def test_bilinear_prolongation_is_kron_of_1d_interpolation(shape):
 @pytest.fixture(params=["kept", "read back"])
 def stencil_path(request, monkeypatch):
     """Both set-up paths: stencils kept as arrays (small grids) or read back from the CSR class by class (large)."""
-    import sparsedepth.multigrid as multigrid
+    import sparsedepth.linalg.multigrid as multigrid
 
     if request.param == "read back":
         monkeypatch.setattr(multigrid, "_KEEP_STENCIL_PIXELS", 0)
@@ -537,7 +537,7 @@ def test_single_precision_coarse_levels_round_the_double_ones_and_converge():
 
 
 def test_single_precision_cycle_rounds_the_double_one_and_solves_to_double_accuracy(monkeypatch):
-    import sparsedepth.multigrid as multigrid
+    import sparsedepth.linalg.multigrid as multigrid
 
     shape = (40, 56)
     rng = np.random.default_rng(12)

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from sparsedepth.operators import (
+from sparsedepth.grid.operators import (
     StencilOperator,
     forward_diff,
     gradient,

@@ -1,11 +1,11 @@
-"""Stencil images <-> CSR in the full in-grid pattern (sparsedepth.stencil)."""
+"""Stencil images <-> CSR in the full in-grid pattern (sparsedepth.grid.stencil)."""
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from sparsedepth.multigrid import GridMultigrid, grid_stencil
-from sparsedepth.stencil import csr_to_stencil, stencil_to_csr
+from sparsedepth.linalg.multigrid import GridMultigrid, grid_stencil
+from sparsedepth.grid.stencil import csr_to_stencil, stencil_to_csr
 
 OFFSETS_13 = sorted({(0, 0), (0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (-1, -1), (1, -1), (-1, 1),
                      (0, 2), (0, -2), (2, 0), (-2, 0)})
@@ -64,7 +64,7 @@ def test_multigrid_reads_the_full_pattern_like_a_general_matrix():
     shape = (33, 47)
     rng = np.random.default_rng(3)
     # SPD 13-point operator: sum of the identity and a Hessian-type normal matrix
-    from sparsedepth.operators import hessian_stencil
+    from sparsedepth.grid.operators import hessian_stencil
 
     K = hessian_stencil(shape)
     offsets = K.offsets()

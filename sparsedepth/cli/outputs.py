@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
-from .io import _create_temporary, _fsync
+from ..io.formats import create_temporary, fsync
 
 __all__ = ["Named", "OutputError", "check_distinct", "check_writable", "commit"]
 
@@ -116,7 +116,7 @@ def check_distinct(outputs: Sequence[Named], inputs: Iterable[Named]) -> None:
 def _probe(folder: Path, target: Named) -> None:
     """Create and delete a temporary file in ``folder`` (permission bits say nothing to root)."""
     try:
-        os.unlink(_create_temporary(folder / target.path.name, "probe"))
+        os.unlink(create_temporary(folder / target.path.name, "probe"))
     except OSError as exc:
         raise OutputError(f"{target.label}: cannot create a file in folder '{folder}' "
                           f"({exc.strerror or type(exc).__name__}); choose another {target.flag}") from None
@@ -225,12 +225,12 @@ def commit(items: Sequence[tuple[Named, Callable[[Path], None]]]) -> None:
                 current = target
                 if target.create_parent:
                     created += _make_folders(target.path.parent)
-                tmp = _create_temporary(target.path)
+                tmp = create_temporary(target.path)
                 staged.append((target, tmp))
                 writer(tmp)
             for target, tmp in staged:
                 current = target
-                _fsync(tmp)
+                fsync(tmp)
                 kept[target.path] = _keep_old(target.path)
             for target, tmp in staged:
                 current = target

@@ -10,7 +10,7 @@ in :data:`SOLVERS`, their options (with defaults) in :data:`SOLVER_OPTIONS`.
 two ``s`` near its median (:func:`depth_scale`) and the objective becomes
 ``F / s²`` (:func:`scaled_objective`), so every solver, its defaults and its
 tolerances see data of order 1 whatever the unit.  Every solver's output
-carries a duality gap (:mod:`sparsedepth.certificate`), a bound on
+carries a duality gap (:mod:`sparsedepth.solvers.certificate`), a bound on
 ``F(z) − F*``; ``converged`` needs the solver's own rule (below) and ``gap
 <= gap_tol · max(F, 1e-7 F(0))`` (option ``gap_tol``: 1e-6 for ``direct``,
 ``cg``, ``amg`` and ``admm``, 1e-4 for ``irls``, 1e-2 for ``lbfgsb``, 1e-1
@@ -42,7 +42,7 @@ adam        any          projected Adam on the smoothed objective; relative
 
 from __future__ import annotations
 
-import numbers
+
 import time
 from dataclasses import dataclass
 
@@ -51,13 +51,14 @@ import scipy.optimize
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from ._l1 import StackedL1, _graph_components
+from .._validation import is_int, is_real
+from ..objective.l1 import StackedL1, graph_components
 from .certificate import Certificate, curvature_lower_bound
-from .linear import make_preconditioner, pcg
-from .multigrid import GridMultigrid
-from .stencil import _index_dtype, full_pattern_offsets
-from .objective import AbsTerm, Objective, QuadraticTerm
-from .result import IterationRecord, SolverState
+from ..linalg.krylov import make_preconditioner, pcg
+from ..linalg.multigrid import GridMultigrid
+from ..grid.stencil import index_dtype, full_pattern_offsets
+from ..objective.objective import AbsTerm, Objective, QuadraticTerm
+from ..result import IterationRecord, SolverState
 
 __all__ = ["SolverOutput", "SOLVERS", "SOLVER_OPTIONS", "DEFAULT_TOL", "DEFAULT_MAX_ITER", "solve", "depth_scale",
            "scaled_objective", "check_solver_arguments"]
@@ -196,7 +197,7 @@ def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner):
     products instead of a full evaluation of every term; the last entry is
     re-evaluated exactly term by term.
     """
-    from .linear import _dot
+    from ..linalg.krylov import dot
 
     A, b, c = objective.normal_equations()
     recorder(0, x0)
@@ -205,7 +206,7 @@ def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner):
 
     def cb(xk, rk):
         it[0] += 1
-        recorder(it[0], xk, inner=it[0], value=c - _dot(b, xk) - _dot(rk, xk))
+        recorder(it[0], xk, inner=it[0], value=c - dot(b, xk) - dot(rk, xk))
 
     z, n, converged, rel = pcg(A, b, x0=x0, M=M, rtol=tol, maxiter=max_iter, callback=cb, callback_residual=True)
     if recorder.history and recorder.history[-1].iteration == n and n > 0:
@@ -226,7 +227,7 @@ def solve_amg(objective, x0, *, tol, max_iter, recorder, options):
     Options
     -------
     preconditioner : {"grid", "amg"}, default "grid"
-        ``"grid"``: geometric :class:`~sparsedepth.multigrid.GridMultigrid`
+        ``"grid"``: geometric :class:`~sparsedepth.linalg.multigrid.GridMultigrid`
         built once for ``A`` (the quadratic part of any objective is a grid
         operator of stencil radius <= 2); ``"amg"``: pyamg Ruge–Stüben.
     """
@@ -384,21 +385,21 @@ def _inner_pcg(S, precondition, z, Sz, rhs, *, rtol, factor, max_steps):
     with ``S`` per step).  ``rhs`` is overwritten (its buffer holds the
     residual).  Returns the number of steps.
     """
-    from .linear import _dot
+    from ..linalg.krylov import dot
 
-    rhs_sq = _dot(rhs, rhs) if max_steps > 1 else None
+    rhs_sq = dot(rhs, rhs) if max_steps > 1 else None
     r = np.subtract(rhs, Sz, out=rhs)
     if max_steps > 1:
-        rr = _dot(r, r)
+        rr = dot(r, r)
         target = max(rtol * rtol * rhs_sq, factor * factor * rr)
         if rr <= target:
             return 0
     d = precondition(r)
-    rd = _dot(r, d)
+    rd = dot(r, d)
     p = d
     for step in range(1, max_steps + 1):
         q = S @ p
-        pq = _dot(p, q)
+        pq = dot(p, q)
         if not pq > 0:
             return step - 1
         alpha = rd / pq
@@ -411,10 +412,10 @@ def _inner_pcg(S, precondition, z, Sz, rhs, *, rtol, factor, max_steps):
         z += alpha * p
         Sz += alpha * q
         r -= alpha * q
-        if _dot(r, r) <= target:
+        if dot(r, r) <= target:
             return step
         d = precondition(r)
-        rd_new = _dot(r, d)
+        rd_new = dot(r, d)
         p = d + (rd_new / rd) * p
         rd = rd_new
     return max_steps
@@ -426,7 +427,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     Notes
     -----
     With ``u = K z`` (``K`` the stacked L1 operators, ``c`` their weights,
-    see :class:`~sparsedepth._l1.StackedL1`), the scaled-form iteration is::
+    see :class:`~sparsedepth.objective.l1.StackedL1`), the scaled-form iteration is::
 
         z ← (2A + ρ KᵀK)⁻¹ (2b + ρ Kᵀ(u − λ))      # PCG, warm-started, inexact
         v ← a K z + (1 − a) u                       # over-relaxation, a = 1.9
@@ -435,7 +436,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
 
     The system matrix ``S = 2A + ρKᵀK`` does not depend on the iterate and is
     a grid operator of stencil radius <= 2, so ONE geometric multigrid
-    hierarchy (:class:`~sparsedepth.multigrid.GridMultigrid`, option
+    hierarchy (:class:`~sparsedepth.linalg.multigrid.GridMultigrid`, option
     ``preconditioner``, default ``"grid"``; ``"amg"`` for pyamg)
     preconditions every inner solve.  The inner solve is one V-cycle
     preconditioned step with exact line search from the previous ``z``
@@ -464,7 +465,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     a slowly converging run is not dominated by polishes); the solver stops
     when a polish changes the best polished ``F`` by at most ``check_rtol ·
     F`` (default 2e-7) AND the duality gap of the best polished point
-    (:class:`~sparsedepth.certificate.Certificate`, dual point ``ρλ`` on the
+    (:class:`~sparsedepth.solvers.certificate.Certificate`, dual point ``ρλ`` on the
     tied rows) is at most ``gap_tol · max(F, 1e-7 F(0))`` (option
     ``gap_tol``, default 1e-6).  The agreement alone is a heuristic (two
     polishes can land on the same wrong tied set); when the certificate
@@ -507,7 +508,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     Found. Trends Mach. Learn. 3 (2011), §3.4.  Goldstein, Osher, "The split
     Bregman method for L1-regularized problems", SIAM J. Imaging Sci. 2 (2009).
     """
-    from .linear import _dot
+    from ..linalg.krylov import dot
 
     A0, b, const = objective.normal_equations()
     z = np.maximum(np.asarray(x0, dtype=float).copy(), 0.0)
@@ -592,7 +593,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
         Kz_sq = step["Kz_sq"]
         feasible = z.min() >= 0
         if feasible:
-            value = 0.5 * (_dot(z, Sz) - rho * Kz_sq) - 2.0 * _dot(b, z) + const + step["value"]
+            value = 0.5 * (dot(z, Sz) - rho * Kz_sq) - 2.0 * dot(b, z) + const + step["value"]
         if need_r:
             r_norm = np.sqrt(step["r_sq"] / max(Kz_sq, step["u_sq"], edge_floor_sq))
         if need_s:
@@ -729,10 +730,10 @@ def _stack_rows(blocks, n_cols):
         return blocks.pop()
     nnz = sum(b.nnz for b in blocks)
     n_rows = sum(b.shape[0] for b in blocks)
-    index_dtype = _index_dtype(nnz, n_cols)
+    itype = index_dtype(nnz, n_cols)
     data = np.empty(nnz)
-    indices = np.empty(nnz, dtype=index_dtype)
-    indptr = np.empty(n_rows + 1, dtype=index_dtype)
+    indices = np.empty(nnz, dtype=itype)
+    indptr = np.empty(n_rows + 1, dtype=itype)
     indptr[0] = 0
     row = pos = 0
     blocks.reverse()
@@ -789,7 +790,7 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
     cg_steps : int
         PCG steps of all rounds.
     """
-    from .linear import _dot
+    from ..linalg.krylov import dot
 
     signs = np.zeros(u.shape, dtype=np.int8)  # sign(u) in 1/8 of the memory
     signs[u > 0] = 1
@@ -823,8 +824,8 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
         np.maximum(z, 0.0, out=z)
         del y
         Kz = l1.apply(z)
-        zAz = _dot(z, A @ z) if penalty is None else 0.5 * (_dot(z, A @ z) - penalty * _dot(Kz, Kz))
-        F = zAz - 2.0 * _dot(b, z) + const + l1.value(Kz)
+        zAz = dot(z, A @ z) if penalty is None else 0.5 * (dot(z, A @ z) - penalty * dot(Kz, Kz))
+        F = zAz - 2.0 * dot(b, z) + const + l1.value(Kz)
         if F >= best_F:
             break
         best_F, best_z, best_count = F, z, count
@@ -838,7 +839,7 @@ def _polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, precondit
         signs[wrong] = 0
         first, second = l1.pairs_where(wrong)
         del wrong
-        merged, count = _graph_components(count, labels[first], labels[second])
+        merged, count = graph_components(count, labels[first], labels[second])
         labels = merged[labels]
         if A.shape[0] < _ADMM_KEEP_A_PIXELS:  # merge the previous components: a smaller matrix than A
             reduced = _merge(reduced, merged, count)
@@ -979,14 +980,6 @@ _POSITIVE_OPTIONS = {"eps_start", "eps_min", "scale", "rho", "learning_rate", "r
 _OPTION_CHOICES = {"preconditioner": ("grid", "amg"), "polish_preconditioner": ("jacobi", "amg")}
 
 
-def _is_int(value):
-    return isinstance(value, (numbers.Integral, np.integer)) and not isinstance(value, (bool, np.bool_))
-
-
-def _is_real(value):
-    return isinstance(value, (numbers.Real, np.floating, np.integer)) and not isinstance(value, (bool, np.bool_))
-
-
 def _check_option(solver, key, value):
     default = SOLVER_OPTIONS[solver][key]
     kind = _NONE_DEFAULT_TYPES.get(key) if default is None else type(default)
@@ -998,14 +991,14 @@ def _check_option(solver, key, value):
             raise TypeError(f"{where} must be True or False; got {type(value).__name__} {value!r}")
         return bool(value)
     if kind is int:
-        if not _is_int(value):
+        if not is_int(value):
             raise TypeError(f"{where} must be an int; got {type(value).__name__} {value!r}: "
-                            f"pass e.g. {key}={int(value) if _is_real(value) and np.isfinite(value) else default}")
+                            f"pass e.g. {key}={int(value) if is_real(value) and np.isfinite(value) else default}")
         if value < (0 if key == "adapt_iters" else 1):
             raise ValueError(f"{where} must be >= {0 if key == 'adapt_iters' else 1}; got {value}")
         return int(value)
     if kind is float:
-        if not _is_real(value):
+        if not is_real(value):
             raise TypeError(f"{where} must be a number; got {type(value).__name__} {value!r}")
         value = float(value)
         positive = key in _POSITIVE_OPTIONS
@@ -1051,15 +1044,15 @@ def check_solver_arguments(solver, tol=None, max_iter=None, options=None):
         raise ValueError(f"unknown solver {solver!r}; choose one of {sorted(SOLVERS)} or 'auto'")
     if tol is None:
         tol = DEFAULT_TOL[solver]
-    elif not _is_real(tol):
+    elif not is_real(tol):
         raise TypeError(f"tol must be a number; got {type(tol).__name__} {tol!r}: pass e.g. tol=1e-6")
     tol = float(tol)
     if not (np.isfinite(tol) and tol >= 0):
         raise ValueError(f"tol must be finite and >= 0, got {tol!r}")
     if max_iter is None:
         max_iter = DEFAULT_MAX_ITER[solver]
-    elif not _is_int(max_iter):
-        hint = f"max_iter={int(max_iter)}" if _is_real(max_iter) and np.isfinite(max_iter) else "max_iter=100"
+    elif not is_int(max_iter):
+        hint = f"max_iter={int(max_iter)}" if is_real(max_iter) and np.isfinite(max_iter) else "max_iter=100"
         raise TypeError(f"max_iter must be an int; got {type(max_iter).__name__} {max_iter!r}: pass e.g. {hint}")
     max_iter = int(max_iter)
     if max_iter < 1:
@@ -1160,11 +1153,11 @@ def solve(objective, x0, *, solver, tol=None, max_iter=None, callback=None, opti
     tol, max_iter, options = check_solver_arguments(solver, tol, max_iter, options)
     x0 = np.asarray(x0, dtype=np.float64).ravel()
     scale = depth_scale(x0)
-    return _solve_scaled(scaled_objective(objective, scale), x0 / scale, scale=scale, solver=solver, tol=tol,
+    return solve_scaled(scaled_objective(objective, scale), x0 / scale, scale=scale, solver=solver, tol=tol,
                          max_iter=max_iter, callback=callback, options=options)
 
 
-def _solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, options):
+def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, options):
     """:func:`solve` for an objective and start already in units of ``scale`` (checked arguments)."""
     options = {key: (value / scale if key in _DEPTH_UNIT_OPTIONS and value is not None else value)
                for key, value in options.items()}
@@ -1198,7 +1191,7 @@ def _solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, opti
 
 
 def _certify(objective, z, solver, options):
-    """The duality gap (:mod:`sparsedepth.certificate`) of a solver's output ``z``, in solver units.
+    """The duality gap (:mod:`sparsedepth.solvers.certificate`) of a solver's output ``z``, in solver units.
 
     Rows of ``K`` with ``|(Kz)_k| <= ε`` count as tied, with ``ε`` the
     smoothing of L-BFGS-B and Adam (:attr:`Objective.l1_smoothing`, 1e-4 at

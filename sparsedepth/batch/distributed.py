@@ -25,7 +25,7 @@ import warnings
 from pathlib import Path
 from typing import Callable, Sequence
 
-from .batch import BatchOptions, BatchSummary, _absolute, run_batch
+from .run import BatchOptions, BatchSummary, absolute_frame, run_batch
 
 __all__ = [
     "DEFAULT_TIMEOUT",
@@ -175,7 +175,7 @@ def absolute_frames(frames: Sequence) -> list:
     TypeError
         For an object that is not a frame of :mod:`sparsedepth.batch`.
     """
-    return [_absolute(frame) for frame in frames]
+    return [absolute_frame(frame) for frame in frames]
 
 
 def remove_stale_outputs(out_dir, names, out_format: str) -> list[Path]:

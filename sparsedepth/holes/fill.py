@@ -3,7 +3,7 @@
 Two methods behind one function, :func:`fill_holes`:
 
 * ``"colorization"`` - the NYU Depth V2 toolbox fill (``fill_depth_colorization.m``),
-  computed exactly by :func:`sparsedepth.colorization.colorization_fill`;
+  computed exactly by :func:`sparsedepth.holes.colorization.colorization_fill`;
 * ``"complete"`` - this package's objective, :func:`sparsedepth.complete_depth`
   with every valid raw pixel observed.
 """
@@ -12,11 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validation import check_same_shape
+from .._validation import check_same_shape
 from .colorization import colorization_fill
-from .completion import complete_depth
-from .sampling import valid_depth_mask
-from .weights import DEFAULT_WEIGHTS
+from ..completion import complete_depth
+from ..sampling import valid_depth_mask
+from ..objective.weights import DEFAULT_WEIGHTS
 
 __all__ = ["FILL_METHODS", "fill_holes"]
 
@@ -57,14 +57,14 @@ def fill_holes(
     method : {"colorization", "complete"}
         ``"colorization"``: the NYU Depth V2 toolbox's ``fill_depth_colorization``
         (Levin et al. colorization), solved exactly and fast by
-        :func:`~sparsedepth.colorization.colorization_fill`.
+        :func:`~sparsedepth.holes.colorization.colorization_fill`.
         ``"complete"``: :func:`~sparsedepth.complete_depth` with observed =
         ``mask``.
     alpha : float, optional
         ``"colorization"`` only: weight of the known depth (toolbox default 1).
     weights : Weights, optional
         ``"complete"`` only: term weights (default
-        :data:`~sparsedepth.weights.DEFAULT_WEIGHTS`).
+        :data:`~sparsedepth.objective.weights.DEFAULT_WEIGHTS`).
     solver : str, optional
         ``"complete"`` only: solver name (default ``"auto"``).
     tol, max_iter : optional
@@ -91,7 +91,7 @@ def fill_holes(
     -----
     ``"colorization"`` solves ``(I - W + alpha M) x = alpha M d`` with ``W`` the
     row-stochastic 3x3 window affinity of the grey image and ``M`` the mask
-    (see :func:`~sparsedepth.colorization.colorization_fill`).  ``"complete"``
+    (see :func:`~sparsedepth.holes.colorization.colorization_fill`).  ``"complete"``
     minimises ``F(z)`` of :func:`~sparsedepth.complete_depth` with
     ``M = mask``; it is exactly ``complete_depth(image, raw_depth, mask).depth``.
 

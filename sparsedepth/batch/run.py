@@ -30,7 +30,6 @@ import glob
 import io as _io
 import json
 import math
-import numbers
 import os
 import signal
 import time
@@ -43,16 +42,16 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ._validation import check_same_shape
-from .baselines import nearest_fill
-from .completion import complete_depth
-from .holes import FILL_METHODS, fill_holes
-from .io import MAX_PIXELS, NYUDepthV2Labeled, _atomic_target, _resolve_scale, read_depth, read_image, read_nyu_h5, write_depth
-from .metrics import DepthMetrics, depth_metrics
-from .result import ClampWarning, CompletionResult
-from .sampling import sample_mask, valid_depth_mask
-from .solvers import SOLVERS
-from .weights import DEFAULT_WEIGHTS, Weights
+from .._validation import check_same_shape, is_int, is_real
+from ..baselines import nearest_fill
+from ..completion import complete_depth
+from ..holes.fill import FILL_METHODS, fill_holes
+from ..io.formats import MAX_PIXELS, NYUDepthV2Labeled, atomic_target, resolve_scale, read_depth, read_image, read_nyu_h5, write_depth
+from ..metrics import DepthMetrics, depth_metrics
+from ..result import ClampWarning, CompletionResult
+from ..sampling import sample_mask, valid_depth_mask
+from ..solvers.core import SOLVERS
+from ..objective.weights import DEFAULT_WEIGHTS, Weights
 
 __all__ = [
     "TASKS",
@@ -529,7 +528,7 @@ def nyu_frames(path, indices=None) -> list[NYUFrame]:
         return [NYUFrame(name=f"nyu_{i:04d}", path=str(nyu.path), index=int(i)) for i in chosen]
 
 
-def _absolute(source):
+def absolute_frame(source):
     """The frame with absolute paths (a worker may run in another working directory)."""
     if isinstance(source, FileFrame):
         return dataclasses.replace(
@@ -553,14 +552,6 @@ def _option_error(option: str, message: str, kind=ValueError) -> Exception:
     exc = kind(message)
     exc.option = option
     return exc
-
-
-def _is_int(value) -> bool:
-    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
-
-
-def _is_real(value) -> bool:
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 @dataclass(frozen=True)
@@ -648,20 +639,20 @@ class BatchOptions:
         if self.task not in TASKS:
             raise _option_error("task", f"unknown task {self.task!r}; choose one of {list(TASKS)}")
         if self.keep_fraction is not None:
-            if not _is_real(self.keep_fraction):
+            if not is_real(self.keep_fraction):
                 raise _option_error("keep_fraction", "keep_fraction must be a number in (0, 1] or None, got "
                                     f"{type(self.keep_fraction).__name__}", TypeError)
             if not 0 < self.keep_fraction <= 1:
                 raise _option_error("keep_fraction", f"keep_fraction must be in (0, 1], got {self.keep_fraction!r}; "
                                     "e.g. 0.05 keeps 5 % of the valid depth pixels")
-        if self.keep_count is not None and (not _is_int(self.keep_count) or self.keep_count < 1):
+        if self.keep_count is not None and (not is_int(self.keep_count) or self.keep_count < 1):
             raise _option_error("keep_count", f"keep_count must be an integer >= 1 or None, got {self.keep_count!r}")
         if self.keep_fraction is not None and self.keep_count is not None:
             raise _option_error("keep_count", "give keep_fraction or keep_count, not both")
         if self.task == "fill" and (self.keep_fraction is not None or self.keep_count is not None):
             raise _option_error("keep_fraction", "keep_fraction/keep_count simulate sparse input; they do not apply "
                                 "to task='fill'")
-        if not _is_int(self.seed) or self.seed < 0:
+        if not is_int(self.seed) or self.seed < 0:
             raise _option_error("seed", f"seed must be an integer >= 0, got {self.seed!r}")
         if self.fill_method not in FILL_METHODS:
             raise _option_error("fill_method", f"unknown fill method {self.fill_method!r}; "
@@ -672,38 +663,38 @@ class BatchOptions:
         if self.solver != "auto" and self.solver not in SOLVERS:
             raise _option_error("solver", f"unknown solver {self.solver!r}; choose one of "
                                 f"{['auto', *sorted(SOLVERS)]}")
-        if self.tol is not None and (not _is_real(self.tol) or not math.isfinite(self.tol) or self.tol < 0):
+        if self.tol is not None and (not is_real(self.tol) or not math.isfinite(self.tol) or self.tol < 0):
             raise _option_error("tol", f"tol must be a finite number >= 0 or None (the solver's default), "
                                 f"got {self.tol!r}")
-        if self.max_iter is not None and (not _is_int(self.max_iter) or self.max_iter < 1):
+        if self.max_iter is not None and (not is_int(self.max_iter) or self.max_iter < 1):
             raise _option_error("max_iter", f"max_iter must be an integer >= 1 or None, got {self.max_iter!r}")
         if self.depth_scale is not None:
             try:
-                _resolve_scale(self.depth_scale, "depth_scale")
+                resolve_scale(self.depth_scale, "depth_scale")
             except (TypeError, ValueError) as exc:
                 raise _option_error("depth_scale", str(exc), type(exc)) from None
-        if not _is_int(self.downsample) or self.downsample < 1:
+        if not is_int(self.downsample) or self.downsample < 1:
             raise _option_error("downsample", f"downsample must be an integer >= 1, got {self.downsample!r}")
         if self.out_format not in (".npy", ".npz", ".h5", ".hdf5", ".pfm", ".png"):
             raise _option_error("out_format", f"unknown out_format {self.out_format!r}; "
                                 "use .npy, .npz, .h5, .hdf5, .pfm or .png")
         try:
-            _resolve_scale(self.out_scale, "out_scale")
+            resolve_scale(self.out_scale, "out_scale")
         except (TypeError, ValueError) as exc:
             raise _option_error("out_scale", str(exc), type(exc)) from None
         if self.byteorder not in (None, "big", "little"):
             raise _option_error("byteorder", f"byteorder must be 'big', 'little' or None, got {self.byteorder!r}")
-        if not isinstance(self.invalid_values, tuple) or not all(_is_real(v) for v in self.invalid_values):
+        if not isinstance(self.invalid_values, tuple) or not all(is_real(v) for v in self.invalid_values):
             raise _option_error("invalid_values", f"invalid_values must be a tuple of numbers, got "
                                 f"{self.invalid_values!r}", TypeError)
         for name in ("min_depth", "max_depth"):
             value = getattr(self, name)
-            if value is not None and not (_is_real(value) and math.isfinite(value) and value >= 0):
+            if value is not None and not (is_real(value) and math.isfinite(value) and value >= 0):
                 raise _option_error(name, f"{name} must be a finite number >= 0 (metres) or None, got {value!r}")
         if self.min_depth is not None and self.max_depth is not None and self.min_depth > self.max_depth:
             raise _option_error("min_depth", f"min_depth {self.min_depth:g} is larger than max_depth "
                                 f"{self.max_depth:g}")
-        if self.max_pixels is not None and not (_is_int(self.max_pixels) and self.max_pixels >= 1):
+        if self.max_pixels is not None and not (is_int(self.max_pixels) and self.max_pixels >= 1):
             raise _option_error("max_pixels", f"max_pixels must be an integer >= 1 or None, got {self.max_pixels!r}")
         if not isinstance(self.clip_to_observed, bool):
             raise _option_error("clip_to_observed", f"clip_to_observed must be True or False, got "
@@ -984,7 +975,7 @@ def _compact(entries, names) -> list[tuple[str, dict, str]]:
 
 
 def _write_text_atomic(path: Path, text: str) -> None:
-    with _atomic_target(path) as tmp:
+    with atomic_target(path) as tmp:
         with open(tmp, "w", newline="", encoding="utf-8") as handle:
             handle.write(text)
 
@@ -1148,7 +1139,7 @@ def run_batch(
     Memory is bounded by the frames in flight: each worker reads its own
     frame from disk and returns only a row.
     """
-    frames = [_absolute(f) for f in frames]
+    frames = [absolute_frame(f) for f in frames]
     if not frames:
         raise ValueError("no frame to process")
     names = [f.name for f in frames]
@@ -1156,7 +1147,7 @@ def run_batch(
         duplicate = next(n for n in names if names.count(n) > 1)
         raise ValueError(f"frame names must be unique (they name the CSV rows and outputs); {duplicate!r} repeats")
     for value, name in ((max_workers, "max_workers"), (max_in_flight, "max_in_flight")):
-        if value is not None and (not _is_int(value) or value < 1):
+        if value is not None and (not is_int(value) or value < 1):
             raise ValueError(f"{name} must be a positive integer or None, got {value!r}")
     options = BatchOptions() if options is None else options
     if not isinstance(options, BatchOptions):

@@ -7,7 +7,7 @@ weights ``r``.  Two kinds exist:
 * :class:`AbsTerm`        ``weight · Σ_k r_k |(K z)_k|``
 
 :func:`build_objective` assembles the terms of the depth-completion problem
-from an image, sparse depth and :class:`~sparsedepth.weights.Weights`; a
+from an image, sparse depth and :class:`~sparsedepth.objective.weights.Weights`; a
 variant of the problem ("L2 only", "data only", ...) is a choice of weights,
 never a code path of its own.
 
@@ -28,10 +28,10 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 
-from ._validation import as_depth_and_mask, as_float_image, check_same_shape, check_weights
-from .baselines import nearest_fill
-from .operators import StencilOperator, gradient_stencil, hessian_stencil
-from .stencil import stencil_to_csr
+from .._validation import as_depth_and_mask, as_float_image, check_same_shape, check_weights
+from ..baselines import nearest_fill
+from ..grid.operators import StencilOperator, gradient_stencil, hessian_stencil
+from ..grid.stencil import stencil_to_csr
 from .weights import DEFAULT_WEIGHTS, Weights
 
 __all__ = [
@@ -69,7 +69,7 @@ class QuadraticTerm:
         Non-negative scalar weight.
     operator : scipy.sparse matrix or StencilOperator of shape (m, N), or None
         ``K``; ``None`` means the identity (``m = N``).  A
-        :class:`~sparsedepth.operators.StencilOperator` is applied matrix-free
+        :class:`~sparsedepth.grid.operators.StencilOperator` is applied matrix-free
         and lets :meth:`Objective.normal_equations` assemble ``KᵀK`` as a
         stencil.
     row_weights : ndarray of shape (m,), or None
@@ -172,8 +172,8 @@ class AbsTerm:
     weight : float
     operator : scipy.sparse matrix or StencilOperator of shape (m, N)
         ``build_objective`` passes the matrix-free
-        :func:`~sparsedepth.operators.gradient_stencil`; the L1 solvers
-        recognise it (:class:`~sparsedepth._l1.StackedL1`) and apply it by
+        :func:`~sparsedepth.grid.operators.gradient_stencil`; the L1 solvers
+        recognise it (:class:`~sparsedepth.objective.l1.StackedL1`) and apply it by
         slicing.
     row_weights : ndarray of shape (m,) or (N,), or None
         ``r``; shape ``(N,)`` (with ``m`` a multiple of ``N``, e.g. the two
@@ -337,7 +337,7 @@ class Objective:
         ``A`` is assembled as a stencil (:meth:`normal_stencil`: one
         coefficient image per neighbour offset, one whole-array operation per
         pair of taps of each term's operator) and converted once to CSR in
-        the full in-grid pattern of :func:`~sparsedepth.stencil.stencil_to_csr`,
+        the full in-grid pattern of :func:`~sparsedepth.grid.stencil.stencil_to_csr`,
         which the multigrid set-up reads back without sparse diagonal
         extraction.  Terms whose operator is a general sparse matrix are
         added as ``K^T diag(r) K`` products.
@@ -371,7 +371,7 @@ class Objective:
         self._normal = None
 
     def normal_stencil(self):
-        """Stencil of the quadratic part's matrix ``A`` (see :mod:`sparsedepth.stencil`).
+        """Stencil of the quadratic part's matrix ``A`` (see :mod:`sparsedepth.grid.stencil`).
 
         Returns
         -------
@@ -384,7 +384,7 @@ class Objective:
         ------
         ValueError
             If a quadratic term's operator is a general sparse matrix (not a
-            :class:`~sparsedepth.operators.StencilOperator`).
+            :class:`~sparsedepth.grid.operators.StencilOperator`).
         """
         offsets, stencil, general = self._stencil_parts()
         if general:
@@ -425,7 +425,7 @@ def image_gradient_magnitude(image) -> np.ndarray:
     """``‖∇I‖ = sqrt(Σ_c (∂x I_c)² + (∂y I_c)²)`` per pixel, shape ``(H, W)``.
 
     ``image`` is converted to [0, 1] floats first (uint8 ÷ 255, uint16 ÷ 65535);
-    the differences are the forward differences of :mod:`sparsedepth.operators`
+    the differences are the forward differences of :mod:`sparsedepth.grid.operators`
     (zero in the last column / row).
     """
     img = as_float_image(image)
@@ -444,7 +444,7 @@ def edge_weights(image, kappa: float) -> np.ndarray:
 
 
 def pair_edge_weights(image, kappa: float) -> np.ndarray:
-    """Per-pair image weights aligned with the rows of :func:`~sparsedepth.operators.gradient`.
+    """Per-pair image weights aligned with the rows of :func:`~sparsedepth.grid.operators.gradient`.
 
     Row ``(i, j)`` of the horizontal block gets ``exp(−κ ‖I[i, j+1] − I[i, j]‖)``
     and row ``(i, j)`` of the vertical block ``exp(−κ ‖I[i+1, j] − I[i, j]‖)``,
@@ -469,7 +469,7 @@ def pair_edge_weights(image, kappa: float) -> np.ndarray:
 
 
 def second_order_edge_weights(pair_weights, shape) -> np.ndarray:
-    """Row weights for :func:`~sparsedepth.operators.hessian_operator` from pair weights.
+    """Row weights for :func:`~sparsedepth.grid.operators.hessian_operator` from pair weights.
 
     A second-difference row gets the smallest pair weight among the pixel
     pairs it spans: ``∂xx`` at ``(i, j)`` spans ``(i, j−1)–(i, j)`` and
@@ -537,7 +537,7 @@ def build_objective(
         For inconsistent shapes, no observed pixel, NaN/inf in the image,
         negative observed depth, wrong dimensions or bad weights.
     TypeError
-        If ``weights`` is not a :class:`~sparsedepth.weights.Weights`.
+        If ``weights`` is not a :class:`~sparsedepth.objective.weights.Weights`.
     """
     check_weights(weights)
     img = as_float_image(image)

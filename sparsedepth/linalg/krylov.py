@@ -19,7 +19,7 @@ def make_preconditioner(A, kind: str = "amg", *, shape=None):
     A : scipy.sparse matrix, (N, N), symmetric positive definite
     kind : {"grid", "amg", "jacobi", "none"} or GridMultigrid
         ``"grid"``: one symmetric V-cycle of a geometric
-        :class:`~sparsedepth.multigrid.GridMultigrid` (``interpolation="auto"``) built here (needs
+        :class:`~sparsedepth.linalg.multigrid.GridMultigrid` (``interpolation="auto"``) built here (needs
         ``shape``; ``A`` must be a grid operator of stencil radius <= 2, which
         the quadratic part of every completion objective is);
         ``"amg"``: one V-cycle of a pyamg Ruge–Stüben hierarchy (set up here);
@@ -65,7 +65,7 @@ def make_preconditioner(A, kind: str = "amg", *, shape=None):
     raise ValueError(f"unknown preconditioner {kind!r}; one of {PRECONDITIONERS}")
 
 
-def _dot(x, y):
+def dot(x, y):
     # einsum runs its own loop instead of BLAS ddot: multithreaded OpenBLAS on
     # a busy 2-core machine made one 600k-long dot product cost ~8 ms instead
     # of 0.1 ms (measured), i.e. more than a V-cycle.
@@ -117,11 +117,11 @@ def pcg(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=No
     the recursively updated residual meets the tolerance the true residual
     ``b − A x`` is recomputed; if it does not meet it (rounding drift), CG
     restarts from the true residual, so ``converged`` is never claimed on the
-    recursive residual alone.  Dot products avoid BLAS (see ``_dot``).
+    recursive residual alone.  Dot products avoid BLAS (see ``dot``).
     """
     b = np.asarray(b, dtype=np.float64).ravel()
     n = b.shape[0]
-    bnorm = np.sqrt(_dot(b, b))
+    bnorm = np.sqrt(dot(b, b))
     if bnorm == 0:
         return np.zeros_like(b), 0, True, 0.0
     maxiter = 10 * n if maxiter is None else int(maxiter)
@@ -129,18 +129,18 @@ def pcg(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=No
     x = np.zeros(n) if x0 is None else np.array(x0, dtype=np.float64).ravel()
     r = b - A @ x if x0 is not None else b.copy()
     target2 = max(rtol * bnorm, float(atol)) ** 2
-    rr = _dot(r, r)
+    rr = dot(r, r)
     it = 0
     converged = rr <= target2
     restarts = 0
     while not converged and it < maxiter:
         z = r if prec is None else prec(r)
-        rz = _dot(r, z)
+        rz = dot(r, z)
         p = z.copy()
         del z  # (here and below) drop work vectors early: peak memory of 8-MP frames
         while it < maxiter:
             q = A @ p
-            pq = _dot(p, q)
+            pq = dot(p, q)
             if not pq > 0:
                 break  # breakdown: A or M not SPD (or exact solution reached)
             step = rz / pq
@@ -154,17 +154,17 @@ def pcg(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=No
                     callback(x, r)
                 else:
                     callback(x)
-            rr = _dot(r, r)
+            rr = dot(r, r)
             if rr <= target2:
                 break
             z = r if prec is None else prec(r)
-            rz_new = _dot(r, z)
+            rz_new = dot(r, z)
             p *= rz_new / rz
             p += z
             del z
             rz = rz_new
         r = b - A @ x
-        rr = _dot(r, r)
+        rr = dot(r, r)
         converged = rr <= target2
         restarts += 1
         if not converged and (restarts > 5 or not pq > 0):

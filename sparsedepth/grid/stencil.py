@@ -7,7 +7,7 @@ coefficient image per offset::
     S[k, y, x] = A[y*W + x, (y + dy_k)*W + (x + dx_k)]      (0 outside the grid)
 
 The normal equations of the completion objective are assembled in this form
-(:meth:`~sparsedepth.operators.StencilOperator.add_normal_stencil`: one
+(:meth:`~sparsedepth.grid.operators.StencilOperator.add_normal_stencil`: one
 whole-array operation per pair of taps, no sparse products), converted once to
 CSR for the smoothers and Krylov solvers (:func:`stencil_to_csr`), and read
 back by the multigrid set-up (:func:`csr_to_stencil`) in one pass over the
@@ -31,7 +31,7 @@ __all__ = ["stencil_to_csr", "csr_to_stencil", "full_pattern_offsets"]
 _CHUNK_ENTRIES = 1 << 21
 
 
-def _index_dtype(*sizes):
+def index_dtype(*sizes):
     """int32 when every size fits, else int64 (CSR index arrays)."""
     return np.int32 if max(sizes) < np.iinfo(np.int32).max else np.int64
 
@@ -155,7 +155,7 @@ def stencil_to_csr(offsets, stencil, *, dtype=np.float64):
         raise ValueError(f"stencil must have shape (len(offsets), H, W) = ({len(offsets)}, H, W), got {stencil.shape}")
     K, H, W = stencil.shape
     n = H * W
-    indptr = _row_starts(offsets, (H, W), _index_dtype(n * K))
+    indptr = _row_starts(offsets, (H, W), index_dtype(n * K))
     nnz = int(indptr[-1])
     data = np.empty(nnz, dtype=dtype)
     indices = np.empty(nnz, dtype=indptr.dtype)

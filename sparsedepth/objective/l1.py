@@ -2,7 +2,7 @@
 
 The L1 ("edge") term of the completion objective is ``Σ_k c_k |(K z)_k|``
 with ``K`` the forward-difference gradient ``[∂x; ∂y]`` of
-:func:`sparsedepth.operators.gradient`.  :class:`StackedL1` stacks the
+:func:`sparsedepth.grid.operators.gradient`.  :class:`StackedL1` stacks the
 operators of all L1 terms of an :class:`~sparsedepth.objective.Objective` and
 applies ``K`` and ``Kᵀ``; when ``K`` is exactly the grid gradient it does so
 by NumPy slicing of the ``(H, W)`` image (a few passes over the array instead
@@ -16,14 +16,14 @@ import scipy.sparse as sp
 from scipy import ndimage
 from scipy.sparse.csgraph import connected_components
 
-from .operators import StencilOperator, gradient, gradient_stencil
-from .stencil import _index_dtype, stencil_to_csr
+from ..grid.operators import StencilOperator, gradient, gradient_stencil
+from ..grid.stencil import index_dtype, stencil_to_csr
 
 __all__ = ["StackedL1", "is_grid_gradient"]
 
 
 def is_grid_gradient(K, shape) -> bool:
-    """True when the sparse ``K`` equals :func:`~sparsedepth.operators.gradient` of ``shape`` entry by entry.
+    """True when the sparse ``K`` equals :func:`~sparsedepth.grid.operators.gradient` of ``shape`` entry by entry.
 
     Parameters
     ----------
@@ -57,7 +57,7 @@ _STEP_CHUNK = 8192
 
 
 def _is_gradient_operator(operator, shape) -> bool:
-    """True for :func:`~sparsedepth.operators.gradient_stencil` of ``shape`` or a sparse matrix equal to it."""
+    """True for :func:`~sparsedepth.grid.operators.gradient_stencil` of ``shape`` or a sparse matrix equal to it."""
     if isinstance(operator, StencilOperator):
         return operator.grid_shape == tuple(shape) and operator.blocks == gradient_stencil(shape).blocks
     return sp.issparse(operator) and is_grid_gradient(operator, shape)
@@ -67,7 +67,7 @@ def _grid_gradient_pairs(shape):
     """:meth:`StackedL1.pixel_pairs` of the grid gradient, by index arithmetic (int32 when it fits)."""
     H, W = shape
     n = H * W
-    dtype = _index_dtype(2 * n)
+    dtype = index_dtype(2 * n)
     pixels = np.arange(n, dtype=dtype).reshape(H, W)
     x_first = pixels[:, :-1].reshape(-1)  # rows 0 .. n-1: pixel p and p + 1 (not in the last column)
     y_first = pixels[:-1].reshape(-1)     # rows n .. 2n-1: pixel p and p + W (not in the last row)
@@ -77,7 +77,7 @@ def _grid_gradient_pairs(shape):
     return rows, first, second, True
 
 
-def _graph_components(n, first, second):
+def graph_components(n, first, second):
     """Connected components of the graph on ``n`` nodes with edges ``first[i]–second[i]``: ``(labels, count)``."""
     graph = sp.csr_matrix((np.ones(first.size), (first, second)), shape=(n, n))
     count, labels = connected_components(graph, directed=False)
@@ -96,7 +96,7 @@ class StackedL1:
     objective : Objective
         With at least one L1 term of positive weight; its operators are
         ``scipy.sparse`` matrices or have a ``tocsr()`` method
-        (:class:`~sparsedepth.operators.StencilOperator`).
+        (:class:`~sparsedepth.grid.operators.StencilOperator`).
 
     Attributes
     ----------
@@ -283,7 +283,7 @@ class StackedL1:
         ----------
         offsets : list of tuple of int, optional
             For the grid gradient: the result is stored in the full in-grid
-            pattern (:func:`~sparsedepth.stencil.stencil_to_csr`) of these
+            pattern (:func:`~sparsedepth.grid.stencil.stencil_to_csr`) of these
             offsets joined with the 5-point ones; pass those of a matrix ``A``
             in that pattern that has the 5-point offsets and ``KᵀK`` has
             exactly ``A``'s ``indptr`` and ``indices``, so ``a A + b KᵀK`` is
@@ -334,7 +334,7 @@ class StackedL1:
         if not self.grid_gradient:
             rows, first, second, _ = self.pixel_pairs()
             sel = tied[rows]
-            return _graph_components(self.shape[0] * self.shape[1], first[sel], second[sel])
+            return graph_components(self.shape[0] * self.shape[1], first[sel], second[sel])
         H, W = self.shape
         n = H * W
         sites = np.zeros((2 * H - 1, 2 * W - 1), dtype=bool)

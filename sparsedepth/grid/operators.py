@@ -18,6 +18,8 @@ from functools import lru_cache
 import numpy as np
 import scipy.sparse as sp
 
+from .._validation import check_grid_shape
+
 __all__ = [
     "forward_diff",
     "gradient",
@@ -26,12 +28,6 @@ __all__ = [
     "hessian_operator",
 ]
 
-
-def _check_shape(shape):
-    shape = tuple(int(s) for s in shape)
-    if len(shape) != 2 or min(shape) < 1:
-        raise ValueError(f"shape must be (H, W) with H, W >= 1, got {shape}")
-    return shape
 
 
 @lru_cache(maxsize=16)
@@ -79,7 +75,7 @@ def forward_diff(shape, axis: int) -> sp.csr_matrix:
     array([[1., 1., 0.],
            [1., 1., 0.]])
     """
-    shape = _check_shape(shape)
+    shape = check_grid_shape(shape)
     if axis not in (0, 1):
         raise ValueError(f"axis must be 0 or 1, got {axis!r}")
     return _forward_diff_cached(shape, axis)
@@ -96,7 +92,7 @@ def gradient(shape) -> sp.csr_matrix:
     The first ``H*W`` rows are the horizontal differences, the last ``H*W`` the
     vertical ones (see :func:`forward_diff`).
     """
-    return _gradient_cached(_check_shape(shape))
+    return _gradient_cached(check_grid_shape(shape))
 
 
 @lru_cache(maxsize=16)
@@ -129,7 +125,7 @@ def second_diff(shape, axis: int) -> sp.csr_matrix:
     Row of pixel ``(i, j)`` for ``axis=1``: ``z[i, j-1] - 2 z[i, j] + z[i, j+1]``
     for ``0 < j < W-1`` and ``0`` on the first and last column.
     """
-    shape = _check_shape(shape)
+    shape = check_grid_shape(shape)
     if axis not in (0, 1):
         raise ValueError(f"axis must be 0 or 1, got {axis!r}")
     return _second_diff_cached(shape, axis)
@@ -147,7 +143,7 @@ def mixed_diff(shape) -> sp.csr_matrix:
 
     Zero in the last row and the last column.
     """
-    return _mixed_diff_cached(_check_shape(shape))
+    return _mixed_diff_cached(check_grid_shape(shape))
 
 
 @lru_cache(maxsize=16)
@@ -165,7 +161,7 @@ def hessian_operator(shape) -> sp.csr_matrix:
     norm of the Hessian) energy; it vanishes exactly on affine ramps
     ``z = a + b*i + c*j``.
     """
-    return _hessian_cached(_check_shape(shape))
+    return _hessian_cached(check_grid_shape(shape))
 
 
 # --------------------------------------------------------------------------
@@ -226,7 +222,7 @@ class StencilOperator:
     """
 
     def __init__(self, shape, blocks):
-        self.grid_shape = _check_shape(shape)
+        self.grid_shape = check_grid_shape(shape)
         self.blocks = tuple(tuple(((int(dy), int(dx)), float(c)) for (dy, dx), c in block) for block in blocks)
         if not self.blocks or any(len(block) == 0 for block in self.blocks):
             raise ValueError("a StencilOperator needs at least one block, each with at least one tap")

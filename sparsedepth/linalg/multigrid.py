@@ -51,7 +51,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from pyamg import amg_core
 
-from .stencil import _index_dtype, csr_to_stencil, full_pattern_offsets, stencil_to_csr
+from .._validation import check_grid_shape
+from ..grid.stencil import index_dtype, csr_to_stencil, full_pattern_offsets, stencil_to_csr
 
 __all__ = [
     "GridMultigrid",
@@ -80,16 +81,6 @@ _KEEP_STENCIL_PIXELS = 1 << 21
 # --------------------------------------------------------------------------
 # input checks
 # --------------------------------------------------------------------------
-def _check_shape(shape):
-    try:
-        h, w = (int(s) for s in shape)
-    except (TypeError, ValueError):
-        raise ValueError(
-            f"`shape` must be a pair (H, W) of grid dimensions, got {shape!r}."
-        ) from None
-    if h < 1 or w < 1:
-        raise ValueError(f"`shape` must have positive entries, got {shape!r}.")
-    return h, w
 
 
 def _check_matrix(A, shape):
@@ -98,7 +89,7 @@ def _check_matrix(A, shape):
         raise TypeError(
             f"`A` must be a scipy.sparse matrix or array, got {type(A).__name__}."
         )
-    h, w = _check_shape(shape)
+    h, w = check_grid_shape(shape)
     if A.shape != (h * w, h * w):
         raise ValueError(
             f"`A` has shape {A.shape} but a grid of shape {(h, w)} needs "
@@ -235,7 +226,7 @@ def _offset_image(A, shape, dy, dx, out):
 def _stencil_of(A, shape, radius=None):
     """Offsets present in ``A`` (radius <= 2, or ``radius``) and their stencil images.
 
-    (Matrices in the full in-grid pattern of :func:`~sparsedepth.stencil.stencil_to_csr`
+    (Matrices in the full in-grid pattern of :func:`~sparsedepth.grid.stencil.stencil_to_csr`
     are read by the callers, see :func:`_pattern_offsets`, before this is tried.)
     Two passes over the candidate offsets: the first only counts the non-zeros
     of each offset (one ``(H, W)`` work image; the 5-point, then the 3x3, then
@@ -292,7 +283,7 @@ class _StencilSource:
 
     Either an array ``(K, H, W)`` (coarse levels, or a fine operator whose
     stencil had to be extracted diagonal by diagonal) or a CSR matrix in the
-    full in-grid pattern of :func:`~sparsedepth.stencil.stencil_to_csr`, read
+    full in-grid pattern of :func:`~sparsedepth.grid.stencil.stencil_to_csr`, read
     class by class so that the fine stencil is never held whole (8 MP,
     13-point: 210 MB per class instead of 830 MB).  Grids below
     ``_KEEP_STENCIL_PIXELS`` read it whole once (:meth:`read_whole`).
@@ -720,9 +711,9 @@ def _prolongation_pattern(shape):
     """
     h, w = shape
     hc, wc = (h + 1) // 2, (w + 1) // 2
-    index_dtype = _index_dtype(4 * h * w)
-    cy = (np.arange(h) // 2).astype(index_dtype)
-    cx = (np.arange(w) // 2).astype(index_dtype)
+    itype = index_dtype(4 * h * w)
+    cy = (np.arange(h) // 2).astype(itype)
+    cx = (np.arange(w) // 2).astype(itype)
     # second parent exists for odd indices whose right/lower coarse point exists
     second_y = slice(1, 2 * (hc - 1), 2)
     second_x = slice(1, 2 * (wc - 1), 2)
@@ -733,10 +724,10 @@ def _prolongation_pattern(shape):
             for ex, xs in ((0, all_x), (1, second_x)):
                 if ys.start >= ys.stop or xs.start >= xs.stop:
                     continue
-                cols = (cy[ys] + ey)[:, None] * index_dtype(wc) + (cx[xs] + ex)[None, :]
+                cols = (cy[ys] + ey)[:, None] * itype(wc) + (cx[xs] + ex)[None, :]
                 yield 2 * ey + ex, ys, xs, cols
 
-    return _pattern_from_slots(shape, 4, slots(), index_dtype)
+    return _pattern_from_slots(shape, 4, slots(), itype)
 
 
 # --------------------------------------------------------------------------

@@ -3,7 +3,7 @@ r"""A duality-gap certificate: a proven upper bound on ``F(z) − F*`` for the c
 The objective is ``F(z) = Q(z) + Σ_k c_k |(K z)_k|`` with the quadratic part
 ``Q(z) = zᵀAz − 2bᵀz + const`` (:meth:`~sparsedepth.objective.Objective.normal_equations`,
 ``A`` symmetric positive definite) and the stacked L1 operator ``K`` with row
-weights ``c >= 0`` (:class:`~sparsedepth._l1.StackedL1`).  See
+weights ``c >= 0`` (:class:`~sparsedepth.objective.l1.StackedL1`).  See
 :func:`duality_gap`.
 """
 
@@ -13,9 +13,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg  # noqa: F401  (sp.linalg)
 
-from ._l1 import StackedL1
-from .linear import _dot, make_preconditioner, pcg
-from .objective import QuadraticTerm
+from ..objective.l1 import StackedL1
+from ..linalg.krylov import dot, make_preconditioner, pcg
+from ..objective.objective import QuadraticTerm
 
 __all__ = ["Certificate", "duality_gap", "curvature_lower_bound"]
 
@@ -192,16 +192,16 @@ class Certificate:
         if self.nonnegative:
             mu = np.where(z <= 0.0, np.maximum(r, 0.0), 0.0)
             r = r - mu
-            first += max(_dot(mu, z), 0.0)  # 0 up to rounding: mu is nonzero where z = 0 only
+            first += max(dot(mu, z), 0.0)  # 0 up to rounding: mu is nonzero where z = 0 only
         if not np.all(np.isfinite(r)):
             return float("nan")
         if not np.any(r):
             return first
         y, _, ok, _ = pcg(A, r, M=self._preconditioner(A), rtol=self.rtol, maxiter=2000)
         e = r - A @ y
-        quad = _dot(y, r + e)  # = 2yᵀr − yᵀAy
+        quad = dot(y, r + e)  # = 2yᵀr − yᵀAy
         if self.proven:
-            quad += _dot(e, e) / self.curvature
+            quad += dot(e, e) / self.curvature
         elif not ok:
             return float("nan")
         if not np.isfinite(quad):
@@ -210,7 +210,7 @@ class Certificate:
 
 
 def _norm_sq(v):
-    return _dot(v, v)
+    return dot(v, v)
 
 
 def duality_gap(objective, z, *, p=None, eps=0.0, nonnegative=True, rtol=1e-10, fit_steps=50):

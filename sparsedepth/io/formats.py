@@ -203,7 +203,7 @@ def _check_extension(path: Path, allowed: tuple[str, ...], what: str, name: str 
     return ext
 
 
-def _resolve_scale(scale, name: str = "scale") -> float:
+def resolve_scale(scale, name: str = "scale") -> float:
     """Turn a preset name or a positive number into a float divisor."""
     if isinstance(scale, str):
         key = scale.lower()
@@ -301,7 +301,7 @@ def _check_depth_bound(value, label: str) -> float | None:
 # --------------------------------------------------------------------------------------
 # atomic writes
 # --------------------------------------------------------------------------------------
-def _fsync(path) -> None:
+def fsync(path) -> None:
     """Flush ``path`` to disk before it is renamed into place (best effort: some systems cannot)."""
     with contextlib.suppress(OSError):
         fd = os.open(path, os.O_RDONLY)
@@ -311,7 +311,7 @@ def _fsync(path) -> None:
             os.close(fd)
 
 
-def _create_temporary(path: Path, kind: str = "tmp") -> Path:
+def create_temporary(path: Path, kind: str = "tmp") -> Path:
     """Create a new empty file ``.<name>.<random>.<kind><suffix>`` next to ``path``; return its path.
 
     The file is created with ``O_EXCL`` (nothing existing is ever clobbered)
@@ -332,7 +332,7 @@ def _create_temporary(path: Path, kind: str = "tmp") -> Path:
 
 
 @contextlib.contextmanager
-def _atomic_target(path) -> Iterator[Path]:
+def atomic_target(path) -> Iterator[Path]:
     """Yield a fresh temporary path next to ``path``; move it onto ``path`` on success.
 
     The temporary name keeps the destination's extension (some encoders choose
@@ -344,10 +344,10 @@ def _atomic_target(path) -> Iterator[Path]:
     path = Path(path)
     if not path.parent.is_dir():
         raise FileNotFoundError(f"`path`: directory '{path.parent}' does not exist.")
-    tmp = _create_temporary(path)
+    tmp = create_temporary(path)
     try:
         yield tmp
-        _fsync(tmp)
+        fsync(tmp)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
@@ -669,7 +669,7 @@ def read_depth_png(path, scale, *, byteorder: str | None = None, max_pixels: int
     array([[nan, 2.5]])
     """
     label = _labels(option_names)
-    scale = _resolve_scale(scale, label("scale"))
+    scale = resolve_scale(scale, label("scale"))
     path = _check_file(path, name)
     _check_extension(path, _DEPTH_IMAGE_EXTENSIONS, "read depth image", name)
     stored = _read_depth_image(path, byteorder, max_pixels, name, option_names)
@@ -842,7 +842,7 @@ def write_pfm(path, array, *, byteorder: str = "little") -> None:
     if byteorder not in ("big", "little"):
         raise ValueError(f"`byteorder` must be 'little' or 'big', got {byteorder!r}.")
     values = _check_pfm_values(array, "array")
-    with _atomic_target(path) as tmp:
+    with atomic_target(path) as tmp:
         _write_pfm_file(tmp, values, byteorder)
 
 
@@ -1607,7 +1607,7 @@ def read_depth(path, *, scale=None, calib=None, key: str | None = None, byteorde
     ext = _check_extension(path, _READ_DEPTH_EXTENSIONS, "read depth", name)
     if key is not None and ext not in (".npz",) + _HDF5_EXTENSIONS:
         raise ValueError(f"{label('key')} only applies to .npz and HDF5 files, not '{ext}'.")
-    divisor = None if scale is None else _resolve_scale(scale, label("scale"))
+    divisor = None if scale is None else resolve_scale(scale, label("scale"))
     byteorder = _check_byteorder(byteorder, label("byteorder"))
     invalid_values = _check_invalid_values(invalid_values, label("invalid_values"))
     min_depth = _check_depth_bound(min_depth, label("min_depth"))
@@ -1816,12 +1816,12 @@ def write_depth(path, depth, *, scale=1000.0) -> None:
     >>> read_depth(fname)
     array([[ 1., nan]])
     """
-    writer = _depth_writer(path, depth, scale=scale)
-    with _atomic_target(path) as tmp:
+    writer = depth_writer(path, depth, scale=scale)
+    with atomic_target(path) as tmp:
         writer(tmp)
 
 
-def _depth_writer(path, depth, *, scale=1000.0) -> Callable[[Path], None]:
+def depth_writer(path, depth, *, scale=1000.0) -> Callable[[Path], None]:
     """Check and encode ``depth`` for ``path`` as :func:`write_depth` does; return ``writer(tmp)``.
 
     Every check of :func:`write_depth` (extension, shape, sign, PNG range)
@@ -1830,7 +1830,7 @@ def _depth_writer(path, depth, *, scale=1000.0) -> Callable[[Path], None]:
     ``path``'s extension.
     """
     ext = _check_extension(Path(path), _WRITE_DEPTH_EXTENSIONS, "write depth")
-    scale = _resolve_scale(scale)
+    scale = resolve_scale(scale)
     array = _check_real_array(depth, "depth")
     if array.ndim != 2:
         raise ValueError(f"`depth` must be a 2-D (H, W) array, got shape {array.shape}.")

@@ -34,7 +34,7 @@ import scipy.linalg
 import scipy.sparse
 import scipy.sparse.linalg
 
-from ._validation import as_float_image
+from .._validation import as_float_image
 
 __all__ = [
     "GREY_WEIGHTS",
@@ -705,7 +705,7 @@ def colorization_fill(image, depth, *, mask=None, alpha=1.0, rtol=1e-8, window_r
     into clusters joined by links of relative weight ~1e-4, and algebraic
     multigrid (smoothed aggregation, Ruge-Stuben, AIR) needs 40-150 GMRES
     iterations; geometric black-box multigrid
-    (:class:`sparsedepth.multigrid.GridMultigrid` with operator-dependent
+    (:class:`sparsedepth.linalg.multigrid.GridMultigrid` with operator-dependent
     interpolation) as GMRES preconditioner of the whole system is still 2.5
     cm off after 100 iterations on a 640x480 NYU frame.  The exact
     elimination removes that difficulty, leaving a known block whose Jacobi
