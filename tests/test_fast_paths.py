@@ -6,7 +6,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from sparsedepth import Weights, build_objective, complete_depth
-from sparsedepth.linalg.krylov import make_preconditioner, pcg
+from sparsedepth.linalg import make_preconditioner, pcg
 from sparsedepth.linalg.multigrid import GridMultigrid, grid_stencil
 
 from conftest import make_problem

@@ -35,6 +35,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from .._validation import as_float_image
+from ..linalg.krylov import gmres
 
 __all__ = [
     "GREY_WEIGHTS",
@@ -478,130 +479,6 @@ def _nested_dissection_order(H, W):
 # the multi-threaded BLAS behind ``@``/``norm`` spends more time waking and
 # synchronising its threads than computing on vectors of this length when the
 # cores are shared, which made the iteration twice as slow in measurements.
-def _norm(v):
-    return math.sqrt(float(np.einsum("i,i->", v, v)))
-
-
-def _dots(V, v):
-    return np.einsum("ij,j->i", V, v)
-
-
-def _combine(c, V):
-    return np.einsum("i,ij->j", c, V)
-
-
-# Gram-Schmidt is repeated only when ||v - V h|| < _REORTHOGONALISE ||v||.
-# One classical pass loses about eps / ratio of orthogonality.  The
-# preconditioned Schur complement is close to the identity, so the ratio is
-# 0.08-0.15 on NYU frames: the usual 0.7 (Daniel-Gragg-Kaufman-Stewart) would
-# repeat every pass, doubling the vector work, to avoid a loss of 1e-15.
-# (Measured on nyu_metric3d/00000: the same iterations and the same result
-# to 1e-11 with and without any repetition.)  The residual is recomputed from
-# x at the end anyway.
-_REORTHOGONALISE = 0.01
-
-
-def _gmres(apply, lift, b, x0, precond, atol, maxiter, restart=30, lift_x0=None):
-    """Right-preconditioned restarted GMRES, stopping on ``||b - A x||_inf <= atol``.
-
-    The operator is ``A x = apply(x, lift(x))``: ``lift`` is the expensive
-    linear part (here ``x_K -> x_U``, one sparse triangular solve pair) and
-    ``apply`` the cheap rest.  The lifted images of the Krylov directions are
-    kept, so the lift of the iterate is their combination and the residual
-    ``b - apply(x, lift(x))`` at the end of a cycle costs no extra solve.
-    ``lift`` may be None (then ``apply(x, None)`` is the whole operator).
-    ``lift_x0``, if given, replaces ``lift(x0)`` for the initial guess: the
-    caller's lift may be affine, ``x -> lift(x) + c``, with ``lift`` applied
-    to the Krylov directions being its linear part.
-
-    The preconditioned images of the Krylov vectors are kept too (as in
-    flexible GMRES), so the update of ``x`` at the end of a cycle costs no
-    further application of ``precond``.  The max-norm of the residual is
-    evaluated from the Arnoldi relation ``r_k = V_{k+1} (beta e_1 - H_k y_k)``
-    once the 2-norm estimate makes it possible, and confirmed at the end of
-    every cycle with the residual ``b - A x`` recomputed from ``x`` and its
-    lift.
-
-    Returns ``(x, lift_x, residual_norms, true_residual_inf, converged)``;
-    ``residual_norms`` holds the 2-norm of the initial residual and then the
-    GMRES estimate after every iteration.
-    """
-    x = x0.copy()
-    if lift is None:
-        lift_x = None
-    else:
-        lift_x = lift(x) if lift_x0 is None else lift_x0.copy()
-    r = b - apply(x, lift_x)
-    res_inf = float(np.max(np.abs(r)))
-    beta = _norm(r)
-    history = [beta]
-    n_iter = 0
-    n = b.size
-    sqrt_n = math.sqrt(n)
-    restart = max(1, min(restart, n, maxiter))
-    while res_inf > atol and n_iter < maxiter:
-        V = np.empty((restart + 1, n))
-        Z = np.empty((restart, n))  # preconditioned V
-        lifted = None if lift is None else np.empty((restart, lift_x.size))
-        Hm = np.zeros((restart + 1, restart))
-        cs = np.zeros(restart)
-        sn = np.zeros(restart)
-        g = np.zeros(restart + 1)
-        g[0] = beta
-        np.divide(r, beta, out=V[0])
-        k = 0
-        while k < restart and n_iter < maxiter:
-            w = Z[k] = precond(V[k])
-            if lift is None:
-                v = apply(w, None)
-            else:
-                lifted[k] = lift(w)
-                v = apply(w, lifted[k])
-            # classical Gram-Schmidt (BLAS-2), repeated once when it cancels
-            # catastrophically (see _REORTHOGONALISE)
-            norm_v = _norm(v)
-            h = _dots(V[: k + 1], v)
-            v -= _combine(h, V[: k + 1])
-            h_next = _norm(v)
-            if h_next < _REORTHOGONALISE * norm_v:
-                h2 = _dots(V[: k + 1], v)
-                v -= _combine(h2, V[: k + 1])
-                h += h2
-                h_next = _norm(v)
-            col = np.append(h, h_next)
-            for i in range(k):  # apply the previous Givens rotations
-                col[i], col[i + 1] = (cs[i] * col[i] + sn[i] * col[i + 1],
-                                      -sn[i] * col[i] + cs[i] * col[i + 1])
-            rho = math.hypot(col[k], col[k + 1])
-            cs[k], sn[k] = col[k] / rho, col[k + 1] / rho
-            col[k], col[k + 1] = rho, 0.0
-            Hm[: k + 2, k] = col
-            g[k + 1] = -sn[k] * g[k]
-            g[k] = cs[k] * g[k]
-            k += 1
-            n_iter += 1
-            history.append(abs(g[k]))
-            if h_next == 0.0:  # the Krylov space is invariant: exact solution
-                break
-            np.divide(v, h_next, out=V[k])
-            if abs(g[k]) <= atol * sqrt_n:
-                # residual vector r_k = g_k V_{k+1} Q_k^T e_{k+1}
-                u = np.zeros(k + 1)
-                u[k] = 1.0
-                for i in range(k - 1, -1, -1):
-                    u[i], u[i + 1] = cs[i] * u[i] - sn[i] * u[i + 1], sn[i] * u[i] + cs[i] * u[i + 1]
-                if abs(g[k]) * float(np.max(np.abs(_combine(u, V[: k + 1])))) <= atol:
-                    break
-        y = scipy.linalg.solve_triangular(Hm[:k, :k], g[:k])
-        x += _combine(y, Z[:k])
-        if lift is not None:
-            lift_x += _combine(y, lifted[:k])
-        r = b - apply(x, lift_x)
-        res_inf = float(np.max(np.abs(r)))
-        beta = _norm(r)
-    return x, lift_x, np.asarray(history), res_inf, res_inf <= atol
-
-
 def colorization_fill(image, depth, *, mask=None, alpha=1.0, rtol=1e-8, window_radius=1,
                       maxiter=1000):
     """Fill depth holes with the NYU toolbox colorization method, fast and exact.
@@ -967,7 +844,7 @@ def _solve_schur(A_E, A_K, b, *, x0, atol, maxiter, diag_K, strip=None, rim=None
             z += z0
         return z
 
-    x_K, x_E, history, res_inf, converged = _gmres(apply, lift, b_K, x0, apply_precond, atol, maxiter,
+    x_K, x_E, history, res_inf, converged = gmres(apply, lift, b_K, x0, apply_precond, atol, maxiter,
                                                    lift_x0=lift_x0)
     if not converged:
         raise RuntimeError(

@@ -14,7 +14,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg  # noqa: F401  (sp.linalg)
 
 from ..objective.l1 import StackedL1
-from ..linalg.krylov import dot, make_preconditioner, pcg
+from ..linalg.krylov import dot, pcg
+from ..linalg.preconditioners import make_preconditioner
 from ..objective.objective import QuadraticTerm
 
 __all__ = ["Certificate", "duality_gap", "curvature_lower_bound"]

@@ -54,7 +54,8 @@ from scipy.sparse.linalg import spsolve
 from .._validation import is_int, is_real
 from ..objective.l1 import StackedL1, graph_components
 from .certificate import Certificate, curvature_lower_bound
-from ..linalg.krylov import make_preconditioner, pcg
+from ..linalg.krylov import pcg, pcg_steps
+from ..linalg.preconditioners import make_preconditioner
 from ..linalg.multigrid import GridMultigrid
 from ..grid.stencil import index_dtype, full_pattern_offsets
 from ..objective.objective import AbsTerm, Objective, QuadraticTerm
@@ -375,52 +376,6 @@ def _combine(a, A, b, B):
     return (a * A + b * B).tocsr()
 
 
-def _inner_pcg(S, precondition, z, Sz, rhs, *, rtol, factor, max_steps):
-    r"""PCG steps on ``S z = rhs`` from the current ``z``, updating ``z`` and ``Sz = S z`` in place.
-
-    With ``max_steps = 1``: one preconditioned step with exact line search
-    along ``d = M⁻¹(rhs − Sz)``.  With more: CG steps until ``‖rhs − S z‖ <=
-    max(rtol ‖rhs‖, factor ‖rhs − S z_start‖)`` or ``max_steps``.  The
-    residual is ``rhs − Sz`` with ``Sz`` updated alongside ``z`` (one product
-    with ``S`` per step).  ``rhs`` is overwritten (its buffer holds the
-    residual).  Returns the number of steps.
-    """
-    from ..linalg.krylov import dot
-
-    rhs_sq = dot(rhs, rhs) if max_steps > 1 else None
-    r = np.subtract(rhs, Sz, out=rhs)
-    if max_steps > 1:
-        rr = dot(r, r)
-        target = max(rtol * rtol * rhs_sq, factor * factor * rr)
-        if rr <= target:
-            return 0
-    d = precondition(r)
-    rd = dot(r, d)
-    p = d
-    for step in range(1, max_steps + 1):
-        q = S @ p
-        pq = dot(p, q)
-        if not pq > 0:
-            return step - 1
-        alpha = rd / pq
-        if step == max_steps:  # p and q are not needed again: scale them in place
-            p *= alpha
-            z += p
-            q *= alpha
-            Sz += q
-            return step
-        z += alpha * p
-        Sz += alpha * q
-        r -= alpha * q
-        if dot(r, r) <= target:
-            return step
-        d = precondition(r)
-        rd_new = dot(r, d)
-        p = d + (rd_new / rd) * p
-        rd = rd_new
-    return max_steps
-
-
 def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     r"""ADMM (split Bregman) with over-relaxation for the L1 terms, finished by exact active-set polishes.
 
@@ -581,7 +536,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
         rhs += b
         if k % 25 == 0:
             Sz = S @ z  # drop the rounding drift of the carried product
-        inner_total += _inner_pcg(S, precondition, z, Sz, rhs, rtol=inner_rtol, factor=inner_factor,
+        inner_total += pcg_steps(S, precondition, z, Sz, rhs, rtol=inner_rtol, factor=inner_factor,
                                   max_steps=inner_max)
         x = l1.apply(z, out=spare)  # K z, overwritten by the new u below
         # between polishes the residuals decide nothing: skip them
