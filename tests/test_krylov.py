@@ -5,7 +5,7 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from sparsedepth.linalg import PCGResult, gmres, pcg, pcg_info, pcg_steps
+from sparsedepth.linalg import PCGResult, gmres, pcg, pcg_info, pcg_steps, solve_spd
 
 
 def spd_system(n=12, seed=0):
@@ -69,6 +69,11 @@ def test_pcg_info_reports_breakdown_on_an_indefinite_matrix():
     assert result.breakdown and not result.converged
     assert "breakdown" in result.message
     assert result.residual_norms[-1] == pytest.approx(np.linalg.norm(b - A @ result.x), rel=1e-10)
+    # through solve_spd: status -2 and the breakdown message, not an iteration limit
+    x, info = solve_spd(A, b, (1, 2), preconditioner="none")
+    assert not info.converged and info.status == -2
+    assert info.message == "CG breakdown (operator or preconditioner not SPD?)"
+    assert info.residuals[-1] == pytest.approx(np.linalg.norm(b - A @ x), rel=1e-10)
 
 
 def test_pcg_info_callback_may_stop():
