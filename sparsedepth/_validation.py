@@ -127,3 +127,35 @@ def as_depth_and_mask(sparse_depth, mask=None, *, name: str = "sparse_depth"):
         )
     depth[~observed] = 0.0
     return depth, observed
+
+
+# --- square matrix (a sparse operator on a pixel grid)
+
+__all__ += ["as_grid_operator"]
+
+
+def as_grid_operator(A, shape, *, name: str = "A"):
+    """Return ``(A, (H, W))``: ``A`` as canonical float64 CSR (no copy when it already is) and the grid shape.
+
+    ``TypeError`` unless ``A`` is a real scipy.sparse matrix or array;
+    ``ValueError`` unless ``shape`` is a grid shape (see
+    :func:`check_grid_shape`) and ``A`` is ``(H W, H W)``.
+    """
+    import scipy.sparse as sp  # local: this rule's additions stay in one block
+
+    if not sp.issparse(A):
+        raise TypeError(f"`{name}` must be a scipy.sparse matrix or array, got {type(A).__name__}.")
+    h, w = check_grid_shape(shape)
+    if A.shape != (h * w, h * w):
+        raise ValueError(
+            f"`{name}` has shape {A.shape} but a grid of shape {(h, w)} needs "
+            f"({h * w}, {h * w}); pass the (H, W) the pixels were flattened from."
+        )
+    if np.iscomplexobj(A.data):
+        raise TypeError(f"`{name}` must be real; complex operators are not supported.")
+    if A.format != "csr" or A.dtype != np.float64:
+        A = sp.csr_array(A, dtype=np.float64)
+    if not A.has_canonical_format:
+        A = A.copy()
+        A.sum_duplicates()
+    return A, (h, w)

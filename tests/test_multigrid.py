@@ -110,7 +110,7 @@ def test_bilinear_prolongation_is_kron_of_1d_interpolation(shape):
 @pytest.fixture(params=["kept", "read back"])
 def stencil_path(request, monkeypatch):
     """Both set-up paths: stencils kept as arrays (small grids) or read back from the CSR class by class (large)."""
-    import sparsedepth.linalg.multigrid as multigrid
+    import sparsedepth.linalg.multigrid.hierarchy as multigrid
 
     if request.param == "read back":
         monkeypatch.setattr(multigrid, "_KEEP_STENCIL_PIXELS", 0)
@@ -537,7 +537,7 @@ def test_single_precision_coarse_levels_round_the_double_ones_and_converge():
 
 
 def test_single_precision_cycle_rounds_the_double_one_and_solves_to_double_accuracy(monkeypatch):
-    import sparsedepth.linalg.multigrid as multigrid
+    import sparsedepth.linalg.multigrid.hierarchy as multigrid
 
     shape = (40, 56)
     rng = np.random.default_rng(12)

@@ -3,17 +3,23 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 
-__all__ = ["dot", "pcg", "pcg_steps", "gmres"]
+__all__ = ["dot", "pcg", "pcg_info", "PCGResult", "pcg_steps", "gmres"]
 
 
 def dot(x, y):
-    # einsum runs its own loop instead of BLAS ddot: multithreaded OpenBLAS on
-    # a busy 2-core machine made one 600k-long dot product cost ~8 ms instead
-    # of 0.1 ms (measured), i.e. more than a V-cycle.
+    """``xᵀ y`` of two float vectors as a Python float.
+
+    Notes
+    -----
+    ``einsum`` runs its own single-threaded loop instead of BLAS ``ddot``:
+    multithreaded OpenBLAS on a busy 2-core machine makes one 600k-long dot
+    product cost about 8 ms instead of 0.1 ms, more than a V-cycle.
+    """
     return float(np.einsum("i,i->", x, y))
 
 
@@ -27,8 +33,50 @@ def _as_apply(M):
     return lambda r: M @ r
 
 
-def pcg(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=None, callback_residual=False):
-    r"""Preconditioned CG for ``A x = b`` stopping at ``‖b − A x‖ ≤ max(rtol·‖b‖, atol)``.
+@dataclass(frozen=True)
+class PCGResult:
+    """Outcome of :func:`pcg_info`.
+
+    Attributes
+    ----------
+    x : ndarray, (N,)
+        The returned iterate.
+    iterations : int
+        Number of CG iterations performed (over all restarts).
+    converged : bool
+        ``‖b − A x‖ ≤ max(rtol ‖b‖, atol)`` at the returned ``x`` (true residual).
+    relative_residual : float
+        ``‖b − A x‖ / ‖b‖`` recomputed at the returned ``x``.
+    residual_norms : ndarray, (iterations + 1,)
+        Residual norm at every iterate, starting with ``‖b − A x0‖``: the
+        recursively updated residual of CG, except at the end of every CG
+        cycle (a restart, a breakdown, a stop, the last iterate), where the
+        true residual ``b − A x`` is recomputed and recorded instead.
+    breakdown : bool
+        ``pᵀ A p ≤ 0`` met before convergence: ``A`` or the preconditioner is
+        not symmetric positive definite.
+    stopped : bool
+        The callback raised ``StopIteration``.
+    message : str
+        Why the iteration ended.
+    """
+
+    x: np.ndarray
+    iterations: int
+    converged: bool
+    relative_residual: float
+    residual_norms: np.ndarray
+    breakdown: bool
+    stopped: bool
+    message: str
+
+
+#: CG cycles (each restarted from the recomputed true residual) before rounding drift ends the solve
+_MAX_CYCLES = 6
+
+
+def pcg_info(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=None, callback_residual=False):
+    r"""Preconditioned CG for ``A x = b`` stopping at ``‖b − A x‖ ≤ max(rtol·‖b‖, atol)``, with its history.
 
     Parameters
     ----------
@@ -45,7 +93,121 @@ def pcg(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=No
     callback : callable, optional
         ``callback(x)`` after every iteration (``x`` is the live iterate: copy
         it to keep it); ``callback(x, r)`` with the recursively updated
-        residual ``r ≈ b − A x`` when ``callback_residual`` is true.
+        residual ``r ≈ b − A x`` when ``callback_residual`` is true.  It may
+        raise ``StopIteration`` to stop: the result then has ``stopped`` set
+        and holds the iterate it was called with.
+
+    Returns
+    -------
+    PCGResult
+        The iterate, the iteration count, convergence on the true residual,
+        the residual history, breakdown and stop flags and a message.
+
+    Notes
+    -----
+    Standard preconditioned CG (Hestenes–Stiefel with ``z = M⁻¹ r``).  When
+    the recursively updated residual meets the tolerance the true residual
+    ``b − A x`` is recomputed; if it does not meet it (rounding drift), CG
+    restarts from the true residual (at most 6 cycles in all), so
+    ``converged`` is never claimed on the recursive residual alone.  A step
+    with ``pᵀ A p ≤ 0`` ends the solve (breakdown, unless the recomputed
+    residual meets the target: ``p = 0`` at the exact solution).  For
+    ``b = 0`` the exact ``x = 0`` is returned without iterating.  Dot
+    products avoid BLAS (see ``dot``).
+    """
+    b = np.asarray(b, dtype=np.float64).ravel()
+    n = b.shape[0]
+    bnorm = np.sqrt(dot(b, b))
+    if bnorm == 0:
+        return PCGResult(np.zeros_like(b), 0, True, 0.0, np.zeros(1), False, False, "b = 0: x = 0 is exact")
+    maxiter = 10 * n if maxiter is None else int(maxiter)
+    prec = _as_apply(M)
+    x = np.zeros(n) if x0 is None else np.array(x0, dtype=np.float64).ravel()
+    r = b - A @ x if x0 is not None else b.copy()
+    target2 = max(rtol * bnorm, float(atol)) ** 2
+    rr = dot(r, r)
+    norms = [math.sqrt(rr)]
+    if callback is None or callback_residual:
+        notify = callback
+    else:
+        def notify(x, r):
+            callback(x)
+    converged = rr <= target2
+    breakdown = stopped = False
+    cycles = 0
+    while not converged and len(norms) - 1 < maxiter:
+        try:
+            ok = _cg_cycle(A, x, r, prec, target2, maxiter, norms, notify)
+        except StopIteration:
+            ok, stopped = True, True
+        r = b - A @ x
+        rr = dot(r, r)
+        norms[-1] = math.sqrt(rr)
+        converged = rr <= target2
+        breakdown = not ok and not converged
+        cycles += 1
+        if stopped or breakdown or (not converged and cycles >= _MAX_CYCLES):
+            break
+    iterations = len(norms) - 1
+    message = _pcg_message(converged, stopped, breakdown, iterations, maxiter)
+    return PCGResult(x, iterations, bool(converged), float(np.sqrt(rr) / bnorm), np.asarray(norms),
+                     breakdown, stopped, message)
+
+
+def _pcg_message(converged, stopped, breakdown, iterations, maxiter):
+    if stopped:
+        return "stopped by callback"
+    if converged:
+        return "converged"
+    if breakdown:
+        return "breakdown: pᵀAp <= 0 (A or the preconditioner is not symmetric positive definite)"
+    if iterations >= maxiter:
+        return f"no convergence in {maxiter} iterations"
+    return f"no convergence: the true residual stayed above the target after {_MAX_CYCLES} restarted CG cycles"
+
+
+def _cg_cycle(A, x, r, prec, target2, maxiter, norms, notify):
+    """CG steps from ``x`` with residual ``r`` (both updated in place) until ``‖r‖² ≤ target2`` or the budget is spent.
+
+    Appends ``‖r‖`` after every step to ``norms`` (whose length counts the
+    iterations) and returns False on breakdown (``pᵀ A p ≤ 0``), else True.
+    """
+    z = r if prec is None else prec(r)
+    rz = dot(r, z)
+    p = z.copy()
+    del z  # (here and below) drop work vectors early: peak memory of 8-MP frames
+    while len(norms) - 1 < maxiter:
+        q = A @ p
+        pq = dot(p, q)
+        if not pq > 0:
+            return False
+        step = rz / pq
+        x += step * p
+        q *= step
+        r -= q
+        del q
+        rr = dot(r, r)
+        norms.append(math.sqrt(rr))
+        if notify is not None:
+            notify(x, r)
+        if rr <= target2:
+            return True
+        z = r if prec is None else prec(r)
+        rz_new = dot(r, z)
+        p *= rz_new / rz
+        p += z
+        del z
+        rz = rz_new
+    return True
+
+
+def pcg(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=None, callback_residual=False):
+    r"""Preconditioned CG for ``A x = b`` stopping at ``‖b − A x‖ ≤ max(rtol·‖b‖, atol)``; the tuple form of :func:`pcg_info`.
+
+    Parameters
+    ----------
+    A, b, x0, M, rtol, atol, maxiter, callback, callback_residual
+        As for :func:`pcg_info`.
 
     Returns
     -------
@@ -55,66 +217,10 @@ def pcg(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=No
         ``‖b − A x‖ ≤ max(rtol ‖b‖, atol)`` at the returned ``x``.
     relative_residual : float
         ``‖b − A x‖ / ‖b‖`` recomputed at the returned ``x``.
-
-    Notes
-    -----
-    Standard preconditioned CG (Hestenes–Stiefel with ``z = M⁻¹ r``).  When
-    the recursively updated residual meets the tolerance the true residual
-    ``b − A x`` is recomputed; if it does not meet it (rounding drift), CG
-    restarts from the true residual, so ``converged`` is never claimed on the
-    recursive residual alone.  Dot products avoid BLAS (see ``dot``).
     """
-    b = np.asarray(b, dtype=np.float64).ravel()
-    n = b.shape[0]
-    bnorm = np.sqrt(dot(b, b))
-    if bnorm == 0:
-        return np.zeros_like(b), 0, True, 0.0
-    maxiter = 10 * n if maxiter is None else int(maxiter)
-    prec = _as_apply(M)
-    x = np.zeros(n) if x0 is None else np.array(x0, dtype=np.float64).ravel()
-    r = b - A @ x if x0 is not None else b.copy()
-    target2 = max(rtol * bnorm, float(atol)) ** 2
-    rr = dot(r, r)
-    it = 0
-    converged = rr <= target2
-    restarts = 0
-    while not converged and it < maxiter:
-        z = r if prec is None else prec(r)
-        rz = dot(r, z)
-        p = z.copy()
-        del z  # (here and below) drop work vectors early: peak memory of 8-MP frames
-        while it < maxiter:
-            q = A @ p
-            pq = dot(p, q)
-            if not pq > 0:
-                break  # breakdown: A or M not SPD (or exact solution reached)
-            step = rz / pq
-            x += step * p
-            q *= step
-            r -= q
-            del q
-            it += 1
-            if callback is not None:
-                if callback_residual:
-                    callback(x, r)
-                else:
-                    callback(x)
-            rr = dot(r, r)
-            if rr <= target2:
-                break
-            z = r if prec is None else prec(r)
-            rz_new = dot(r, z)
-            p *= rz_new / rz
-            p += z
-            del z
-            rz = rz_new
-        r = b - A @ x
-        rr = dot(r, r)
-        converged = rr <= target2
-        restarts += 1
-        if not converged and (restarts > 5 or not pq > 0):
-            break
-    return x, it, bool(converged), float(np.sqrt(rr) / bnorm)
+    result = pcg_info(A, b, x0=x0, M=M, rtol=rtol, atol=atol, maxiter=maxiter, callback=callback,
+                      callback_residual=callback_residual)
+    return result.x, result.iterations, result.converged, result.relative_residual
 
 
 def pcg_steps(S, precondition, z, Sz, rhs, *, rtol, factor, max_steps):
@@ -125,7 +231,8 @@ def pcg_steps(S, precondition, z, Sz, rhs, *, rtol, factor, max_steps):
     max(rtol ‖rhs‖, factor ‖rhs − S z_start‖)`` or ``max_steps``.  The
     residual is ``rhs − Sz`` with ``Sz`` updated alongside ``z`` (one product
     with ``S`` per step).  ``rhs`` is overwritten (its buffer holds the
-    residual).  Returns the number of steps.
+    residual).  ``precondition`` may return its argument itself (identity).
+    Returns the number of steps.
     """
     rhs_sq = dot(rhs, rhs) if max_steps > 1 else None
     r = np.subtract(rhs, Sz, out=rhs)
@@ -136,7 +243,7 @@ def pcg_steps(S, precondition, z, Sz, rhs, *, rtol, factor, max_steps):
             return 0
     d = precondition(r)
     rd = dot(r, d)
-    p = d
+    p = d.copy() if d is r else d  # r is updated in place below: p must not share its buffer
     for step in range(1, max_steps + 1):
         q = S @ p
         pq = dot(p, q)
@@ -175,12 +282,11 @@ def _combine(c, V):
 
 # Gram-Schmidt is repeated only when ||v - V h|| < _REORTHOGONALISE ||v||.
 # One classical pass loses about eps / ratio of orthogonality.  The
-# preconditioned Schur complement is close to the identity, so the ratio is
-# 0.08-0.15 on NYU frames: the usual 0.7 (Daniel-Gragg-Kaufman-Stewart) would
-# repeat every pass, doubling the vector work, to avoid a loss of 1e-15.
-# (Measured on nyu_metric3d/00000: the same iterations and the same result
-# to 1e-11 with and without any repetition.)  The residual is recomputed from
-# x at the end anyway.
+# preconditioned Schur complement of the colorization fill is close to the
+# identity, so the ratio is 0.08-0.15 on NYU frames: the usual 0.7
+# (Daniel-Gragg-Kaufman-Stewart) would repeat every pass, doubling the vector
+# work, to avoid a loss of 1e-15.  The residual is recomputed from x at the
+# end of every cycle anyway.
 _REORTHOGONALISE = 0.01
 
 
@@ -188,14 +294,15 @@ def gmres(apply, lift, b, x0, precond, atol, maxiter, restart=30, lift_x0=None):
     """Right-preconditioned restarted GMRES, stopping on ``||b - A x||_inf <= atol``.
 
     The operator is ``A x = apply(x, lift(x))``: ``lift`` is the expensive
-    linear part (here ``x_K -> x_U``, one sparse triangular solve pair) and
-    ``apply`` the cheap rest.  The lifted images of the Krylov directions are
-    kept, so the lift of the iterate is their combination and the residual
-    ``b - apply(x, lift(x))`` at the end of a cycle costs no extra solve.
-    ``lift`` may be None (then ``apply(x, None)`` is the whole operator).
-    ``lift_x0``, if given, replaces ``lift(x0)`` for the initial guess: the
-    caller's lift may be affine, ``x -> lift(x) + c``, with ``lift`` applied
-    to the Krylov directions being its linear part.
+    linear part (for the colorization fill ``x_K -> x_U``, one sparse
+    triangular solve pair) and ``apply`` the cheap rest.  The lifted images
+    of the Krylov directions are kept, so the lift of the iterate is their
+    combination and the residual ``b - apply(x, lift(x))`` at the end of a
+    cycle costs no extra solve.  ``lift`` may be None (then ``apply(x,
+    None)`` is the whole operator).  ``lift_x0``, if given, replaces
+    ``lift(x0)`` for the initial guess: the caller's lift may be affine,
+    ``x -> lift(x) + c``, with ``lift`` applied to the Krylov directions
+    being its linear part.
 
     The preconditioned images of the Krylov vectors are kept too (as in
     flexible GMRES), so the update of ``x`` at the end of a cycle costs no
@@ -226,11 +333,7 @@ def gmres(apply, lift, b, x0, precond, atol, maxiter, restart=30, lift_x0=None):
         V = np.empty((restart + 1, n))
         Z = np.empty((restart, n))  # preconditioned V
         lifted = None if lift is None else np.empty((restart, lift_x.size))
-        Hm = np.zeros((restart + 1, restart))
-        cs = np.zeros(restart)
-        sn = np.zeros(restart)
-        g = np.zeros(restart + 1)
-        g[0] = beta
+        rotations = _Givens(restart, beta)
         np.divide(r, beta, out=V[0])
         k = 0
         while k < restart and n_iter < maxiter:
@@ -240,42 +343,17 @@ def gmres(apply, lift, b, x0, precond, atol, maxiter, restart=30, lift_x0=None):
             else:
                 lifted[k] = lift(w)
                 v = apply(w, lifted[k])
-            # classical Gram-Schmidt (BLAS-2), repeated once when it cancels
-            # catastrophically (see _REORTHOGONALISE)
-            norm_v = _norm(v)
-            h = _dots(V[: k + 1], v)
-            v -= _combine(h, V[: k + 1])
-            h_next = _norm(v)
-            if h_next < _REORTHOGONALISE * norm_v:
-                h2 = _dots(V[: k + 1], v)
-                v -= _combine(h2, V[: k + 1])
-                h += h2
-                h_next = _norm(v)
-            col = np.append(h, h_next)
-            for i in range(k):  # apply the previous Givens rotations
-                col[i], col[i + 1] = (cs[i] * col[i] + sn[i] * col[i + 1],
-                                      -sn[i] * col[i] + cs[i] * col[i + 1])
-            rho = math.hypot(col[k], col[k + 1])
-            cs[k], sn[k] = col[k] / rho, col[k + 1] / rho
-            col[k], col[k + 1] = rho, 0.0
-            Hm[: k + 2, k] = col
-            g[k + 1] = -sn[k] * g[k]
-            g[k] = cs[k] * g[k]
+            h_next = rotations.add_column(_orthogonalise(V[: k + 1], v), k)
             k += 1
             n_iter += 1
-            history.append(abs(g[k]))
+            g_k = rotations.g[k]
+            history.append(abs(g_k))
             if h_next == 0.0:  # the Krylov space is invariant: exact solution
                 break
             np.divide(v, h_next, out=V[k])
-            if abs(g[k]) <= atol * sqrt_n:
-                # residual vector r_k = g_k V_{k+1} Q_k^T e_{k+1}
-                u = np.zeros(k + 1)
-                u[k] = 1.0
-                for i in range(k - 1, -1, -1):
-                    u[i], u[i + 1] = cs[i] * u[i] - sn[i] * u[i + 1], sn[i] * u[i] + cs[i] * u[i + 1]
-                if abs(g[k]) * float(np.max(np.abs(_combine(u, V[: k + 1])))) <= atol:
-                    break
-        y = scipy.linalg.solve_triangular(Hm[:k, :k], g[:k])
+            if abs(g_k) <= atol * sqrt_n and rotations.residual_inf(V, k) <= atol:
+                break
+        y = scipy.linalg.solve_triangular(rotations.H[:k, :k], rotations.g[:k])
         x += _combine(y, Z[:k])
         if lift is not None:
             lift_x += _combine(y, lifted[:k])
@@ -283,3 +361,57 @@ def gmres(apply, lift, b, x0, precond, atol, maxiter, restart=30, lift_x0=None):
         res_inf = float(np.max(np.abs(r)))
         beta = _norm(r)
     return x, lift_x, np.asarray(history), res_inf, res_inf <= atol
+
+
+def _orthogonalise(V, v):
+    """Orthogonalise ``v`` against the rows of ``V`` in place; returns the new Hessenberg column ``(h, ‖v‖)``.
+
+    Classical Gram-Schmidt (BLAS-2), repeated once when it cancels
+    catastrophically (see ``_REORTHOGONALISE``).
+    """
+    norm_v = _norm(v)
+    h = _dots(V, v)
+    v -= _combine(h, V)
+    h_next = _norm(v)
+    if h_next < _REORTHOGONALISE * norm_v:
+        h2 = _dots(V, v)
+        v -= _combine(h2, V)
+        h += h2
+        h_next = _norm(v)
+    return np.append(h, h_next)
+
+
+class _Givens:
+    """The Givens QR of one GMRES cycle's Hessenberg matrix: rotations, triangular ``H`` and rotated ``g = Qᵀ beta e_1``."""
+
+    def __init__(self, restart, beta):
+        self.H = np.zeros((restart + 1, restart))
+        self.cs = np.zeros(restart)
+        self.sn = np.zeros(restart)
+        self.g = np.zeros(restart + 1)
+        self.g[0] = beta
+
+    def add_column(self, col, k):
+        """Rotate the Hessenberg column ``k`` into ``H``, update ``g``; returns the column's last entry before rotation."""
+        cs, sn = self.cs, self.sn
+        h_next = col[k + 1]
+        for i in range(k):  # apply the previous Givens rotations
+            col[i], col[i + 1] = (cs[i] * col[i] + sn[i] * col[i + 1],
+                                  -sn[i] * col[i] + cs[i] * col[i + 1])
+        rho = math.hypot(col[k], col[k + 1])
+        cs[k], sn[k] = col[k] / rho, col[k + 1] / rho
+        col[k], col[k + 1] = rho, 0.0
+        self.H[: k + 2, k] = col
+        g = self.g
+        g[k + 1] = -sn[k] * g[k]
+        g[k] = cs[k] * g[k]
+        return h_next
+
+    def residual_inf(self, V, k):
+        """``‖r_k‖_inf`` of the residual vector ``r_k = g_k V_{k+1} Q_kᵀ e_{k+1}`` after ``k`` steps."""
+        cs, sn = self.cs, self.sn
+        u = np.zeros(k + 1)
+        u[k] = 1.0
+        for i in range(k - 1, -1, -1):
+            u[i], u[i + 1] = cs[i] * u[i] - sn[i] * u[i + 1], sn[i] * u[i] + cs[i] * u[i + 1]
+        return abs(self.g[k]) * float(np.max(np.abs(_combine(u, V[: k + 1]))))

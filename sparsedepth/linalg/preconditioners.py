@@ -1,10 +1,15 @@
-"""Preconditioners for the SPD systems of the package: Jacobi, grid multigrid, pyamg."""
+"""Preconditioners for the SPD systems of the package by name: Jacobi, grid multigrid, pyamg.
+
+May import :mod:`.multigrid`, NumPy, SciPy and pyamg.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import LinearOperator
+
+from .multigrid import GridMultigrid
 
 __all__ = ["make_preconditioner", "PRECONDITIONERS"]
 
@@ -40,8 +45,6 @@ def make_preconditioner(A, kind: str = "amg", *, shape=None):
         For an unknown kind, ``"grid"`` without ``shape``, or a non-positive
         diagonal with ``"jacobi"``.
     """
-    from .multigrid import GridMultigrid
-
     n = A.shape[0]
     if isinstance(kind, GridMultigrid):
         return kind.aspreconditioner()

@@ -1,0 +1,556 @@
+"""The multigrid hierarchy :class:`GridMultigrid`: set-up from stencils, :meth:`~GridMultigrid.update`, the V-cycle.
+
+The set-up reads the fine stencil (:mod:`.stencils`), builds the prolongation
+(:mod:`.interpolation`, :mod:`.transfer`) and the Galerkin coarse operators
+(:mod:`.galerkin`) level by level, sets up the smoothers (:mod:`.smoothers`)
+and factors the coarsest operator.  May import the sibling modules,
+:mod:`sparsedepth.grid`, :mod:`sparsedepth._validation`, NumPy, SciPy and
+pyamg; :mod:`.solve` only inside :meth:`GridMultigrid.solve`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..._validation import as_grid_operator
+from ...grid.stencil import full_pattern_offsets, stencil_to_csr
+from .galerkin import galerkin_offsets, galerkin_stencil
+from .interpolation import bilinear_weights, operator_weights
+from .smoothers import gauss_seidel_backward, gauss_seidel_forward, jacobi_damping, jacobi_sweeps
+from .stencils import StencilSource, extract_stencil, fine_stencil_source
+from .transfer import ClassProlongation, SeparableProlongation
+
+__all__ = ["GridMultigrid", "grid_multigrid"]
+
+_INTERPOLATIONS = ("bilinear", "operator", "auto")
+_SMOOTHERS = ("gauss_seidel", "jacobi")
+#: fine grids from this many pixels keep their coarse levels in float32 (coarse_precision="auto")
+_SINGLE_COARSE_PIXELS = 1 << 21
+#: fine operators with at most this many non-zeros are smoothed in float32 (fine_precision="auto"), on
+#: a float32 copy of their values (at most 256 MB); larger ones (an 8-megapixel 13-point system has
+#: 1.04e8) are smoothed in float64, as the copy would then weigh on the peak memory
+_SINGLE_FINE_VALUES = 1 << 26
+# Below this many fine pixels every level's stencil is kept as one (K, H, W)
+# array during the set-up (fine: read from the CSR once; coarse: the Galerkin
+# result itself) instead of being read back from the CSR one parity class at a
+# time, which keeps the 8-MP set-up's memory low but reads most classes twice.
+_KEEP_STENCIL_PIXELS = 1 << 21
+
+
+class _Level:
+    """One level of the hierarchy: operator, prolongation to it from below, smoother."""
+
+    __slots__ = ("shape", "A", "offsets", "P", "diag_inv", "omega")
+
+    def __init__(self, shape):
+        self.shape = shape
+        self.A = None
+        self.offsets = None
+        self.P = None  # prolongation from the next coarser level
+        self.diag_inv = None
+        self.omega = None
+
+
+class GridMultigrid:
+    r"""Geometric multigrid hierarchy for an SPD operator on a pixel grid.
+
+    Build once, then use as a preconditioner many times; after the weights of
+    the operator change (same grid, same stencil) call :meth:`update`, which
+    recomputes only the numbers.
+
+    Parameters
+    ----------
+    A : scipy.sparse matrix, shape (N, N)
+        Symmetric positive definite operator on a ``shape`` grid with pixels
+        flattened in C order, coupling pixels at most 2 apart in each direction
+        (5-, 9- or 13-point stencils).  Used as is when it is float64 CSR;
+        never modified.
+    shape : tuple of int
+        Grid shape ``(H, W)`` with ``H * W == N``.
+    interpolation : {"bilinear", "operator", "auto"}, default "bilinear"
+        ``"bilinear"``: tensor product of 1-D linear interpolation, fixed per
+        grid shape.  ``"operator"``: Dendy's black-box interpolation whose
+        weights are read from the (collapsed) stencil; more robust when the
+        weights jump across image edges.  Requires a stencil of radius 1.
+        ``"auto"``: ``"operator"`` for radius-1 (5-/9-point) stencils,
+        ``"bilinear"`` otherwise (on a 640x480 depth-completion system PCG
+        needs 6 iterations with it instead of 9 with ``"bilinear"``);
+        :attr:`interpolation` then holds the choice.
+    smoother : {"gauss_seidel", "jacobi"}, default "gauss_seidel"
+        Gauss--Seidel uses a forward sweep before and a backward sweep after
+        the coarse-grid correction; Jacobi is damped with
+        :math:`\omega = 4 / (3 \rho)`, :math:`\rho` the Gershgorin bound of
+        :math:`D^{-1} A`.  Both keep the V-cycle symmetric.
+    sweeps : int, default 1
+        Smoothing sweeps before and after the coarse-grid correction.
+    max_coarse : int, default 1024
+        Coarsening stops once a level has at most this many unknowns; that
+        level is solved directly (sparse LU).
+    max_levels : int, optional
+        Upper bound on the number of levels.
+    coarse_precision : {"auto", "double", "single"}, default "auto"
+        Storage and smoothing precision of the coarse levels (level 1 on).
+        ``"single"`` halves the coarse operators' values (8 MP, 13-point:
+        ~200 MB) and perturbs the preconditioner by float32 rounding only;
+        ``"auto"`` takes it when the fine level is smoothed in single
+        precision or the fine grid has at least ``2**21`` pixels.
+    fine_precision : {"auto", "double", "single"}, default "auto"
+        Precision of the V-cycle's work on the fine level (smoothing, the
+        residual, the transfers).  ``"single"`` keeps a float32 copy of the
+        fine operator's values (sharing its index arrays: 4 bytes per
+        non-zero), so each sweep moves fewer bytes; the operator `A` itself
+        is kept as given, so the residuals of :meth:`solve` and of PCG stay
+        float64 and the accuracy of a solve is unchanged (the V-cycle is
+        only a preconditioner).  ``"auto"`` takes it when `A` has at most
+        ``2**26`` non-zeros (a copy of at most 256 MB: a 13-point system of
+        up to about 5 megapixels).
+
+    Attributes
+    ----------
+    levels : list
+        Per level, fine to coarse: ``shape``, operator ``A`` (CSR) and
+        prolongation ``P`` to it from the next coarser level (None at the
+        coarsest).
+    shape : tuple of int
+        Fine grid shape.
+    fine_dtype, coarse_dtype : numpy.dtype
+        Precision of the V-cycle on the fine level and on the coarse levels
+        (see `fine_precision` and `coarse_precision`).
+
+    Raises
+    ------
+    ValueError
+        For an unknown option, a `shape` that does not match `A`, or an `A`
+        that is not a grid operator of stencil radius at most 2.
+
+    See Also
+    --------
+    solve_spd : preconditioned conjugate gradients with this preconditioner.
+
+    Notes
+    -----
+    Grid :math:`l+1` keeps the pixels of grid :math:`l` with even row and
+    column indices, so an :math:`n`-pixel axis becomes :math:`\lceil n/2
+    \rceil` (odd and even sizes alike).  With 1-D weights :math:`W^{(1)}`
+    (weight 1 at coincident points, :math:`\tfrac12, \tfrac12` between two
+    coarse points, 1 for a trailing point of an even-length axis) the bilinear
+    prolongation is :math:`P = W^{(1)}_y \otimes W^{(1)}_x`; it reproduces
+    constants, matching the Neumann boundary.
+
+    For ``interpolation="operator"`` the stencil is collapsed across the
+    interpolation direction: a pixel between two coarse points along :math:`x`
+    gets weights :math:`-\bar a_W / \bar a_C` and :math:`-\bar a_E / \bar a_C`
+    with :math:`\bar a_\ast` the column sums of its 3x3 stencil
+    (same along :math:`y`), and a cell-centre pixel :math:`c` gets
+    :math:`P_{c,:} = -a_{cc}^{-1} \sum_{n \ne c} a_{cn} P_{n,:}` from its eight
+    neighbours [1]_.
+
+    Coarse operators are Galerkin products :math:`A_{l+1} = P_l^\top A_l P_l`
+    (the 5-point stencil becomes 9-point, a 13-point one 25-point, then stay
+    so).  The V-cycle applied to a residual :math:`b` is
+
+    .. math::
+
+        x \leftarrow S_f^{\nu}(0, b),\quad
+        x \leftarrow x + P\, V_{l+1}(P^\top (b - A x)),\quad
+        x \leftarrow S_b^{\nu}(x, b)
+
+    with :math:`S_f` / :math:`S_b` forward / backward Gauss--Seidel, which are
+    adjoint in the :math:`A` inner product, and an exact solve on the coarsest
+    grid; hence :math:`M^{-1} = V_0` is symmetric positive definite and can
+    precondition CG.
+
+    References
+    ----------
+    .. [1] J. E. Dendy, "Black box multigrid", J. Comput. Phys. 48 (1982)
+       366-386.
+    .. [2] U. Trottenberg, C. Oosterlee, A. Schueller, *Multigrid*, Academic
+       Press, 2001.
+
+    Examples
+    --------
+    >>> import numpy as np, scipy.sparse as sp
+    >>> from scipy.sparse.linalg import cg
+    >>> H, W = 30, 40
+    >>> d = lambda n: sp.diags([-np.ones(n), np.r_[np.ones(n - 1), 0]], [0, 1])
+    >>> Dx = sp.kron(sp.eye(H), d(W)); Dy = sp.kron(d(H), sp.eye(W))
+    >>> A = (1e-2 * sp.eye(H * W) + Dx.T @ Dx + Dy.T @ Dy).tocsr()
+    >>> mg = GridMultigrid(A, (H, W))
+    >>> x, info = cg(A, np.ones(H * W), rtol=1e-10, M=mg.aspreconditioner())
+    >>> info
+    0
+    """
+
+    def __init__(self, A, shape, *, interpolation="bilinear",
+                 smoother="gauss_seidel", sweeps=1, max_coarse=1024,
+                 max_levels=None, coarse_precision="auto", fine_precision="auto"):
+        for name, value in (("coarse_precision", coarse_precision), ("fine_precision", fine_precision)):
+            if value not in ("auto", "double", "single"):
+                raise ValueError(f"`{name}` must be 'auto', 'double' or 'single', got {value!r}.")
+        if interpolation not in _INTERPOLATIONS:
+            raise ValueError(
+                f"unknown interpolation {interpolation!r}; "
+                f"use one of {_INTERPOLATIONS}."
+            )
+        if smoother not in _SMOOTHERS:
+            raise ValueError(
+                f"unknown smoother {smoother!r}; use one of {_SMOOTHERS}."
+            )
+        if int(sweeps) < 1:
+            raise ValueError(f"`sweeps` must be a positive integer, got {sweeps!r}.")
+        if int(max_coarse) < 1:
+            raise ValueError(
+                f"`max_coarse` must be a positive integer, got {max_coarse!r}."
+            )
+        if max_levels is not None and int(max_levels) < 1:
+            raise ValueError(
+                f"`max_levels` must be a positive integer or None, got {max_levels!r}."
+            )
+        self.requested_interpolation = interpolation
+        self.interpolation = interpolation
+        self.smoother = smoother
+        self.sweeps = int(sweeps)
+        self.max_coarse = int(max_coarse)
+        self.max_levels = None if max_levels is None else int(max_levels)
+        A, shape = as_grid_operator(A, shape)
+        self.shape = shape
+        large = shape[0] * shape[1] >= _SINGLE_COARSE_PIXELS
+        fine_single = fine_precision == "single" or (fine_precision == "auto" and A.nnz <= _SINGLE_FINE_VALUES)
+        coarse_single = coarse_precision == "single" or (coarse_precision == "auto" and (large or fine_single))
+        self.fine_dtype = np.dtype(np.float32 if fine_single else np.float64)
+        self.coarse_dtype = np.dtype(np.float32 if coarse_single else np.float64)
+        self._build(A)
+
+    # ---- construction -------------------------------------------------------
+    def _shapes(self):
+        shapes = [self.shape]
+        while True:
+            h, w = shapes[-1]
+            if h * w <= self.max_coarse or (h == 1 and w == 1):
+                break
+            if self.max_levels is not None and len(shapes) >= self.max_levels:
+                break
+            shapes.append(((h + 1) // 2, (w + 1) // 2))
+        return shapes
+
+    def _build(self, A):
+        offsets, source = fine_stencil_source(A, self.shape)
+        wide = any(max(abs(dy), abs(dx)) > 1 for dy, dx in offsets)
+        if self.requested_interpolation == "auto":
+            self.interpolation = "bilinear" if wide else "operator"
+        if self.interpolation == "operator" and wide:
+            raise ValueError(
+                "interpolation='operator' needs a stencil of radius 1 (5- or "
+                "9-point); use interpolation='bilinear' for wider stencils."
+            )
+        shapes = self._shapes()
+        levels = []
+        for li, shp in enumerate(shapes):
+            lvl = _Level(shp)
+            if li == 0:
+                lvl.A = A
+            levels.append(lvl)
+        # structure: offsets of the coarse operators (their CSR form is made by
+        # stencil_to_csr in _numeric); P is made there too
+        levels[0].offsets = offsets
+        for li in range(1, len(levels)):
+            levels[li].offsets = galerkin_offsets(levels[li - 1].offsets)
+        self.levels = levels
+        box = [source]
+        del source  # _numeric drops the fine stencil as soon as the first Galerkin product is done
+        self._numeric(box)
+
+    def _numeric(self, box, refill_p=True):
+        """Numeric setup: interpolation weights, Galerkin products, smoothers, LU.
+
+        ``box`` is a one-element list holding the fine :class:`StencilSource`,
+        emptied here so that the fine stencil is freed after the first
+        Galerkin product.
+        """
+        source = box.pop()
+        keep = self.shape[0] * self.shape[1] < _KEEP_STENCIL_PIXELS
+        if keep:
+            source.read_whole()
+        levels = self.levels
+        for li in range(len(levels) - 1):
+            fine, coarse = levels[li], levels[li + 1]
+            if self.interpolation == "operator":
+                interp = operator_weights(fine.offsets, source, fine.shape)
+                fine.P = ClassProlongation(interp.full, self.coarse_dtype)
+            else:
+                interp = bilinear_weights(fine.shape)
+                if refill_p:
+                    fine.P = SeparableProlongation(fine.shape)
+            S = galerkin_stencil(fine.offsets, source, interp, fine.shape, coarse.offsets)
+            del source
+            coarse.A = stencil_to_csr(coarse.offsets, S, dtype=self.coarse_dtype)
+            if keep:
+                source = StencilSource(coarse.offsets, coarse.shape, array=S)
+            elif full_pattern_offsets(coarse.A, coarse.shape) == coarse.offsets:
+                # read back class by class: the coarse stencil array can go
+                source = StencilSource(coarse.offsets, coarse.shape, csr=coarse.A, csr_offsets=coarse.offsets)
+            else:
+                source = StencilSource(coarse.offsets, coarse.shape, array=S)
+            del S
+        del source
+        A = levels[0].A
+        # the fine level's operator in the cycle's precision: a float32 copy of the values, same index arrays
+        self._fine_cycle_A = A if self.fine_dtype == A.dtype else sp.csr_matrix(
+            (A.data.astype(self.fine_dtype), A.indices, A.indptr), shape=A.shape)
+        for lvl in levels[:-1]:
+            self._setup_smoother(lvl)
+        self._factor_coarsest()
+
+    def _setup_smoother(self, lvl):
+        if self.smoother == "jacobi":
+            lvl.diag_inv, lvl.omega = jacobi_damping(lvl.A)
+
+    def _factor_coarsest(self):
+        Ac = self.levels[-1].A
+        self._pinv = None
+        self._lu = None
+        try:
+            lu = spla.splu(sp.csc_matrix(Ac, dtype=np.float64))
+            pivots = np.abs(lu.U.diagonal())
+            if not pivots.min() > 1e3 * Ac.shape[0] * np.finfo(float).eps * pivots.max():
+                raise RuntimeError("numerically singular")
+            self._lu = lu
+        except RuntimeError:
+            # singular coarsest operator (e.g. pure Neumann problem): pseudo-inverse
+            self._lu = None
+            self._pinv = scipy.linalg.pinvh(Ac.toarray().astype(np.float64))
+
+    def _coarse_solve(self, b):
+        if self._lu is not None:
+            return self._lu.solve(b)
+        return self._pinv @ b
+
+    # ---- public API ---------------------------------------------------------
+    def update(self, A):
+        """Recompute the hierarchy numerically for a new operator on the same grid.
+
+        Parameters
+        ----------
+        A : scipy.sparse matrix, shape (N, N)
+            New SPD operator on the same grid whose stencil is contained in the
+            stencil of the operator this hierarchy was built for (typically the
+            same sparsity pattern with new weights).
+
+        Returns
+        -------
+        self : GridMultigrid
+
+        Raises
+        ------
+        ValueError
+            If `A` does not fit the grid.
+
+        Notes
+        -----
+        Interpolation weights (for ``interpolation="operator"``), Galerkin
+        coarse operators, smoother data and the coarsest factorisation are
+        recomputed into the existing sparsity patterns; the grid hierarchy,
+        the coarse operators' patterns and the bilinear prolongation are reused.  If the stencil
+        gained offsets, the structure is rebuilt.
+        """
+        A, _ = as_grid_operator(A, self.shape)
+        offsets = self.levels[0].offsets
+        pattern = full_pattern_offsets(A, self.shape)
+        if pattern is not None and set(pattern) <= set(offsets):
+            source = StencilSource(offsets, self.shape, csr=A, csr_offsets=pattern)
+        else:
+            S = extract_stencil(A, self.shape, offsets)
+            if int(np.count_nonzero(S)) != int(np.count_nonzero(A.data)):
+                # the stencil grew (a pixel and a diagonal determine at most one
+                # in-grid offset, so equal non-zero counts mean nothing is missing)
+                del S
+                self._build(A)
+                return self
+            source = StencilSource(offsets, self.shape, array=S)
+            del S
+        self.levels[0].A = A
+        box = [source]
+        del source
+        self._numeric(box, refill_p=False)
+        return self
+
+    def vcycle(self, b):
+        """Apply one V-cycle with zero initial guess, i.e. :math:`M^{-1} b`.
+
+        Parameters
+        ----------
+        b : array_like, shape (N,)
+            Right-hand side (a residual, when used as a preconditioner).
+
+        Returns
+        -------
+        x : ndarray, shape (N,)
+        """
+        b = np.ascontiguousarray(b, dtype=self.fine_dtype).reshape(-1)
+        levels = self.levels
+        nu = self.sweeps
+        # the operator each smoothed level is cycled with: the fine one in the cycle's precision
+        cycle_ops = [self._fine_cycle_A] + [lvl.A for lvl in levels[1:-1]]
+        xs, bs = [], []
+        for lvl, A in zip(levels[:-1], cycle_ops):
+            x = np.zeros_like(b)
+            if lvl.diag_inv is None:
+                gauss_seidel_forward(A, x, b, nu)
+            else:
+                self._jacobi(lvl, x, b, A)
+            r = A @ x
+            np.subtract(b, r, out=r)
+            xs.append(x)
+            bs.append(b)
+            b = (lvl.P.T @ r).astype(self.coarse_dtype, copy=False)
+            del r  # work vectors go as soon as possible: peak memory of 8-MP frames
+        x = self._coarse_solve(b.astype(np.float64, copy=False)).astype(self.coarse_dtype, copy=False)
+        for lvl, A, xf, bf in zip(levels[-2::-1], cycle_ops[::-1], xs[::-1], bs[::-1]):
+            lvl.P.add_prolonged(xf, x)
+            if lvl.diag_inv is None:
+                gauss_seidel_backward(A, xf, bf, nu)
+            else:
+                self._jacobi(lvl, xf, bf, A)
+            x = xf
+        return x.astype(np.float64, copy=False)
+
+    def _jacobi(self, lvl, x, b, A):
+        """``sweeps`` damped Jacobi sweeps on ``A x = b`` (``A``: ``lvl``'s operator in the cycle's precision)."""
+        jacobi_sweeps(A, x, b, lvl.diag_inv, lvl.omega, self.sweeps)
+
+    def aspreconditioner(self):
+        """The V-cycle as a :class:`scipy.sparse.linalg.LinearOperator`.
+
+        Returns
+        -------
+        M : LinearOperator, shape (N, N)
+            ``M @ r`` applies one V-cycle (symmetric positive definite), for
+            the ``M=`` argument of :func:`scipy.sparse.linalg.cg`.
+        """
+        n = self.levels[0].A.shape[0]
+        return spla.LinearOperator((n, n), matvec=self.vcycle, dtype=np.float64)
+
+    def solve(self, b, *, x0=None, rtol=1e-8, atol=0.0, maxiter=None,
+              accel="cg", callback=None):
+        r"""Solve :math:`A x = b` with this hierarchy.
+
+        Parameters
+        ----------
+        b : array_like, shape (N,) or (H, W)
+            Right-hand side.
+        x0 : array_like, optional
+            Initial guess (zero by default).
+        rtol, atol : float
+            Stop when :math:`\|b - A x_k\|_2 \le \max(\mathrm{rtol}\,\|b\|_2,
+            \mathrm{atol})`.
+        maxiter : int, optional
+            Maximum number of iterations (CG iterations or V-cycles); default
+            ``10 * N`` for CG and 100 for plain cycling.
+        accel : {"cg", None}, default "cg"
+            ``"cg"``: V-cycle-preconditioned conjugate gradients; ``None``:
+            stationary V-cycle iteration
+            :math:`x_{k+1} = x_k + M^{-1}(b - A x_k)`.
+        callback : callable, optional
+            Called as ``callback(xk)`` with a copy of the iterate after each
+            iteration; may raise ``StopIteration`` to stop early.
+
+        Returns
+        -------
+        x : ndarray, same shape as `b`
+        info : SolveInfo
+            Convergence flag, iteration count, residual history.
+        """
+        from .solve import solve_spd, vcycle_iteration  # solve.py builds GridMultigrids: imported on use
+
+        if accel == "cg":
+            return solve_spd(self.levels[0].A, b, self.shape, x0=x0, rtol=rtol,
+                             atol=atol, maxiter=maxiter, preconditioner=self,
+                             callback=callback)
+        if accel is not None:
+            raise ValueError(f"unknown accel {accel!r}; use 'cg' or None.")
+        return vcycle_iteration(self, b, x0=x0, rtol=rtol, atol=atol, maxiter=maxiter, callback=callback)
+
+    def to_pyamg(self):
+        """The same hierarchy as a :class:`pyamg.multilevel.MultilevelSolver`.
+
+        Returns
+        -------
+        ml : pyamg.multilevel.MultilevelSolver
+            Shares the float64 operators (no copies); float32 coarse levels
+            are converted to float64, as pyamg cycles in the precision of the
+            fine level, and the prolongations to CSR matrices.  Its cycle
+            is therefore the float64 form of :meth:`vcycle` (equal to it for
+            ``fine_precision = coarse_precision = "double"``).  Use its
+            ``solve(b, accel='cg')``, ``aspreconditioner()``, ``cycle_complexity``.
+        """
+        from pyamg.multilevel import MultilevelSolver
+
+        pyamg_levels = []
+        for lvl in self.levels:
+            L = MultilevelSolver.Level()
+            L.A = lvl.A.astype(np.float64, copy=False)
+            if lvl.P is not None:
+                L.P = (lvl.P if sp.issparse(lvl.P) else lvl.P.tocsr()).astype(np.float64, copy=False)
+                L.R = L.P.T.tocsr()
+                if lvl.diag_inv is None:
+                    nu = self.sweeps
+                    L.presmoother = lambda A, x, b, nu=nu: gauss_seidel_forward(A, x, b, nu)
+                    L.postsmoother = lambda A, x, b, nu=nu: gauss_seidel_backward(A, x, b, nu)
+                else:
+                    L.presmoother = L.postsmoother = (
+                        lambda A, x, b, lvl=lvl: self._jacobi(lvl, x, b, A))
+            pyamg_levels.append(L)
+        ml = MultilevelSolver(pyamg_levels, coarse_solver=_CoarseSolve(self))
+        ml.symmetric_smoothing = True  # forward GS before, backward GS after
+        return ml
+
+    # ---- reporting ----------------------------------------------------------
+    def operator_complexity(self):
+        """Sum over levels of non-zeros divided by the fine-level non-zeros."""
+        return sum(lvl.A.nnz for lvl in self.levels) / self.levels[0].A.nnz
+
+    def grid_complexity(self):
+        """Sum over levels of unknowns divided by the fine-level unknowns."""
+        n0 = self.levels[0].A.shape[0]
+        return sum(lvl.A.shape[0] for lvl in self.levels) / n0
+
+    def __repr__(self):
+        total = sum(lvl.A.nnz for lvl in self.levels)
+        coarse = "splu" if self._lu is not None else "pinv"
+        lines = [
+            f"GridMultigrid(shape={self.shape}, interpolation={self.interpolation!r}, "
+            f"smoother={self.smoother!r}, sweeps={self.sweeps})",
+            f"Number of Levels:     {len(self.levels)}",
+            f"Operator Complexity:  {self.operator_complexity():6.3f}",
+            f"Grid Complexity:      {self.grid_complexity():6.3f}",
+            f"Coarse Solver:        {coarse}",
+            "  level      grid     unknowns     nonzeros  stencil",
+        ]
+        for i, lvl in enumerate(self.levels):
+            h, w = lvl.shape
+            lines.append(
+                f"{i:>7} {f'{h}x{w}':>9} {h * w:>12} {lvl.A.nnz:>12}  "
+                f"{len(lvl.offsets):>2}-point [{100 * lvl.A.nnz / total:5.2f}%]"
+            )
+        return "\n".join(lines)
+
+
+class _CoarseSolve:
+    """Callable coarsest-grid solve for pyamg (reuses our factorisation)."""
+
+    def __init__(self, mg):
+        self._mg = mg
+
+    def __call__(self, A, b):
+        return self._mg._coarse_solve(np.asarray(b, dtype=np.float64).ravel())
+
+    def __repr__(self):
+        return "splu" if self._mg._lu is not None else "pinv"
+
+
+def grid_multigrid(A, shape, **options):
+    """Build a :class:`GridMultigrid` (functional spelling; same parameters)."""
+    return GridMultigrid(A, shape, **options)

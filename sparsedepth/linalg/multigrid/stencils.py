@@ -1,0 +1,245 @@
+"""Stencils of grid operators: one coefficient image per neighbour offset, read from a CSR matrix.
+
+The multigrid set-up works on stencils, never on general sparse products;
+this module reads them from an operator (:func:`grid_stencil`) and hands a
+level's stencil to the set-up one parity class at a time
+(:class:`StencilSource`).  May import :mod:`sparsedepth.grid` and
+:mod:`sparsedepth._validation`, NumPy and SciPy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..._validation import as_grid_operator
+from ...grid.stencil import csr_to_stencil, full_pattern_offsets
+
+__all__ = ["grid_stencil", "extract_stencil", "StencilSource", "fine_stencil_source"]
+
+
+def _square_offsets(radius):
+    r = range(-radius, radius + 1)
+    return [(dy, dx) for dy in r for dx in r]
+
+
+def _mask_outside(S, offsets, shape):
+    """Zero stencil coefficients whose neighbour lies outside the grid (in place)."""
+    h, w = shape
+    for k, (dy, dx) in enumerate(offsets):
+        if dy > 0:
+            S[k, max(h - dy, 0):, :] = 0.0
+        elif dy < 0:
+            S[k, : min(-dy, h), :] = 0.0
+        if dx > 0:
+            S[k, :, max(w - dx, 0):] = 0.0
+        elif dx < 0:
+            S[k, :, : min(-dx, w)] = 0.0
+
+
+def extract_stencil(A, shape, offsets):
+    """Stencil images of a canonical CSR matrix for the given offsets."""
+    h, w = shape
+    n = h * w
+    S = np.zeros((len(offsets), h, w))
+    flat = S.reshape(len(offsets), n)
+    for k, (dy, dx) in enumerate(offsets):
+        delta = dy * w + dx
+        if abs(delta) >= n:
+            continue
+        d = A.diagonal(delta)
+        if delta >= 0:
+            flat[k, : n - delta] = d
+        else:
+            flat[k, -delta:] = d
+    _mask_outside(S, offsets, shape)
+    return S
+
+
+def grid_stencil(A, shape, *, radius=None):
+    r"""Stencil (one coefficient image per neighbour offset) of a grid operator.
+
+    Parameters
+    ----------
+    A : scipy.sparse matrix, shape (N, N)
+        Operator on an ``shape = (H, W)`` grid, pixels flattened in C order,
+        ``N = H * W``.
+    shape : tuple of int
+        Grid shape ``(H, W)``.
+    radius : int, optional
+        Stencil radius :math:`r`: couplings :math:`|dy|, |dx| \le r` are read.
+        By default 1 is tried, then 2.
+
+    Returns
+    -------
+    offsets : list of tuple of int
+        Neighbour offsets ``(dy, dx)`` in lexicographic order, restricted to
+        those with a non-zero coefficient somewhere (the centre is always kept).
+    S : ndarray, shape (len(offsets), H, W)
+        ``S[k, y, x] = A[y*W + x, (y+dy_k)*W + (x+dx_k)]``; zero where the
+        neighbour lies outside the grid.
+
+    Raises
+    ------
+    ValueError
+        If `A` has couplings outside the stencil radius (for instance when
+        `shape` is not the grid `A` was built on).
+
+    Notes
+    -----
+    The coefficients are read diagonal by diagonal (``A.diagonal(dy*W + dx)``)
+    and masked at the grid boundary.  A pixel and a diagonal determine at
+    most one in-grid offset, so every non-zero entry of `A` lands in `S` at
+    most once, and the extraction is complete iff the numbers of non-zeros
+    agree -- an exact integer check, which rounding cannot upset (a
+    floating-point comparison of norms can, on grids as small as 640x480).
+
+    Examples
+    --------
+    >>> import scipy.sparse as sp
+    >>> A = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(4, 4))
+    >>> offsets, S = grid_stencil(A, (1, 4))
+    >>> offsets
+    [(0, -1), (0, 0), (0, 1)]
+    """
+    A, shape = as_grid_operator(A, shape)
+    offsets = _pattern_offsets(A, shape, radius)  # one pass when A is in the full in-grid pattern
+    if offsets is None:
+        return _stencil_of(A, shape, radius)
+    _, S = csr_to_stencil(A, shape, offsets=offsets)
+    return _without_empty_offsets(offsets, S)
+
+
+def _without_empty_offsets(offsets, S):
+    """``offsets`` and ``S`` without the offsets whose image is all zero (the centre is always kept)."""
+    keep = [k for k, o in enumerate(offsets) if o == (0, 0) or np.any(S[k])]
+    return [offsets[k] for k in keep], (S if len(keep) == len(offsets) else S[keep])
+
+
+def _offset_image(A, shape, dy, dx, out):
+    """``out[y, x] = A[y*W + x, (y+dy)*W + (x+dx)]`` (0 outside the grid); returns ``out``."""
+    h, w = shape
+    n = h * w
+    flat = out.reshape(n)
+    flat[:] = 0.0
+    delta = dy * w + dx
+    if abs(delta) < n:
+        d = A.diagonal(delta)
+        if delta >= 0:
+            flat[: n - delta] = d
+        else:
+            flat[-delta:] = d
+    _mask_outside(out[None], [(dy, dx)], shape)
+    return out
+
+
+def _stencil_of(A, shape, radius=None):
+    """Offsets present in ``A`` (radius <= 2, or ``radius``) and their stencil images.
+
+    (Matrices in the full in-grid pattern of :func:`~sparsedepth.grid.stencil.stencil_to_csr`
+    are read by the callers, see :func:`_pattern_offsets`, before this is tried.)
+    Two passes over the candidate offsets: the first only counts the non-zeros
+    of each offset (one ``(H, W)`` work image; the 5-point, then the 3x3, then
+    the 5x5 offsets, stopping as soon as every non-zero is accounted for), the
+    second fills ``S`` for the offsets present, so memory is ``(#present + 1) H W`` floats, never the
+    full ``(2r+1)² H W`` (1.6 GB for a 13-point operator on 8 MP).
+    Completeness is exact: a pixel and a diagonal determine at most one
+    in-grid offset, so the operator is captured iff the non-zero counts add
+    up to the number of stored non-zeros of ``A``.
+    """
+    largest = 2 if radius is None else int(radius)
+    if radius is None:  # 5-point first, then 3x3, then 5x5: stop once all is found
+        rings = [[(-1, 0), (0, -1), (0, 0), (0, 1), (1, 0)], _square_offsets(1), _square_offsets(2)]
+    else:
+        rings = [_square_offsets(largest)]
+    total = int(np.count_nonzero(A.data))
+    if radius is None:
+        # common case first: a 5-point operator is extracted in a single pass
+        five = rings[0]
+        S = np.empty((5,) + tuple(shape))
+        if sum(int(np.count_nonzero(_offset_image(A, shape, dy, dx, S[k])))
+               for k, (dy, dx) in enumerate(five)) == total:
+            return _without_empty_offsets(five, S)
+        del S
+    work = np.empty(shape)
+    present, seen, counted = [], set(), 0
+    for ring in rings:
+        for dy, dx in ring:
+            if (dy, dx) in seen:
+                continue
+            seen.add((dy, dx))
+            count = int(np.count_nonzero(_offset_image(A, shape, dy, dx, work)))
+            if count or (dy, dx) == (0, 0):
+                present.append((dy, dx))
+                counted += count
+        if counted == total:
+            break
+    del work
+    present.sort()
+    if counted != total:
+        raise ValueError(
+            f"`A` couples pixels farther apart than a stencil of radius {largest} "
+            f"on a grid of shape {shape}: check that `shape` is the (H, W) the pixels "
+            "were flattened from (C order), or pass `radius=` for wider stencils."
+        )
+    S = np.empty((len(present),) + tuple(shape))
+    for k, (dy, dx) in enumerate(present):
+        _offset_image(A, shape, dy, dx, S[k])
+    return present, S
+
+
+class StencilSource:
+    """A level's stencil for the numeric set-up, handed out one parity class at a time.
+
+    Either an array ``(K, H, W)`` (coarse levels, or a fine operator whose
+    stencil had to be extracted diagonal by diagonal) or a CSR matrix in the
+    full in-grid pattern of :func:`~sparsedepth.grid.stencil.stencil_to_csr`, read
+    class by class so that the fine stencil is never held whole (8 MP,
+    13-point: 210 MB per class instead of 830 MB).  Grids below
+    ``_KEEP_STENCIL_PIXELS`` read it whole once (:meth:`read_whole`).
+    """
+
+    def __init__(self, offsets, shape, *, array=None, csr=None, csr_offsets=None):
+        self.offsets = list(offsets)
+        self.shape = tuple(shape)
+        self.array = array
+        self.csr = csr
+        self.csr_offsets = None if csr_offsets is None else list(csr_offsets)
+
+    def parity_class(self, py, px):
+        """Stencil images on the pixels ``(py::2, px::2)``, shape ``(K, ny, nx)`` (``py = None``: all pixels)."""
+        if self.array is not None:
+            return np.ascontiguousarray(self.array[:, py::2, px::2])
+        parity = None if py is None else (py, px)  # None: the whole grid
+        _, part = csr_to_stencil(self.csr, self.shape, offsets=self.csr_offsets, parity=parity)
+        if self.csr_offsets == self.offsets:
+            return part
+        out = np.zeros((len(self.offsets),) + part.shape[1:])
+        slot = {o: k for k, o in enumerate(self.offsets)}
+        for k, o in enumerate(self.csr_offsets):
+            out[slot[o]] = part[k]
+        return out
+
+    def read_whole(self):
+        """Read a CSR source into one array now (the set-up asks for most classes twice)."""
+        if self.array is None:
+            self.array = self.parity_class(None, None)
+            self.csr = None
+        return self
+
+
+def _pattern_offsets(A, shape, radius=None):
+    """Offsets of ``A`` when it is in the full in-grid pattern within the radius (default 2), else None."""
+    largest = 2 if radius is None else int(radius)
+    offsets = full_pattern_offsets(A, shape)
+    if offsets is not None and all(max(abs(dy), abs(dx)) <= largest for dy, dx in offsets):
+        return offsets
+    return None
+
+
+def fine_stencil_source(A, shape, radius=None):
+    """Offsets and :class:`StencilSource` of a fine operator (pattern read, else extraction)."""
+    offsets = _pattern_offsets(A, shape, radius)
+    if offsets is not None:
+        return offsets, StencilSource(offsets, shape, csr=A, csr_offsets=offsets)
+    offsets, S = _stencil_of(A, shape, radius)
+    return offsets, StencilSource(offsets, shape, array=S)
