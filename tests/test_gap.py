@@ -12,7 +12,7 @@ from scipy.sparse.linalg import spsolve
 import sparsedepth as sd
 from sparsedepth import Weights, build_objective
 from sparsedepth.solvers.certificate import curvature_lower_bound, duality_gap
-from sparsedepth.solvers.core import SOLVER_OPTIONS, check_solver_arguments, solve
+from sparsedepth.solvers import SOLVER_OPTIONS, check_solver_arguments, solve
 
 from conftest import make_problem
 

@@ -9,7 +9,8 @@ from sparsedepth import Weights, build_objective, complete_depth
 from sparsedepth.objective.l1 import StackedL1, is_grid_gradient
 from sparsedepth.objective import AbsTerm, Objective, QuadraticTerm
 from sparsedepth.grid.operators import forward_diff, gradient, hessian_operator
-from sparsedepth.solvers.core import _polish_active_set, solve
+from sparsedepth.solvers import solve
+from sparsedepth.solvers.active_set import polish_active_set
 
 from conftest import make_problem
 
@@ -182,7 +183,7 @@ def optimal_signs():
 
 def test_polish_from_the_optimal_signs_is_the_optimum(optimal_signs):
     obj, coarse, ref, (A, b, const), l1, u = optimal_signs
-    z, F, count, _ = _polish_active_set(A, b, const, l1, u, z0=coarse.ravel(), rtol=1e-12)
+    z, F, count, _ = polish_active_set(A, b, const, l1, u, z0=coarse.ravel(), rtol=1e-12)
     assert F == pytest.approx(obj.value(z), rel=1e-10)
     assert F <= obj.value(ref.z) * (1 + 1e-12)
     assert count < obj.size  # pixels were merged
@@ -199,9 +200,9 @@ def test_polish_ties_edges_whose_sign_comes_out_wrong(optimal_signs):
     tied_rows = rows[u[rows] == 0]
     spoiled = u.copy()
     spoiled[tied_rows[::3]] = 1.0
-    _, F_one, _, _ = _polish_active_set(A, b, const, l1, spoiled, z0=coarse.ravel(), rounds=1, rtol=1e-12)
-    _, F_two, _, _ = _polish_active_set(A, b, const, l1, spoiled, z0=coarse.ravel(), rounds=2, rtol=1e-12)
-    _, F_opt, _, _ = _polish_active_set(A, b, const, l1, u, z0=coarse.ravel(), rtol=1e-12)
+    _, F_one, _, _ = polish_active_set(A, b, const, l1, spoiled, z0=coarse.ravel(), rounds=1, rtol=1e-12)
+    _, F_two, _, _ = polish_active_set(A, b, const, l1, spoiled, z0=coarse.ravel(), rounds=2, rtol=1e-12)
+    _, F_opt, _, _ = polish_active_set(A, b, const, l1, u, z0=coarse.ravel(), rtol=1e-12)
     assert F_opt < F_two < F_one
     assert F_two - F_opt < 0.1 * (F_one - F_opt)  # measured ~0.03: most spoiled edges are re-tied
 
@@ -221,7 +222,7 @@ def test_polish_declines_a_singular_reduced_model():
     A, b, const = obj.normal_equations()
     l1 = StackedL1(obj)
     untied = np.ones(l1.rows)
-    assert _polish_active_set(A, b, const, l1, untied, z0=coarse.ravel()) is None
+    assert polish_active_set(A, b, const, l1, untied, z0=coarse.ravel()) is None
     # the solver still runs (plain ADMM where the polish is declined) and returns a valid point
     res = complete_depth(image, sparse, mask, weights=weights, solver="admm", max_iter=200)
     assert np.all(np.isfinite(res.depth)) and res.depth.min() >= 0
@@ -229,19 +230,19 @@ def test_polish_declines_a_singular_reduced_model():
 
 
 def test_merge_sums_entries_per_pair_of_components():
-    from sparsedepth.solvers.core import _merge
+    from sparsedepth.solvers.active_set import merge_by_label
 
     rng = np.random.default_rng(4)
     M = sp.random(30, 30, density=0.2, random_state=5, format="csr")
     labels = rng.integers(0, 7, 30)
     labels[:7] = np.arange(7)  # every label used
     C = sp.csr_matrix((np.ones(30), (np.arange(30), labels)), shape=(30, 7))
-    np.testing.assert_allclose(_merge(M, labels, 7).toarray(), (C.T @ M @ C).toarray(), atol=1e-14)
+    np.testing.assert_allclose(merge_by_label(M, labels, 7).toarray(), (C.T @ M @ C).toarray(), atol=1e-14)
     # in blocks of a few pixels (stacked), and with entries replaced by a function of the block
     expected = (C.T @ M @ C).toarray()
     for chunk in (1, 4, 13):
-        np.testing.assert_allclose(_merge(M, labels, 7, chunk=chunk).toarray(), expected, atol=1e-14)
-    doubled = _merge(M, labels, 7, chunk=5, entries=lambda block, rows: 2.0 * block.data + rows[0] * 0)
+        np.testing.assert_allclose(merge_by_label(M, labels, 7, chunk=chunk).toarray(), expected, atol=1e-14)
+    doubled = merge_by_label(M, labels, 7, chunk=5, entries=lambda block, rows: 2.0 * block.data + rows[0] * 0)
     np.testing.assert_allclose(doubled.toarray(), 2.0 * expected, atol=1e-14)
 
 
@@ -281,36 +282,36 @@ def test_gram_entries_on_a_dense_block(shape):
 
 def test_weight_chunks_and_stack_rows():
     from sparsedepth.objective import l1 as _l1
-    from sparsedepth.solvers.core import _stack_rows
+    from sparsedepth.solvers.active_set import stack_rows
 
     rng = np.random.default_rng(6)
     shape = (7, 9)
     l1 = StackedL1(_objective_with(shape, gradient(shape), rng))
-    old_chunk, _l1._CHUNK = _l1._CHUNK, 10  # several chunks
+    old_chunk, _l1.CHUNK_ROWS = _l1.CHUNK_ROWS, 10  # several chunks
     try:
         assert l1.max_weight() == pytest.approx(np.max(l1.weights), rel=1e-15)
         Kz = l1.apply(rng.standard_normal(shape[0] * shape[1]))
         assert l1.value(Kz) == pytest.approx(np.sum(l1.weights * np.abs(Kz)), rel=1e-13)
     finally:
-        _l1._CHUNK = old_chunk
+        _l1.CHUNK_ROWS = old_chunk
     blocks = [sp.random(m, 11, density=0.3, random_state=m, format="csr") for m in (3, 1, 4)]
     expected = sp.vstack(blocks).toarray()
-    np.testing.assert_array_equal(_stack_rows(list(blocks), 11).toarray(), expected)
+    np.testing.assert_array_equal(stack_rows(list(blocks), 11).toarray(), expected)
 
 
 def test_polish_with_the_admm_matrix_equals_the_polish_with_A(optimal_signs):
     """penalty=ρ: the polish reduces S = 2A + ρKᵀK block by block and must find the same point."""
-    from sparsedepth.solvers.core import _combine
+    from sparsedepth.solvers.admm import combine
 
     obj, coarse, ref, (A, b, const), l1, u = optimal_signs
     rho = 2.5
-    S = _combine(2.0, A, rho, (gradient(obj.shape).T @ gradient(obj.shape)).tocsr())
+    S = combine(2.0, A, rho, (gradient(obj.shape).T @ gradient(obj.shape)).tocsr())
     spoiled = u.copy()
     rows = l1.pixel_pairs()[0]
     spoiled[rows[u[rows] == 0][::3]] = 1.0  # two rounds
     for sign_source in (u, spoiled):
-        z_a, F_a, n_a, _ = _polish_active_set(A, b, const, l1, sign_source, z0=coarse.ravel(), rtol=1e-12)
-        z_s, F_s, n_s, _ = _polish_active_set(S, b, const, l1, sign_source, z0=coarse.ravel(), rtol=1e-12,
+        z_a, F_a, n_a, _ = polish_active_set(A, b, const, l1, sign_source, z0=coarse.ravel(), rtol=1e-12)
+        z_s, F_s, n_s, _ = polish_active_set(S, b, const, l1, sign_source, z0=coarse.ravel(), rtol=1e-12,
                                               penalty=rho)
         assert n_a == n_s
         assert F_s == pytest.approx(F_a, rel=1e-11)
@@ -318,13 +319,13 @@ def test_polish_with_the_admm_matrix_equals_the_polish_with_A(optimal_signs):
 
 
 def test_combine_same_and_different_patterns():
-    from sparsedepth.solvers.core import _combine
+    from sparsedepth.solvers.admm import combine
 
     A = sp.random(20, 20, density=0.3, random_state=1, format="csr")
     same = sp.csr_matrix((np.arange(1.0, A.nnz + 1), A.indices, A.indptr), shape=A.shape)
     other = sp.random(20, 20, density=0.3, random_state=2, format="csr")
     for B in (same, other):
-        np.testing.assert_allclose(_combine(2.0, A, 1.5, B).toarray(), (2.0 * A + 1.5 * B).toarray(), atol=1e-14)
+        np.testing.assert_allclose(combine(2.0, A, 1.5, B).toarray(), (2.0 * A + 1.5 * B).toarray(), atol=1e-14)
 
 
 @pytest.mark.parametrize("options", [{"inner_max_iter": 3}, {"adapt_iters": 20}, {"preconditioner": "amg"},
@@ -339,12 +340,12 @@ def test_admm_options_reach_the_same_optimum(options):
 
 def test_admm_keeping_only_s_reaches_the_same_point(monkeypatch):
     """Large frames keep S = 2A + ρKᵀK only (the polish reduces S); forced here on a small frame."""
-    from sparsedepth.solvers import core as solvers
+    from sparsedepth.solvers import active_set
 
     image, sparse, mask, _ = make_problem((24, 30))
     obj, _, _ = build_objective(image, sparse, mask, weights=L1)
     with_a = complete_depth(image, sparse, mask, weights=L1, solver="admm")
-    monkeypatch.setattr(solvers, "_ADMM_KEEP_A_PIXELS", 0)
+    monkeypatch.setattr(active_set, "KEEP_A_PIXELS", 0)
     s_only = complete_depth(image, sparse, mask, weights=L1, solver="admm")
     assert s_only.converged and with_a.converged
     # the same ADMM iterates, not only the same end point (compared by value: counts are not, as rounding
@@ -377,13 +378,13 @@ def test_weights_shared_by_the_gradient_blocks_equal_the_stacked_ones():
     a, b = StackedL1(shared), StackedL1(stacked)
     np.testing.assert_array_equal(a.weights, b.weights)
     v = rng.standard_normal(2 * n)
-    old_chunk, _l1._CHUNK = _l1._CHUNK, 7  # chunks that do not divide a block
+    old_chunk, _l1.CHUNK_ROWS = _l1.CHUNK_ROWS, 7  # chunks that do not divide a block
     try:
         np.testing.assert_allclose(a.weighted(v), b.weights * v, rtol=1e-15)
         assert a.value(v) == pytest.approx(np.sum(b.weights * np.abs(v)), rel=1e-14)
         assert a.max_weight() == pytest.approx(0.7 * w.max(), rel=1e-15)
     finally:
-        _l1._CHUNK = old_chunk
+        _l1.CHUNK_ROWS = old_chunk
     with pytest.raises(ValueError, match="row_weights"):
         AbsTerm("edge", 0.7, G, rng.random(n + 1))
 
@@ -405,7 +406,7 @@ def test_admm_step_equals_the_update_written_out(monkeypatch, chunk, weights):
     from sparsedepth.objective import l1 as _l1
     from sparsedepth.grid.operators import gradient_stencil
 
-    monkeypatch.setattr(_l1, "_STEP_CHUNK", chunk)  # 5 and 7 do not divide the blocks of 2 * 30 rows
+    monkeypatch.setattr(_l1, "STEP_CHUNK_ROWS", chunk)  # 5 and 7 do not divide the blocks of 2 * 30 rows
     rng = np.random.default_rng(8)
     shape = (6, 5)
     n = shape[0] * shape[1]

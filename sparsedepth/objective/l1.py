@@ -7,6 +7,9 @@ operators of all L1 terms of an :class:`~sparsedepth.objective.Objective` and
 applies ``K`` and ``Kᵀ``; when ``K`` is exactly the grid gradient it does so
 by NumPy slicing of the ``(H, W)`` image (a few passes over the array instead
 of a sparse product with index look-ups), otherwise by sparse products.
+:func:`graph_components` labels the pixels joined by pixel-pair rows.
+
+May import :mod:`sparsedepth.grid`; nothing else of the package.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from scipy.sparse.csgraph import connected_components
 from ..grid.operators import StencilOperator, gradient, gradient_stencil
 from ..grid.stencil import index_dtype, stencil_to_csr
 
-__all__ = ["StackedL1", "is_grid_gradient"]
+__all__ = ["StackedL1", "is_grid_gradient", "graph_components", "CHUNK_ROWS", "STEP_CHUNK_ROWS"]
 
 
 def is_grid_gradient(K, shape) -> bool:
@@ -49,11 +52,12 @@ def is_grid_gradient(K, shape) -> bool:
 
 
 _LAPLACIAN_OFFSETS = {(-1, 0), (0, -1), (0, 0), (0, 1), (1, 0)}
-_CHUNK = 1 << 20
+#: Rows per chunk of the passes over the L1 row weights (:meth:`StackedL1.value`, :meth:`StackedL1.weighted`).
+CHUNK_ROWS = 1 << 20
 #: Rows per chunk of the fused ADMM edge step: its temporaries (a few float64 chunks) stay in the L2
 #: cache, and its dot products stay below the length (10000) from which OpenBLAS's ddot starts threads
-#: (on a busy 2-core machine a threaded 600k-long dot product was measured at ~8 ms instead of 0.1 ms).
-_STEP_CHUNK = 8192
+#: (a threaded dot product is many times slower than a single-threaded one on a busy machine).
+STEP_CHUNK_ROWS = 8192
 
 
 def _is_gradient_operator(operator, shape) -> bool:
@@ -132,8 +136,13 @@ class StackedL1:
         return np.concatenate([w * (np.ones(m) if r is None else np.tile(r, m // r.shape[0]))
                                for w, r, m in self._row_weights])
 
-    def _weight_chunks(self, chunk=_CHUNK):
-        """``(rows, weight, r[rows])`` in chunks of at most ``chunk`` rows (``r`` None for ones)."""
+    def _weight_chunks(self, chunk=None):
+        """``(rows, weight, r[rows])`` in chunks of at most ``chunk`` rows (``r`` None for ones).
+
+        ``chunk`` defaults to :data:`CHUNK_ROWS`, read at the call.
+        """
+        if chunk is None:
+            chunk = CHUNK_ROWS
         start = 0
         for w, r, m in self._row_weights:
             period = m if r is None else r.shape[0]  # r repeats every `period` rows
@@ -157,7 +166,7 @@ class StackedL1:
             λ ← clip(x, −scale c, scale c)
             u_new = x − λ                      (the shrinkage of x), written into Kz
 
-        chunk by chunk (``_STEP_CHUNK`` rows), so that each vector is read or
+        chunk by chunk (``STEP_CHUNK_ROWS`` rows), so that each vector is read or
         written once and ``c`` is never formed.  The same pass sums what the
         solver needs of ``Kz`` before it is overwritten.
 
@@ -179,14 +188,14 @@ class StackedL1:
             ``r_sq = ‖Kz − u_new‖²`` and ``u_sq = ‖u_new‖²``; with ``dual``
             ``s_sq = ‖u − u_new‖²`` and ``lam_sq = ‖λ_new‖²``.
         """
-        n = min(_STEP_CHUNK, Kz.shape[0])
+        n = min(STEP_CHUNK_ROWS, Kz.shape[0])
         x, bound, low, work = (np.empty(n) for _ in range(4))
         sums = dict(Kz_sq=0.0, value=0.0)
         if primal:
             sums.update(r_sq=0.0, u_sq=0.0)
         if dual:
             sums.update(s_sq=0.0, lam_sq=0.0)
-        for rows, w, r in self._weight_chunks(_STEP_CHUNK):
+        for rows, w, r in self._weight_chunks(STEP_CHUNK_ROWS):
             k, u_k, lam_k = Kz[rows], u[rows], lam[rows]
             size = k.shape[0]
             xk, bk, lk, wk = x[:size], bound[:size], low[:size], work[:size]

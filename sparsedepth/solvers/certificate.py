@@ -5,6 +5,8 @@ The objective is ``F(z) = Q(z) + Σ_k c_k |(K z)_k|`` with the quadratic part
 ``A`` symmetric positive definite) and the stacked L1 operator ``K`` with row
 weights ``c >= 0`` (:class:`~sparsedepth.objective.l1.StackedL1`).  See
 :func:`duality_gap`.
+
+May import :mod:`sparsedepth.objective` and :mod:`sparsedepth.linalg`.
 """
 
 from __future__ import annotations
