@@ -8,7 +8,9 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from sparsedepth.io import formats as sio
+from sparsedepth import io as sio
+from sparsedepth.io import pfm as sio_pfm
+from sparsedepth.io import writing as sio_writing
 
 
 # ------------------------------------------------------------------------------------
@@ -152,6 +154,13 @@ def test_read_depth_png_bad_scale(tmp_path, scale, exc):
     iio.imwrite(tmp_path / "d.png", np.ones((2, 2), np.uint16))
     with pytest.raises(exc, match="scale"):
         sio.read_depth_png(tmp_path / "d.png", scale)
+
+
+def test_sensor_code_warning_points_at_the_caller(tmp_path):
+    sio.write_depth(tmp_path / "d.png", np.full((4, 4), 2.047), scale=1000)
+    with pytest.warns(UserWarning, match="2047") as record:
+        sio.read_depth(tmp_path / "d.png", scale=1000)
+    assert [w.filename for w in record] == [__file__]
 
 
 def test_read_depth_png_rejects_colour_and_other_formats(tmp_path):
@@ -622,7 +631,7 @@ def test_write_depth_does_not_modify_input(tmp_path):
 @pytest.mark.parametrize(
     "name, writer",
     [("d.png", "_write_png_file"), ("d.npy", "_write_npy_file"), ("d.npz", "_write_npz_file"),
-     ("d.h5", "_write_hdf5_file"), ("d.pfm", "_write_pfm_file")],
+     ("d.h5", "_write_hdf5_file"), ("d.pfm", "write_pfm_file")],
 )
 def test_write_is_atomic(tmp_path, monkeypatch, name, writer):
     def half_then_fail(path, *args):
@@ -630,7 +639,7 @@ def test_write_is_atomic(tmp_path, monkeypatch, name, writer):
             fh.write(b"partial")
         raise OSError("disk full")
 
-    monkeypatch.setattr(sio, writer, half_then_fail)
+    monkeypatch.setattr(sio_writing, writer, half_then_fail)
     with pytest.raises(OSError, match="disk full"):
         sio.write_depth(tmp_path / name, np.ones((2, 2)))
     assert _listing(tmp_path) == []  # neither the target nor a temporary file
@@ -644,7 +653,7 @@ def test_write_is_atomic(tmp_path, monkeypatch, name, writer):
 
 
 def test_write_pfm_is_atomic(tmp_path, monkeypatch):
-    monkeypatch.setattr(sio, "_write_pfm_file", lambda *a: (_ for _ in ()).throw(KeyboardInterrupt()))
+    monkeypatch.setattr(sio_pfm, "write_pfm_file", lambda *a: (_ for _ in ()).throw(KeyboardInterrupt()))
     with pytest.raises(KeyboardInterrupt):
         sio.write_pfm(tmp_path / "a.pfm", np.ones((2, 2)))
     assert _listing(tmp_path) == []
