@@ -138,8 +138,11 @@ __all__ += ["argument_label", "check_input_file"]
 
 
 def argument_label(name: str) -> str:
-    """How an argument appears in messages: command-line flags as typed (``--depth``), Python names in backticks."""
-    return name if name.startswith("-") else f"`{name}`"
+    """How an argument appears in messages: command-line flags as typed (``--depth``), Python names in backticks.
+
+    A name already labelled (in backticks) is returned as it is.
+    """
+    return name if name.startswith(("-", "`")) else f"`{name}`"
 
 
 def check_input_file(path, *, name: str = "path") -> Path:

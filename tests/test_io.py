@@ -156,6 +156,25 @@ def test_read_depth_png_bad_scale(tmp_path, scale, exc):
         sio.read_depth_png(tmp_path / "d.png", scale)
 
 
+@pytest.mark.parametrize("reader", ["read_depth", "read_depth_png"])
+@pytest.mark.parametrize("scale, exc, text", [
+    ("furlongs", ValueError, ": unknown preset 'furlongs'"),
+    (-1.0, ValueError, " must be a finite positive number, got -1.0."),
+    ([1000], TypeError, " must be a positive number or a preset name, got list."),
+])
+def test_scale_messages_name_the_keyword_once(tmp_path, reader, scale, exc, text):
+    iio.imwrite(tmp_path / "d.png", np.ones((2, 2), np.uint16))
+    read = getattr(sio, reader)
+    args = (scale,) if reader == "read_depth_png" else ()
+    kwargs = {} if reader == "read_depth_png" else {"scale": scale}
+    with pytest.raises(exc) as info:
+        read(tmp_path / "d.png", *args, **kwargs)
+    assert str(info.value).startswith("`scale`" + text)
+    with pytest.raises(exc) as info:
+        read(tmp_path / "d.png", *args, **kwargs, option_names={"scale": "--depth-scale"})
+    assert str(info.value).startswith("--depth-scale" + text)
+
+
 def test_sensor_code_warning_points_at_the_caller(tmp_path):
     sio.write_depth(tmp_path / "d.png", np.full((4, 4), 2.047), scale=1000)
     with pytest.warns(UserWarning, match="2047") as record:
