@@ -360,6 +360,25 @@ def test_disparity_to_depth_bad(args, kwargs, exc, match):
         sio.disparity_to_depth(*args, **kwargs)
 
 
+@pytest.mark.parametrize("value", [-2, 0, -0.5, np.nan, np.inf])
+def test_positive_quantities_share_one_rule(value):
+    """Scale, focal length and baseline refuse the same values with the same message."""
+    cases = [
+        ("`scale`", lambda: sio.read_depth_png(__file__, value)),
+        ("`focal_px`", lambda: sio.disparity_to_depth([1.0], value, 1.0)),
+        ("`baseline_mm`", lambda: sio.disparity_to_depth([1.0], 1.0, value)),
+        ("`baseline_mm`", lambda: sio.StereoCalibration(cam0=np.eye(3), baseline_mm=value)),
+    ]
+    for label, call in cases:
+        with pytest.raises(ValueError) as info:
+            call()
+        assert str(info.value) == f"{label} must be a finite positive number, got {value!r}."
+    with pytest.raises(TypeError, match=r"^`focal_px` must be a real number, got bool\.$"):
+        sio.disparity_to_depth([1.0], True, 1.0)
+    with pytest.raises(TypeError, match=r"^`scale` must be a positive number or a preset name, got NoneType\.$"):
+        sio.read_depth_png(__file__, None)
+
+
 def test_disparity_to_depth_doffs_is_keyword_only():
     with pytest.raises(TypeError):
         sio.disparity_to_depth([1.0], 1.0, 1.0, 2.0)
