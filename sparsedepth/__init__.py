@@ -23,7 +23,7 @@ from .datasets import (
     load_shared_frame,
     shared_data_dir,
 )
-from .io.formats import DEPTH_SCALES, read_depth, read_image, write_depth
+from .io import DEPTH_SCALES, read_depth, read_image, write_depth
 
 __version__ = "0.1.0"
 

@@ -159,3 +159,76 @@ def as_grid_operator(A, shape, *, name: str = "A"):
         A = A.copy()
         A.sum_duplicates()
     return A, (h, w)
+# --- path
+import os  # noqa: E402 - kept with the rule that uses it, so that each concept's block stands alone
+import stat  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+__all__ += ["argument_label", "check_input_file"]
+
+
+def argument_label(name: str) -> str:
+    """How an argument appears in messages: command-line flags as typed (``--depth``), Python names in backticks.
+
+    A name already labelled (in backticks) is returned as it is.
+    """
+    return name if name.startswith(("-", "`")) else f"`{name}`"
+
+
+def check_input_file(path, *, name: str = "path") -> Path:
+    """Return ``path`` as a :class:`~pathlib.Path` after checking that it names an existing regular file.
+
+    ``name`` labels the path in messages (see :func:`argument_label`).  Only
+    :func:`os.stat` is called, so a FIFO or a device is refused without being
+    opened (opening a FIFO blocks until a writer appears).  Raises
+    ``TypeError`` for a ``name`` that is not a non-empty str or a ``path``
+    that is not a str or os.PathLike, ``FileNotFoundError`` for a missing
+    file and ``ValueError`` for a path that cannot be examined or is not a
+    regular file (directory, FIFO, device, socket).
+    """
+    if not isinstance(name, str) or not name:
+        raise TypeError(f"`name` must be a non-empty str (the label of the path in messages), got {name!r}.")
+    label = argument_label(name)
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"{label} must be a str or os.PathLike, got {type(path).__name__}.")
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        raise FileNotFoundError(f"{label}: no such file: '{path}'.") from None
+    except (OSError, ValueError) as exc:  # permission, embedded NUL, name too long, ...
+        raise ValueError(f"{label} '{path}': cannot be accessed ({exc}).") from None
+    if not stat.S_ISREG(mode):
+        kind = (
+            "a directory" if stat.S_ISDIR(mode)
+            else "a FIFO (named pipe)" if stat.S_ISFIFO(mode)
+            else "a character device" if stat.S_ISCHR(mode)
+            else "a block device" if stat.S_ISBLK(mode)
+            else "a socket" if stat.S_ISSOCK(mode)
+            else "not a regular file"
+        )
+        raise ValueError(f"{label} '{path}' is {kind}; expected a regular file.")
+    return path
+
+
+# --- scale
+import math  # noqa: E402
+
+__all__ += ["check_positive_finite"]
+
+
+def check_positive_finite(value, *, label: str, expected: str = "a real number") -> float:
+    """Return ``value`` as a float: ``TypeError`` unless it is a real number, ``ValueError`` unless finite and > 0.
+
+    ``label`` is the argument as it appears in messages (see
+    :func:`argument_label`); ``expected`` ends the type message
+    "<label> must be <expected>" (e.g. "a positive number or a preset name"
+    where a preset name is also accepted).  The rule for depth scales and
+    every other strictly positive quantity (focal length, baseline).
+    """
+    if not is_real(value):
+        raise TypeError(f"{label} must be {expected}, got {type(value).__name__}.")
+    number = float(value)
+    if not math.isfinite(number) or number <= 0:
+        raise ValueError(f"{label} must be a finite positive number, got {value!r}.")
+    return number

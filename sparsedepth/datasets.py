@@ -28,7 +28,7 @@ from typing import Callable
 
 import numpy as np
 
-from .io.formats import (
+from .io import (
     NYUDepthV2Labeled,
     StereoCalibration,
     read_calib,

@@ -8,7 +8,9 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from sparsedepth.io import formats as sio
+from sparsedepth import io as sio
+from sparsedepth.io import pfm as sio_pfm
+from sparsedepth.io import writing as sio_writing
 
 
 # ------------------------------------------------------------------------------------
@@ -152,6 +154,32 @@ def test_read_depth_png_bad_scale(tmp_path, scale, exc):
     iio.imwrite(tmp_path / "d.png", np.ones((2, 2), np.uint16))
     with pytest.raises(exc, match="scale"):
         sio.read_depth_png(tmp_path / "d.png", scale)
+
+
+@pytest.mark.parametrize("reader", ["read_depth", "read_depth_png"])
+@pytest.mark.parametrize("scale, exc, text", [
+    ("furlongs", ValueError, ": unknown preset 'furlongs'"),
+    (-1.0, ValueError, " must be a finite positive number, got -1.0."),
+    ([1000], TypeError, " must be a positive number or a preset name, got list."),
+])
+def test_scale_messages_name_the_keyword_once(tmp_path, reader, scale, exc, text):
+    iio.imwrite(tmp_path / "d.png", np.ones((2, 2), np.uint16))
+    read = getattr(sio, reader)
+    args = (scale,) if reader == "read_depth_png" else ()
+    kwargs = {} if reader == "read_depth_png" else {"scale": scale}
+    with pytest.raises(exc) as info:
+        read(tmp_path / "d.png", *args, **kwargs)
+    assert str(info.value).startswith("`scale`" + text)
+    with pytest.raises(exc) as info:
+        read(tmp_path / "d.png", *args, **kwargs, option_names={"scale": "--depth-scale"})
+    assert str(info.value).startswith("--depth-scale" + text)
+
+
+def test_sensor_code_warning_points_at_the_caller(tmp_path):
+    sio.write_depth(tmp_path / "d.png", np.full((4, 4), 2.047), scale=1000)
+    with pytest.warns(UserWarning, match="2047") as record:
+        sio.read_depth(tmp_path / "d.png", scale=1000)
+    assert [w.filename for w in record] == [__file__]
 
 
 def test_read_depth_png_rejects_colour_and_other_formats(tmp_path):
@@ -330,6 +358,25 @@ def test_disparity_to_depth_values():
 def test_disparity_to_depth_bad(args, kwargs, exc, match):
     with pytest.raises(exc, match=match):
         sio.disparity_to_depth(*args, **kwargs)
+
+
+@pytest.mark.parametrize("value", [-2, 0, -0.5, np.nan, np.inf])
+def test_positive_quantities_share_one_rule(value):
+    """Scale, focal length and baseline refuse the same values with the same message."""
+    cases = [
+        ("`scale`", lambda: sio.read_depth_png(__file__, value)),
+        ("`focal_px`", lambda: sio.disparity_to_depth([1.0], value, 1.0)),
+        ("`baseline_mm`", lambda: sio.disparity_to_depth([1.0], 1.0, value)),
+        ("`baseline_mm`", lambda: sio.StereoCalibration(cam0=np.eye(3), baseline_mm=value)),
+    ]
+    for label, call in cases:
+        with pytest.raises(ValueError) as info:
+            call()
+        assert str(info.value) == f"{label} must be a finite positive number, got {value!r}."
+    with pytest.raises(TypeError, match=r"^`focal_px` must be a real number, got bool\.$"):
+        sio.disparity_to_depth([1.0], True, 1.0)
+    with pytest.raises(TypeError, match=r"^`scale` must be a positive number or a preset name, got NoneType\.$"):
+        sio.read_depth_png(__file__, None)
 
 
 def test_disparity_to_depth_doffs_is_keyword_only():
@@ -622,7 +669,7 @@ def test_write_depth_does_not_modify_input(tmp_path):
 @pytest.mark.parametrize(
     "name, writer",
     [("d.png", "_write_png_file"), ("d.npy", "_write_npy_file"), ("d.npz", "_write_npz_file"),
-     ("d.h5", "_write_hdf5_file"), ("d.pfm", "_write_pfm_file")],
+     ("d.h5", "_write_hdf5_file"), ("d.pfm", "write_pfm_file")],
 )
 def test_write_is_atomic(tmp_path, monkeypatch, name, writer):
     def half_then_fail(path, *args):
@@ -630,7 +677,7 @@ def test_write_is_atomic(tmp_path, monkeypatch, name, writer):
             fh.write(b"partial")
         raise OSError("disk full")
 
-    monkeypatch.setattr(sio, writer, half_then_fail)
+    monkeypatch.setattr(sio_writing, writer, half_then_fail)
     with pytest.raises(OSError, match="disk full"):
         sio.write_depth(tmp_path / name, np.ones((2, 2)))
     assert _listing(tmp_path) == []  # neither the target nor a temporary file
@@ -644,7 +691,7 @@ def test_write_is_atomic(tmp_path, monkeypatch, name, writer):
 
 
 def test_write_pfm_is_atomic(tmp_path, monkeypatch):
-    monkeypatch.setattr(sio, "_write_pfm_file", lambda *a: (_ for _ in ()).throw(KeyboardInterrupt()))
+    monkeypatch.setattr(sio_pfm, "write_pfm_file", lambda *a: (_ for _ in ()).throw(KeyboardInterrupt()))
     with pytest.raises(KeyboardInterrupt):
         sio.write_pfm(tmp_path / "a.pfm", np.ones((2, 2)))
     assert _listing(tmp_path) == []

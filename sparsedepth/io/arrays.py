@@ -1,0 +1,184 @@
+"""Arrays stored with NumPy (``.npy``, ``.npz``) and HDF5 (``.h5``, ``.hdf5``, MATLAB v7.3 ``.mat``).
+
+What lives here: :func:`read_depth_array`, the header-first ``.npy`` reader
+(shape, dtype and pixel limit are checked before the data are read; pickled
+objects are refused), the ``.npz`` member choice, and the HDF5 helpers that
+:mod:`.nyu` and :func:`sparsedepth.io.read_depth` share (:func:`open_hdf5`,
+:func:`hdf5_dataset`, :func:`hdf5_read`, :func:`read_hdf5_array`).
+
+Imports NumPy, h5py, :mod:`sparsedepth._validation` and :mod:`.files` /
+:mod:`.stored` only.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+from typing import Callable, Mapping
+
+import h5py
+import numpy as np
+
+from .._validation import check_input_file
+from .files import (MAX_PIXELS, as_value_error, check_extension, check_max_pixels, file_label, load_error,
+                    option_labels, suffix)
+from .stored import as_depth, check_stored_array
+
+__all__ = ["ARRAY_EXTENSIONS", "HDF5_EXTENSIONS", "hdf5_dataset", "hdf5_read", "load_array", "open_hdf5",
+           "read_depth_array", "read_hdf5_array"]
+
+ARRAY_EXTENSIONS = (".npy", ".npz")
+HDF5_EXTENSIONS = (".h5", ".hdf5")
+
+
+def _read_npy_stream(fh, where: str, max_pixels, label: str, *, allow_bool=False) -> np.ndarray:
+    """Read one ``.npy`` array from an open binary stream, checking its header first."""
+    with as_value_error(where, load_error):  # bad magic, malformed header dict, pickled (object) dtype, ...
+        version = np.lib.format.read_magic(fh)
+        if version == (1, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+        elif version == (2, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+        else:
+            raise ValueError(f"unsupported .npy format version {version}")
+    check_stored_array(shape, dtype, where, max_pixels, label, allow_bool=allow_bool)
+    count = int(shape[0]) * int(shape[1])
+    nbytes = count * dtype.itemsize
+    with as_value_error(where, load_error):  # OSError, zipfile.BadZipFile (CRC), zlib.error, ...
+        data = fh.read(nbytes)
+    if len(data) != nbytes:
+        raise ValueError(f"could not load {where}: {len(data)} bytes of data, expected {nbytes} (truncated).")
+    array = np.frombuffer(data, dtype=dtype, count=count)
+    return array.reshape(shape, order="F" if fortran else "C").copy()
+
+
+def _choose_npz_array(names: list[str], key: str | None, where: str, label: Callable[[str], str]) -> str:
+    """The archive member to read: ``key``, else the only array, else the one called ``'depth'``."""
+    if key is None:
+        if len(names) == 1:
+            return names[0]
+        if "depth" in names:
+            return "depth"
+        if not names:
+            raise ValueError(f"could not load {where}: the archive holds no .npy array.")
+        raise ValueError(f"{where} holds several arrays {names}; choose one with {label('key')}.")
+    if key not in names:
+        raise ValueError(f"{label('key')}: '{key}' is not in {where}; available arrays: {names}.")
+    return key
+
+
+def load_array(path: Path, key: str | None, max_pixels, where: str, label: Callable[[str], str],
+                *, allow_bool=False) -> tuple[np.ndarray, str]:
+    """The stored (H, W) array of a ``.npy`` or ``.npz`` file and a description of its source."""
+    limit = label("max_pixels")
+    if suffix(path) == ".npy":
+        if key is not None:
+            raise ValueError(f"{label('key')} only applies to .npz archives; omit it for a .npy file.")
+        try:
+            with open(path, "rb") as fh:
+                return _read_npy_stream(fh, where, max_pixels, limit, allow_bool=allow_bool), where
+        except OSError as exc:
+            raise ValueError(f"{where}: cannot be read ({exc}).") from None
+    with as_value_error(where, load_error):
+        archive = zipfile.ZipFile(path)
+    with archive:
+        members = [m for m in archive.namelist() if m.endswith(".npy")]
+        names = [m[:-4] for m in members]
+        key = _choose_npz_array(names, key, where, label)
+        source = f"{where} array '{key}'"
+        try:
+            with archive.open(key + ".npy") as fh:
+                return _read_npy_stream(fh, source, max_pixels, limit, allow_bool=allow_bool), source
+        except (ValueError, MemoryError):
+            raise
+        except Exception as exc:
+            raise load_error(source, exc) from exc
+
+
+def read_depth_array(path, *, key: str | None = None, max_pixels: int | None = MAX_PIXELS,
+                     name: str = "path", option_names: Mapping[str, str] | None = None) -> np.ndarray:
+    """Read a depth map stored with NumPy (``.npy`` or ``.npz``).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.npy`` file holding one (H, W) array, or ``.npz`` archive.
+    key : str, optional
+        Array name inside an ``.npz``.  If omitted, the archive's only array
+        is used, or else the one called ``'depth'``.
+    max_pixels : int or None, optional
+        Largest accepted ``H * W``, checked from the array header before the
+        data are read; default :data:`MAX_PIXELS`, None for no limit.
+    name : str, optional
+        Label of ``path`` in error messages.
+    option_names : mapping, optional
+        Labels of the keywords in messages, e.g. ``{"key": "--depth-key"}``.
+
+    Returns
+    -------
+    depth : (H, W) ndarray of float64
+        Stored values (no unit conversion: :func:`read_depth` requires a
+        ``scale`` for integer arrays), with NaN where they are 0, inf or NaN.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If ``path`` is not a regular file, the file cannot be loaded
+        (pickled objects are refused), ``key`` is missing or ambiguous, or
+        the array is not a non-negative 2-D real array within ``max_pixels``.
+    """
+    label = option_labels(option_names)
+    path = check_input_file(path, name=name)
+    check_extension(path, ARRAY_EXTENSIONS, "read depth array", name)
+    max_pixels = check_max_pixels(max_pixels, label("max_pixels"))
+    stored, source = load_array(path, key, max_pixels, file_label(path, name), label)
+    return as_depth(stored, source)
+
+
+def open_hdf5(path: Path, where: str | None = None) -> h5py.File:
+    """``path`` opened read-only with h5py; ``ValueError`` naming ``where`` if it is not readable HDF5."""
+    where = f"'{path}'" if where is None else where
+    try:
+        return h5py.File(path, "r")
+    except MemoryError:
+        raise
+    except Exception as exc:  # OSError for non-HDF5 content; other types on corrupt superblocks
+        raise ValueError(
+            f"{where} is not a readable HDF5 file ({exc}). MATLAB .mat files must be "
+            "version 7.3 (HDF5); older ones need scipy.io.loadmat."
+        ) from exc
+
+
+def hdf5_dataset(handle: h5py.File, key: str, where) -> h5py.Dataset:
+    """Dataset ``key`` of ``handle`` with its metadata readable; ``ValueError`` listing the datasets if absent."""
+    try:
+        item = handle.get(key)
+        if not isinstance(item, h5py.Dataset):
+            available = sorted(k for k in handle.keys() if isinstance(handle.get(k), h5py.Dataset))
+            raise ValueError(f"{where} has no dataset '{key}'; available datasets: {available}.")
+        item.shape, item.dtype  # noqa: B018 - reading the metadata may fail on corrupt files
+    except (ValueError, MemoryError):
+        raise
+    except Exception as exc:
+        raise load_error(f"{where} dataset '{key}'", exc) from exc
+    return item
+
+
+def hdf5_read(dset: h5py.Dataset, source: str, index=()):
+    """``dset[index]``; a corrupt chunk or filter becomes a ``ValueError`` naming ``source``."""
+    with as_value_error(source, load_error):  # OSError / RuntimeError / KeyError from corrupt chunks or filters
+        return dset[index]
+
+
+def read_hdf5_array(path: Path, key: str | None, max_pixels, where: str,
+                     label: Callable[[str], str], *, allow_bool=False) -> tuple[np.ndarray, str]:
+    """The stored (H, W) dataset ``key`` (default ``'depth'``) of an HDF5 file and a description of its source."""
+    key = "depth" if key is None else key
+    with open_hdf5(path, where) as handle:
+        dset = hdf5_dataset(handle, key, where)
+        source = f"{where} dataset '{key}'"
+        check_stored_array(dset.shape, dset.dtype, source, max_pixels, label("max_pixels"),
+                            allow_bool=allow_bool)
+        return np.asarray(hdf5_read(dset, source)), source

@@ -1,0 +1,159 @@
+"""Writing depth maps: :func:`write_depth` and :func:`depth_writer`, the format chosen from the extension.
+
+Every write is atomic (see :func:`sparsedepth.io.files.atomic_target`).
+:func:`depth_writer` makes every check and encodes the data before anything is
+written, so that a caller can check several outputs before writing any.
+
+Imports NumPy, imageio, h5py and the format modules of :mod:`sparsedepth.io`
+only.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+import h5py
+import imageio.v3 as iio
+import numpy as np
+
+from .arrays import ARRAY_EXTENSIONS, HDF5_EXTENSIONS
+from .depth import resolve_scale
+from .files import atomic_target, check_extension
+from .pfm import check_pfm_values, write_pfm_file
+from .stored import check_real_array
+
+__all__ = ["depth_writer", "write_depth"]
+
+_EXTENSIONS = (".png", ".pfm") + ARRAY_EXTENSIONS + HDF5_EXTENSIONS
+_UINT16_MAX = np.iinfo(np.uint16).max
+
+
+def _write_png_file(path: Path, stored: np.ndarray) -> None:
+    iio.imwrite(path, stored, plugin="pillow", extension=".png")
+
+
+def _write_npy_file(path: Path, depth: np.ndarray) -> None:
+    with open(path, "wb") as fh:
+        np.save(fh, depth)
+
+
+def _write_npz_file(path: Path, depth: np.ndarray) -> None:
+    with open(path, "wb") as fh:
+        np.savez_compressed(fh, depth=depth)
+
+
+def _write_hdf5_file(path: Path, depth: np.ndarray) -> None:
+    with h5py.File(path, "w") as handle:
+        handle.create_dataset("depth", data=depth, compression="gzip")
+
+
+def _quantise_png(depth: np.ndarray, scale: float) -> np.ndarray:
+    """uint16 ``round(depth * scale)``, 0 where NaN; ``ValueError`` if a value overflows or rounds to 0."""
+    valid = ~np.isnan(depth)
+    stored = np.zeros(depth.shape, dtype=np.uint16)
+    if not np.any(valid):
+        return stored
+    values = np.rint(depth[valid] * scale)
+    too_large = values > _UINT16_MAX
+    if np.any(too_large):
+        raise ValueError(
+            f"`depth` up to {depth[valid].max():g} overflows 16-bit PNG at scale {scale:g} "
+            f"(largest storable value {_UINT16_MAX / scale:g}); use a smaller `scale` or a "
+            "float format (.npy, .npz, .h5, .pfm)."
+        )
+    rounds_to_zero = values == 0
+    if np.any(rounds_to_zero):
+        raise ValueError(
+            f"`depth` has {int(rounds_to_zero.sum())} positive value(s) (min "
+            f"{depth[valid].min():g}) that round to 0 at scale {scale:g} and would be read "
+            "back as invalid; use a larger `scale` or a float format."
+        )
+    stored[valid] = values.astype(np.uint16)
+    return stored
+
+
+def write_depth(path, depth, *, scale=1000.0) -> None:
+    """Write a depth map, choosing the format from the extension (atomically).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Destination; extension ``.png`` (16-bit integer), ``.npy``, ``.npz``
+        (array ``depth``), ``.h5`` / ``.hdf5`` (dataset ``depth``) or ``.pfm``.
+        Its folder must exist.
+    depth : (H, W) array_like of real numbers
+        Depth, NaN (or inf, or 0) where invalid.  Must be non-negative.
+    scale : float or str, optional
+        PNG only: stored value ``= round(depth * scale)`` (1000 stores
+        millimetres from metres, 256 KITTI, 5000 TUM), or a preset name from
+        :data:`DEPTH_SCALES`.  Float formats always store ``depth`` itself as
+        float64 (PFM: float32), so read them back without a scale.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the destination folder does not exist.
+    ValueError
+        If the extension is not supported, ``depth`` is not 2-D or has
+        negative values, or (PNG) a value overflows 65535 or rounds to 0.
+    TypeError
+        If ``depth`` is not real-valued.
+
+    Notes
+    -----
+    Invalid pixels are written as 0 in PNG, NaN in NPY/NPZ/HDF5 and ``inf``
+    in PFM (the Middlebury convention).  The file appears only once
+    complete: data go to a temporary file in the same folder that then
+    replaces ``path`` with :func:`os.replace`; on failure the temporary file
+    is removed and an existing ``path`` is left untouched.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os
+    >>> fname = os.path.join(tempfile.mkdtemp(), "depth.npy")
+    >>> write_depth(fname, np.array([[1.0, np.nan]]))
+    >>> read_depth(fname)
+    array([[ 1., nan]])
+    """
+    writer = depth_writer(path, depth, scale=scale)
+    with atomic_target(path) as tmp:
+        writer(tmp)
+
+
+def depth_writer(path, depth, *, scale=1000.0) -> Callable[[Path], None]:
+    """Check and encode ``depth`` for ``path`` as :func:`write_depth` does; return ``writer(tmp)``.
+
+    Every check of :func:`write_depth` (extension, shape, sign, PNG range)
+    happens here, before anything is written; the returned function only
+    writes the encoded data to the file it is given, in the format of
+    ``path``'s extension.
+    """
+    ext = check_extension(Path(path), _EXTENSIONS, "write depth")
+    scale = resolve_scale(scale)
+    array = check_real_array(depth, "depth")
+    if array.ndim != 2:
+        raise ValueError(f"`depth` must be a 2-D (H, W) array, got shape {array.shape}.")
+    if array.size == 0:
+        raise ValueError(f"`depth` is empty (shape {array.shape}).")
+    values = array.astype(np.float64)
+    values[~np.isfinite(values)] = np.nan
+    if np.any(values < 0):
+        raise ValueError(
+            f"`depth` has negative values (min {np.nanmin(values):g}); use NaN for invalid pixels."
+        )
+    values[values == 0] = np.nan
+    writer: Callable[[Path], None]
+    if ext == ".png":
+        stored = _quantise_png(values, scale)
+        writer = lambda tmp: _write_png_file(tmp, stored)  # noqa: E731
+    elif ext == ".npy":
+        writer = lambda tmp: _write_npy_file(tmp, values)  # noqa: E731
+    elif ext == ".npz":
+        writer = lambda tmp: _write_npz_file(tmp, values)  # noqa: E731
+    elif ext in HDF5_EXTENSIONS:
+        writer = lambda tmp: _write_hdf5_file(tmp, values)  # noqa: E731
+    else:  # .pfm
+        pfm = check_pfm_values(np.where(np.isnan(values), np.inf, values), "depth")
+        writer = lambda tmp: write_pfm_file(tmp, pfm, "little")  # noqa: E731
+    return writer
