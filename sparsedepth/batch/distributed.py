@@ -25,7 +25,9 @@ import warnings
 from pathlib import Path
 from typing import Callable, Sequence
 
-from .run import BatchOptions, BatchSummary, absolute_frame, run_batch
+from .frames import absolute_frame
+from .options import BatchOptions, BatchSummary
+from .run import run_batch
 
 __all__ = [
     "DEFAULT_TIMEOUT",
@@ -215,6 +217,7 @@ def remove_stale_outputs(out_dir, names, out_format: str) -> list[Path]:
     return removed
 
 
+# the numpydoc docstring is most of this function's length; its code is about 25 lines
 def run_batch_on_cluster(
     frames: Sequence,
     csv_path,

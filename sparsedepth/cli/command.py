@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..batch.run import (
+from ..batch import (
     BatchOptions,
     FileFrame,
     default_workers,
