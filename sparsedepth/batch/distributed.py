@@ -25,6 +25,7 @@ import warnings
 from pathlib import Path
 from typing import Callable, Sequence
 
+from .._validation import is_real
 from .frames import absolute_frame
 from .options import BatchOptions, BatchSummary
 from .run import run_batch
@@ -56,7 +57,7 @@ def _import_distributed():
 
 
 def _check_timeout(timeout) -> float:
-    if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not timeout > 0:
+    if not is_real(timeout) or not timeout > 0:
         raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
     return float(timeout)
 
