@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import numbers
+import operator
+import os
+from pathlib import Path
 
 import numpy as np
 
 __all__ = ["as_float_image", "as_depth_and_mask", "check_same_shape", "check_weights", "check_grid_shape",
-           "is_int", "is_real"]
+           "is_int", "is_real",
+           "check_folder", "check_index"]
 
 
 def is_int(value) -> bool:
@@ -232,3 +236,30 @@ def check_positive_finite(value, *, label: str, expected: str = "a real number")
     if not math.isfinite(number) or number <= 0:
         raise ValueError(f"{label} must be a finite positive number, got {value!r}.")
     return number
+# --- folder path
+def check_folder(folder, name: str) -> Path:
+    """Return ``folder`` as a :class:`~pathlib.Path` of an existing directory.
+
+    ``TypeError`` unless it is a ``str`` or ``os.PathLike``; ``FileNotFoundError`` unless it is a directory.
+    """
+    if not isinstance(folder, (str, os.PathLike)):
+        raise TypeError(f"{name} must be a str or os.PathLike, got {type(folder).__name__}")
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{name} '{folder}' does not exist or is not a directory")
+    return folder
+
+
+# --- frame index
+def check_index(index, count: int) -> int:
+    """Return frame ``index`` of ``count`` frames as ``0 <= i < count`` (negative counts from the end).
+
+    ``TypeError`` unless it is an integer; ``IndexError`` outside ``-count <= index < count``.
+    """
+    try:
+        index = operator.index(index)
+    except TypeError:
+        raise TypeError(f"frame index must be an integer, got {type(index).__name__}.") from None
+    if not -count <= index < count:
+        raise IndexError(f"frame index {index} out of range for {count} frames.")
+    return index % count

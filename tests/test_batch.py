@@ -224,6 +224,25 @@ def test_nyu_frames_errors(tmp_path):
         nyu_frames(tmp_path / "absent.mat")
 
 
+def test_nyu_frames_index_the_file_as_the_reader_does(tmp_path):
+    from sparsedepth.io import NYUDepthV2Labeled
+
+    scenes = [_scene(seed=seed) for seed in range(3)]
+    mat = tmp_path / "nyu.mat"
+    _write_nyu_mat(mat, [(image, depth, depth) for image, depth in scenes])
+    chosen = nyu_frames(mat, [-1, 0, np.int64(-3), 1])
+    assert [f.index for f in chosen] == [2, 0, 0, 1]
+    with NYUDepthV2Labeled(mat) as nyu:
+        for frame in chosen:  # the frame the batch reads is the reader's frame of the index given
+            np.testing.assert_array_equal(nyu[frame.index][0], scenes[frame.index][0])
+        for bad, kind in ((3, IndexError), (-4, IndexError), (1.0, TypeError), ("0", TypeError)):
+            with pytest.raises(kind) as from_reader:
+                nyu[bad]
+            with pytest.raises(kind) as from_batch:
+                nyu_frames(mat, [bad])
+            assert str(from_batch.value) == str(from_reader.value)
+
+
 def test_clamped_pixels_are_a_column_not_a_printed_warning(tmp_path):
     image, depth = _scene()
     iio.imwrite(tmp_path / "rgb_a.png", image)
@@ -263,18 +282,33 @@ def test_clip_to_observed_option_is_checked_and_passed_on(tmp_path):
     assert int(row["clamped"]) == expected.result.clamped
 
 
+def openblas_threads() -> list[int]:
+    """The thread count of every loaded OpenBLAS that reports one (run in a worker too: module level)."""
+    import ctypes
+
+    from sparsedepth.batch.pool import loaded_openblas, openblas_function
+
+    counts = []
+    for library in loaded_openblas():
+        function = openblas_function(library, "get")
+        if function is not None:
+            function.restype = ctypes.c_int
+            counts.append(int(function()))
+    return counts
+
+
 def test_default_pool_workers_run_blas_on_one_thread():
     from concurrent.futures import ProcessPoolExecutor
 
-    from sparsedepth.batch import run as batch
+    from sparsedepth.batch import pool as batch
 
-    before = batch._openblas_threads()
+    before = openblas_threads()
     if not before:
         pytest.skip("no OpenBLAS loaded in this process (another BLAS build): nothing to check")
-    with ProcessPoolExecutor(max_workers=1, initializer=batch._init_worker) as pool:
-        in_worker = pool.submit(batch._openblas_threads).result()
+    with ProcessPoolExecutor(max_workers=1, initializer=batch.init_worker) as pool:
+        in_worker = pool.submit(openblas_threads).result()
     assert in_worker and all(count == 1 for count in in_worker), in_worker
-    assert batch._openblas_threads() == before  # the driver's own pools are left as they were
+    assert openblas_threads() == before  # the driver's own pools are left as they were
 
 
 def test_batch_applies_the_reader_options_to_every_frame(tmp_path, capsys):

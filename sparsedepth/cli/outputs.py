@@ -8,8 +8,8 @@ can be created.  After the work, :func:`commit` writes every output to a
 temporary file next to its target and renames them onto their targets only
 when all of them were written; on any failure nothing is left behind.
 
-This module imports only the standard library and :mod:`sparsedepth.io`;
-it never prints.
+This module imports only the standard library, :mod:`sparsedepth.io` and
+:mod:`sparsedepth.cli.messages`; it never prints.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
 from ..io.formats import create_temporary, fsync
+from .messages import one_line
 
 __all__ = ["Named", "OutputError", "check_distinct", "check_writable", "commit"]
 
@@ -239,7 +240,7 @@ def commit(items: Sequence[tuple[Named, Callable[[Path], None]]]) -> None:
         except OSError as exc:
             label = current.label if current is not None else "output"
             flag = current.flag if current is not None else "output"
-            raise OutputError(f"{label}: could not be written ({exc.strerror or _one_line(exc)}); nothing "
+            raise OutputError(f"{label}: could not be written ({exc.strerror or one_line(exc)}); nothing "
                               f"was written; choose another {flag}") from exc
     except BaseException:
         _roll_back(created, staged, kept, replaced)
@@ -250,8 +251,6 @@ def commit(items: Sequence[tuple[Named, Callable[[Path], None]]]) -> None:
                 os.unlink(backup)
 
 
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def _roll_back(created, staged, kept, replaced) -> None:

@@ -1,0 +1,174 @@
+"""The batch CSV: its columns, one line per row, the settings fingerprint beside it, reading, resuming and compacting.
+
+The CSV has the header :data:`CSV_COLUMNS` and one line per finished frame,
+appended and flushed as the frame finishes (:func:`append_row`).  The
+settings of the run (options and frame list) are kept as JSON beside it
+(:func:`settings_path`); a rerun with other settings is refused.  A CSV with
+several rows for a frame is compacted to the last one (:func:`compact`),
+rewritten atomically.
+
+Imports the standard library and :mod:`sparsedepth.io` (atomic writes).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io as _io
+import json
+from pathlib import Path
+
+from ..io.formats import atomic_target
+
+__all__ = ["CSV_COLUMNS", "LINE_END", "HEADER", "settings_path", "fingerprint", "settings_difference", "csv_line",
+           "append_row", "read_log", "compact", "write_text_atomic", "start_log", "compact_file"]
+
+#: Columns of the batch CSV, in order.
+CSV_COLUMNS = (
+    "position", "name", "status", "height", "width", "observed", "scored", "method",
+    "rmse", "mae", "rel", "delta1", "nn_rmse", "nn_mae", "nn_rel", "nn_delta1",
+    "runtime", "converged", "clamped", "output", "error",
+)
+
+LINE_END = "\r\n"  # the csv module's line terminator
+HEADER = ",".join(CSV_COLUMNS)
+_SETTINGS_FORMAT = 1
+
+
+def settings_path(csv_path) -> Path:
+    """Where :func:`~sparsedepth.batch.run_batch` keeps the settings fingerprint of ``csv_path``: ``<csv>.settings.json``."""
+    csv_path = Path(csv_path)
+    return csv_path.with_name(csv_path.name + ".settings.json")
+
+
+def fingerprint(frames, options) -> dict:
+    """The settings of a batch as plain JSON data: the options and the frame list (absolute paths)."""
+    data = {
+        "format": _SETTINGS_FORMAT,
+        "options": dataclasses.asdict(options),
+        "frames": [[type(f).__name__, *dataclasses.astuple(f)] for f in frames],
+    }
+    return json.loads(json.dumps(data, allow_nan=False))
+
+
+def settings_difference(stored, current) -> str:
+    """What differs between a stored fingerprint and the current one, in words ("" when nothing does)."""
+    if not isinstance(stored, dict) or stored.get("format") != _SETTINGS_FORMAT:
+        return "the settings file is not one this version writes"
+    parts = []
+    old, new = stored.get("options", {}), current["options"]
+    changed = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+    if changed:
+        parts.append("options " + ", ".join(changed))
+    if stored.get("frames") != current["frames"]:
+        before, after = stored.get("frames") or [], current["frames"]
+        parts.append(f"the frame list ({len(before)} frames before, {len(after)} now)")
+    return " and ".join(parts)
+
+
+def csv_line(row: dict) -> str:
+    """One CSV line (with its line end) of ``row``; missing columns are empty."""
+    buffer = _io.StringIO()
+    csv.DictWriter(buffer, fieldnames=CSV_COLUMNS, restval="", lineterminator=LINE_END).writerow(row)
+    return buffer.getvalue()
+
+
+def _parse_line(line: str) -> dict:
+    values = next(csv.reader([line]), [])
+    return dict(zip(CSV_COLUMNS, values))
+
+
+def read_log(csv_path: Path) -> tuple[str, list[tuple[str, dict, str]]]:
+    """(file text, [(name, row, line with its line end)]) of an existing batch CSV.
+
+    A last line without its line end (a run killed while writing it) is
+    dropped.
+    """
+    with open(csv_path, newline="", encoding="utf-8") as handle:
+        text = handle.read()
+    parts = text.split(LINE_END)
+    if parts[0] != HEADER and not (len(parts) == 1 and HEADER.startswith(parts[0])):
+        raise ValueError(
+            f"'{csv_path}' is not a batch CSV of this version (its first line is not the header "
+            f"{HEADER!r}); give another CSV path or overwrite=True (command line: --overwrite)"
+        )
+    entries = []
+    for line in parts[1:-1]:
+        row = _parse_line(line)
+        entries.append((row.get("name", ""), row, line + LINE_END))
+    return text, entries
+
+
+def compact(entries, names) -> list[tuple[str, dict, str]]:
+    """The last row of each frame of ``names``, in the order of those rows."""
+    last = {name: i for i, (name, _, _) in enumerate(entries) if name in names}
+    return [entries[i] for i in sorted(last.values())]
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Replace ``path`` by ``text`` atomically (a temporary file renamed onto it)."""
+    with atomic_target(path) as tmp:
+        with open(tmp, "w", newline="", encoding="utf-8") as handle:
+            handle.write(text)
+
+
+def append_row(handle, row: dict) -> None:
+    """Append the line of ``row`` to the open CSV ``handle`` and flush it, so that it survives an interruption."""
+    handle.write(csv_line(row))
+    handle.flush()
+
+
+def _stored_settings(settings: Path):
+    """The stored fingerprint: None if the file is missing, ``{}`` if it is not JSON."""
+    try:
+        return json.loads(settings.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return None
+    except ValueError:
+        return {}
+
+
+def start_log(csv_path: Path, current: dict, names, *, resume: bool, overwrite: bool) -> list[tuple[str, dict, str]]:
+    """Create the CSV and its settings file, or check and compact an existing CSV to resume it.
+
+    Returns the entries kept from an existing CSV (the last row of each frame
+    of ``names``), empty for a new one.  An existing CSV is an error without
+    ``resume``, or when it was written with other settings (or has rows but
+    no settings file); ``overwrite`` starts afresh instead.
+    """
+    settings = settings_path(csv_path)
+    if not csv_path.exists() or overwrite:
+        write_text_atomic(settings, json.dumps(current, indent=1) + "\n")
+        write_text_atomic(csv_path, HEADER + LINE_END)
+        return []
+    if not resume:
+        raise ValueError(f"'{csv_path}' exists; pass resume=True to continue it or overwrite=True to start afresh")
+    text, entries = read_log(csv_path)
+    stored = _stored_settings(settings)
+    if stored is None:
+        if entries:
+            raise ValueError(
+                f"'{csv_path}' has rows but no settings file '{settings.name}', so a resumed run cannot be "
+                "checked against it; give another CSV path or overwrite=True (command line: --overwrite)"
+            )
+        write_text_atomic(settings, json.dumps(current, indent=1) + "\n")
+    else:
+        difference = settings_difference(stored, current)
+        if difference:
+            raise ValueError(
+                f"'{csv_path}' was written with other settings ({difference} differ); to start it afresh pass "
+                "overwrite=True (command line: --overwrite), or give another CSV path"
+            )
+    kept = compact(entries, set(names))
+    compacted = HEADER + LINE_END + "".join(line for _, _, line in kept)
+    if compacted != text:
+        write_text_atomic(csv_path, compacted)
+    return kept
+
+
+def compact_file(csv_path: Path, names) -> None:
+    """Rewrite the CSV with the last row of each frame of ``names`` if it has more rows than that."""
+    _, entries = read_log(csv_path)
+    kept = compact(entries, set(names))
+    if len(kept) != len(entries):
+        write_text_atomic(csv_path, HEADER + LINE_END + "".join(line for _, _, line in kept))

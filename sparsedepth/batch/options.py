@@ -1,0 +1,219 @@
+"""What to do with every frame of a batch (:class:`BatchOptions`) and what a finished batch reports (:class:`BatchSummary`).
+
+Every option is checked when :class:`BatchOptions` is made, so that a bad
+option is one error before any frame runs; the exception's ``option``
+attribute names the field, so that the command line can name its flag.
+
+Imports the standard library, :mod:`sparsedepth._validation`,
+:mod:`sparsedepth.io` (scales, pixel limit), the solver and fill-method
+names and :class:`~sparsedepth.Weights`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .._validation import is_int, is_real
+from ..holes import FILL_METHODS
+from ..io import MAX_PIXELS
+from ..io.formats import resolve_scale
+from ..objective import DEFAULT_WEIGHTS, Weights
+from ..solvers import SOLVERS
+from .evaluate import TASKS
+
+__all__ = ["BatchOptions", "BatchSummary"]
+
+
+def _option_error(option: str, message: str, kind=ValueError) -> Exception:
+    """An error about one BatchOptions field; ``option`` lets the command line name its flag."""
+    exc = kind(message)
+    exc.option = option
+    return exc
+
+
+@dataclass(frozen=True)
+class BatchOptions:
+    """What to do with every frame of a batch (picklable, sent to the workers).
+
+    Every field is checked when the object is made, so that a bad option is
+    one error before any frame runs.
+
+    Attributes
+    ----------
+    task : {"complete", "fill"}
+        See :func:`evaluate_frame`.  For NYU frames, ``"fill"`` fills
+        ``rawDepths`` and scores against the inpainted ``depths``;
+        ``"complete"`` samples ``depths`` (give ``keep_fraction`` or
+        ``keep_count``).
+    keep_fraction : float in (0, 1], optional
+    keep_count : int >= 1, optional
+        Simulate sparse input (``"complete"`` only; at most one of the two).
+    seed : int >= 0
+        Frame ``i`` of the batch (0-based position) is sampled with
+        ``numpy.random.default_rng([seed, i])``.
+    fill_method : {"colorization", "complete"}
+    weights : Weights
+    solver : str
+        ``"auto"`` or a name in :data:`~sparsedepth.SOLVERS`.
+    tol : float >= 0, optional
+    max_iter : int >= 1, optional
+        Passed to :func:`~sparsedepth.complete_depth`.
+    depth_scale : float > 0 or str, optional
+        Divisor of integer depth files (:data:`~sparsedepth.io.DEPTH_SCALES`).
+    downsample : int >= 1
+        Keep every ``downsample``-th row and column (1 = full resolution).
+    out_dir : str, optional
+        An existing folder: each frame's output depth is written there as
+        ``<name><out_format>`` (atomically).
+    out_format : str
+        ``".npy"``, ``".npz"``, ``".h5"``, ``".hdf5"``, ``".pfm"`` or
+        ``".png"`` (16-bit, stored value = depth x ``out_scale``).
+    out_scale : float > 0 or str
+        PNG output scale.
+    byteorder, invalid_values, min_depth, max_depth, max_pixels
+        Passed to :func:`~sparsedepth.io.read_depth` for every depth and
+        truth file (and ``max_pixels`` to :func:`~sparsedepth.io.read_image`):
+        byte order of 16-bit binary Netpbm, stored values that mean "no
+        measurement" (e.g. Kinect 2047, RealSense 65535), the metric range
+        outside which depth counts as missing, and the largest image a header
+        may declare.
+    clip_to_observed : bool
+        Passed to :func:`~sparsedepth.complete_depth`: keep each completed
+        map within the range of its observed depths (the CSV's ``clamped``
+        column counts the pixels this moved).
+
+    Raises
+    ------
+    ValueError, TypeError
+        A field out of range or of the wrong type; the exception's
+        ``option`` attribute is the field name.
+    FileNotFoundError
+        ``out_dir`` does not exist.
+    """
+
+    task: str = "complete"
+    keep_fraction: float | None = None
+    keep_count: int | None = None
+    seed: int = 0
+    fill_method: str = "colorization"
+    weights: Weights = field(default_factory=lambda: DEFAULT_WEIGHTS)
+    solver: str = "auto"
+    tol: float | None = None
+    max_iter: int | None = None
+    depth_scale: float | str | None = None
+    downsample: int = 1
+    out_dir: str | None = None
+    out_format: str = ".npy"
+    out_scale: float | str = 1000.0
+    byteorder: str | None = None
+    invalid_values: tuple = ()
+    min_depth: float | None = None
+    max_depth: float | None = None
+    max_pixels: int | None = MAX_PIXELS
+    clip_to_observed: bool = True
+
+    def __post_init__(self):
+        if self.task not in TASKS:
+            raise _option_error("task", f"unknown task {self.task!r}; choose one of {list(TASKS)}")
+        if self.keep_fraction is not None:
+            if not is_real(self.keep_fraction):
+                raise _option_error("keep_fraction", "keep_fraction must be a number in (0, 1] or None, got "
+                                    f"{type(self.keep_fraction).__name__}", TypeError)
+            if not 0 < self.keep_fraction <= 1:
+                raise _option_error("keep_fraction", f"keep_fraction must be in (0, 1], got {self.keep_fraction!r}; "
+                                    "e.g. 0.05 keeps 5 % of the valid depth pixels")
+        if self.keep_count is not None and (not is_int(self.keep_count) or self.keep_count < 1):
+            raise _option_error("keep_count", f"keep_count must be an integer >= 1 or None, got {self.keep_count!r}")
+        if self.keep_fraction is not None and self.keep_count is not None:
+            raise _option_error("keep_count", "give keep_fraction or keep_count, not both")
+        if self.task == "fill" and (self.keep_fraction is not None or self.keep_count is not None):
+            raise _option_error("keep_fraction", "keep_fraction/keep_count simulate sparse input; they do not apply "
+                                "to task='fill'")
+        if not is_int(self.seed) or self.seed < 0:
+            raise _option_error("seed", f"seed must be an integer >= 0, got {self.seed!r}")
+        if self.fill_method not in FILL_METHODS:
+            raise _option_error("fill_method", f"unknown fill method {self.fill_method!r}; "
+                                f"choose one of {list(FILL_METHODS)}")
+        if not isinstance(self.weights, Weights):
+            raise _option_error("weights", f"weights must be a sparsedepth.Weights, got {type(self.weights).__name__}; "
+                                "e.g. Weights(gamma=0.0)", TypeError)
+        if self.solver != "auto" and self.solver not in SOLVERS:
+            raise _option_error("solver", f"unknown solver {self.solver!r}; choose one of "
+                                f"{['auto', *sorted(SOLVERS)]}")
+        if self.tol is not None and (not is_real(self.tol) or not math.isfinite(self.tol) or self.tol < 0):
+            raise _option_error("tol", f"tol must be a finite number >= 0 or None (the solver's default), "
+                                f"got {self.tol!r}")
+        if self.max_iter is not None and (not is_int(self.max_iter) or self.max_iter < 1):
+            raise _option_error("max_iter", f"max_iter must be an integer >= 1 or None, got {self.max_iter!r}")
+        if self.depth_scale is not None:
+            try:
+                resolve_scale(self.depth_scale, "depth_scale")
+            except (TypeError, ValueError) as exc:
+                raise _option_error("depth_scale", str(exc), type(exc)) from None
+        if not is_int(self.downsample) or self.downsample < 1:
+            raise _option_error("downsample", f"downsample must be an integer >= 1, got {self.downsample!r}")
+        if self.out_format not in (".npy", ".npz", ".h5", ".hdf5", ".pfm", ".png"):
+            raise _option_error("out_format", f"unknown out_format {self.out_format!r}; "
+                                "use .npy, .npz, .h5, .hdf5, .pfm or .png")
+        try:
+            resolve_scale(self.out_scale, "out_scale")
+        except (TypeError, ValueError) as exc:
+            raise _option_error("out_scale", str(exc), type(exc)) from None
+        if self.byteorder not in (None, "big", "little"):
+            raise _option_error("byteorder", f"byteorder must be 'big', 'little' or None, got {self.byteorder!r}")
+        if not isinstance(self.invalid_values, tuple) or not all(is_real(v) for v in self.invalid_values):
+            raise _option_error("invalid_values", f"invalid_values must be a tuple of numbers, got "
+                                f"{self.invalid_values!r}", TypeError)
+        for name in ("min_depth", "max_depth"):
+            value = getattr(self, name)
+            if value is not None and not (is_real(value) and math.isfinite(value) and value >= 0):
+                raise _option_error(name, f"{name} must be a finite number >= 0 (metres) or None, got {value!r}")
+        if self.min_depth is not None and self.max_depth is not None and self.min_depth > self.max_depth:
+            raise _option_error("min_depth", f"min_depth {self.min_depth:g} is larger than max_depth "
+                                f"{self.max_depth:g}")
+        if self.max_pixels is not None and not (is_int(self.max_pixels) and self.max_pixels >= 1):
+            raise _option_error("max_pixels", f"max_pixels must be an integer >= 1 or None, got {self.max_pixels!r}")
+        if not isinstance(self.clip_to_observed, bool):
+            raise _option_error("clip_to_observed", f"clip_to_observed must be True or False, got "
+                                f"{self.clip_to_observed!r}", TypeError)
+        if self.out_dir is not None:
+            if not isinstance(self.out_dir, (str, os.PathLike)):
+                raise _option_error("out_dir", f"out_dir must be a str or os.PathLike, got "
+                                    f"{type(self.out_dir).__name__}", TypeError)
+            if not Path(self.out_dir).is_dir():
+                raise _option_error("out_dir", f"output folder '{self.out_dir}' does not exist; create it first",
+                                    FileNotFoundError)
+
+
+@dataclass(frozen=True)
+class BatchSummary:
+    """Counts of a finished batch and where its CSV is.
+
+    Attributes
+    ----------
+    total : int
+        Frames of the batch.
+    succeeded, failed : int
+        Frames whose row in the CSV is ``ok`` / an error, at the end.
+    csv_path : str
+    skipped : int
+        Frames already done by an earlier run (kept, not recomputed);
+        counted in ``succeeded``.
+    rmse_ratio : float or None
+        Mean over the scored ``ok`` rows of ``rmse / nn_rmse`` (the method's
+        RMSE relative to nearest-neighbour fill; below 1 is better), None if
+        no row is scored.
+    scored : int
+        Rows in that mean.
+    """
+
+    total: int
+    succeeded: int
+    failed: int
+    csv_path: str
+    skipped: int = 0
+    rmse_ratio: float | None = None
+    scored: int = 0

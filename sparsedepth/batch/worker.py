@@ -1,0 +1,142 @@
+"""The worker side of a batch: one frame in, one CSV row out.
+
+:func:`process_frame` runs in a worker (a process of the pool, a thread, or
+a Dask task): it reads the frame, runs
+:func:`~sparsedepth.batch.evaluate_frame`, writes the output depth
+atomically and returns the row as a dict.  A failing frame becomes an error
+row, never an exception.
+
+Imports NumPy, :mod:`sparsedepth.io`, :mod:`sparsedepth.result` and the
+frame, option and evaluation modules of :mod:`sparsedepth.batch`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..io import NYUDepthV2Labeled, read_depth, read_image, read_nyu_h5, write_depth
+from ..result import ClampWarning
+from .evaluate import evaluate_frame
+from .frames import NYUFrame, NYUH5Frame
+from .options import BatchOptions
+
+__all__ = ["process_frame", "output_path", "remove_temporaries", "error_text"]
+
+
+def _read_frame(source, options: BatchOptions):
+    """(image, depth, truth) of one frame, in metres."""
+    if isinstance(source, NYUFrame):
+        with NYUDepthV2Labeled(source.path) as nyu:
+            image, depth, raw = nyu[source.index]
+        if options.task == "fill":
+            if raw is None:
+                raise ValueError(f"'{source.path}' has no rawDepths to fill")
+            return image, raw, depth
+        return image, depth, None
+    if isinstance(source, NYUH5Frame):
+        image, depth = read_nyu_h5(source.path)
+        return image, depth, None
+    if source.depth is None:
+        raise ValueError(f"no (unique) depth file for image '{source.image}'")
+    image = read_image(source.image, max_pixels=options.max_pixels)
+    reader = dict(scale=options.depth_scale, byteorder=options.byteorder, invalid_values=options.invalid_values,
+                  min_depth=options.min_depth, max_depth=options.max_depth, max_pixels=options.max_pixels)
+    depth = read_depth(source.depth, **reader)
+    truth = None if source.truth is None else read_depth(source.truth, **reader)
+    return image, depth, truth
+
+
+def _fmt(value):
+    """A CSV cell: "" for None and NaN, 6 significant digits for a float."""
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return "" if math.isnan(value) else f"{value:.6g}"
+    return value
+
+
+def output_path(name: str, options: BatchOptions) -> Path:
+    """Where the output depth of frame ``name`` goes: ``<out_dir>/<name><out_format>``."""
+    return Path(options.out_dir) / f"{name}{options.out_format}"
+
+
+def process_frame(position: int, source, options: BatchOptions) -> dict:
+    """Worker: one frame in, one CSV row out (errors become a row, never an exception).
+
+    Parameters
+    ----------
+    position : int
+        The frame's 0-based place in the batch: its sampling seed is
+        ``numpy.random.default_rng([options.seed, position])``.
+    source : FileFrame, NYUFrame or NYUH5Frame
+        Read here, in the worker.
+    options : BatchOptions
+
+    Returns
+    -------
+    dict
+        The CSV row: columns of :data:`~sparsedepth.batch.CSV_COLUMNS`;
+        ``status`` is ``"ok"``, or ``"error"`` with the message in ``error``.
+
+    Notes
+    -----
+    The output depth (with ``options.out_dir``) is written atomically: it
+    appears complete, or not at all.  :class:`~sparsedepth.ClampWarning` is
+    not shown: the row's ``clamped`` column carries it.
+    """
+    row = {"position": position, "name": source.name, "status": "ok"}
+    try:
+        image, depth, truth = _read_frame(source, options)
+        step = options.downsample
+        if step > 1:
+            image, depth = image[::step, ::step], depth[::step, ::step]
+            truth = None if truth is None else truth[::step, ::step]
+        with warnings.catch_warnings():
+            # the row's "clamped" column carries it; a worker never prints
+            warnings.simplefilter("ignore", ClampWarning)
+            out = evaluate_frame(
+                image, depth, truth=truth, task=options.task, keep_fraction=options.keep_fraction,
+                keep_count=options.keep_count, seed=np.random.default_rng([options.seed, position]),
+                fill_method=options.fill_method, weights=options.weights, solver=options.solver,
+                tol=options.tol, max_iter=options.max_iter, clip_to_observed=options.clip_to_observed,
+            )
+        row.update(height=depth.shape[0], width=depth.shape[1], observed=int(out.observed.sum()),
+                   method=out.method, runtime=f"{out.runtime:.3f}",
+                   converged="" if out.result is None else out.result.converged,
+                   clamped="" if out.result is None else out.result.clamped)
+        if out.metrics is not None:
+            row.update(scored=out.metrics.count)
+            for key in ("rmse", "mae", "rel", "delta1"):
+                row[key] = _fmt(getattr(out.metrics, key))
+                row["nn_" + key] = _fmt(getattr(out.nearest_metrics, key))
+        if options.out_dir is not None:
+            target = output_path(source.name, options)
+            write_depth(target, out.depth, scale=options.out_scale)
+            row["output"] = str(target)
+    except Exception as exc:  # noqa: BLE001 - a failing frame is reported, not fatal
+        row.update(status="error", error=error_text(exc))
+    return row
+
+
+def error_text(exc: BaseException) -> str:
+    """The ``error`` cell of a failed frame: ``"<exception type>: <message on one line>"``."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return f"{type(exc).__name__}: {text}"
+
+
+def remove_temporaries(names, options: BatchOptions) -> None:
+    """Remove the temporary output files of these frames (left by a worker that was stopped)."""
+    if options.out_dir is None:
+        return
+    folder = Path(options.out_dir)
+    for name in names:
+        target = output_path(name, options)
+        for tmp in folder.glob(f".{glob.escape(target.name)}.*.tmp*"):
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()

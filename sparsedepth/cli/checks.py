@@ -1,0 +1,144 @@
+"""Checks of option combinations after parsing: which mode a command runs, and what it may not combine.
+
+Every problem is a :class:`~sparsedepth.cli.messages.UsageError` raised
+before any file is read or written.  Imports the standard library, the
+other modules of :mod:`sparsedepth.cli` and :mod:`sparsedepth.io`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import os
+from pathlib import Path
+
+from ..io import MAX_PIXELS
+from ..objective import Weights
+from .messages import UsageError
+from .outputs import check_distinct, check_writable
+from .report import matplotlib_classes
+from .single import input_files, plan_outputs
+
+__all__ = ["check_options", "cluster_address"]
+
+
+_OUT_EXTENSIONS = (".png", ".npy", ".npz", ".h5", ".hdf5", ".pfm")
+
+
+_FIGURE_EXTENSIONS = (".png", ".pdf", ".svg", ".jpg", ".jpeg")
+
+
+def _check_output(path, allowed, what) -> Path:
+    path = Path(path)
+    if path.suffix.lower() not in allowed:
+        raise UsageError(f"{what} '{path}': unsupported extension '{path.suffix or '(none)'}'; use {', '.join(allowed)}")
+    return path
+
+
+def _check_combinations(args) -> str:
+    """Check option combinations; return the mode: 'demo', 'files' or 'batch'."""
+    batch = args.batch is not None or args.nyu_mat is not None
+    files = args.image is not None or args.depth is not None
+    if batch and files:
+        raise UsageError("--batch/--nyu-mat and --image/--depth are exclusive")
+    if files and (args.image is None or args.depth is None):
+        raise UsageError("--image and --depth go together")
+    mode = "batch" if batch else "files" if files else "demo"
+    if mode == "demo" and (args.mask or args.truth or args.calib or args.depth_key):
+        raise UsageError("--mask, --truth, --calib and --depth-key need --image and --depth")
+    if mode == "demo" and args.fill_holes:
+        raise UsageError("--fill-holes needs --image and --depth (raw depth), or --batch/--nyu-mat")
+    if args.fill_holes and (args.keep_fraction is not None or args.keep_count is not None):
+        raise UsageError("--keep-fraction/--keep-count simulate sparse input; they do not apply to --fill-holes")
+    colorization = args.fill_holes and args.fill_method == "colorization"
+    if colorization:
+        weight_options = [f"--{f.name.replace('_', '-')}" for f in dataclasses.fields(Weights)
+                          if getattr(args, f"w_{f.name}") is not None]
+        solver_options = [name for name, value in (("--solver", args.solver), ("--tol", args.tol),
+                                                   ("--max-iter", args.max_iter)) if value is not None]
+        if weight_options or solver_options:
+            raise UsageError(f"{', '.join(weight_options + solver_options)} apply to --fill-method complete, "
+                              "not colorization")
+    if mode == "batch":
+        if args.csv is None:
+            raise UsageError("a batch needs --csv PATH for the per-frame metrics")
+        if args.out or args.json or args.figure or args.mask or args.truth or args.calib:
+            raise UsageError("--out, --json, --figure, --mask, --truth and --calib are for one frame; "
+                              "a batch writes --csv (and per-frame depth with --outdir)")
+        if args.indices is not None and args.nyu_mat is None:
+            raise UsageError("--indices selects frames of --nyu-mat")
+        if (args.nyu_mat is not None and not args.fill_holes and args.keep_fraction is None
+                and args.keep_count is None):
+            raise UsageError("--nyu-mat without --fill-holes samples the dense depths: give --keep-fraction "
+                              "or --keep-count")
+        _check_output(args.csv, (".csv",), "--csv")
+    else:
+        if args.csv or args.workers or args.indices is not None:
+            raise UsageError("--csv, --workers and --indices are for --batch/--nyu-mat")
+        if args.out:
+            _check_output(args.out, _OUT_EXTENSIONS, "--out")
+        if args.json:
+            _check_output(args.json, (".json",), "--json")
+        if args.figure:
+            _check_output(args.figure, _FIGURE_EXTENSIONS, "--figure")
+        outputs = [target for _, target in plan_outputs(args, mode)]
+        check_distinct(outputs, input_files(args))
+        check_writable(outputs)
+        if args.figure and matplotlib_classes() is None:
+            raise UsageError("--figure needs matplotlib, which is not installed: "
+                              "pip install 'sparsedepth[plot]' (or matplotlib)")
+    _check_cluster_options(args, mode)
+    return mode
+
+
+def _check_batch_flags(args, mode) -> None:
+    if mode != "batch" and (args.batch_depths or args.batch_truths or args.overwrite):
+        raise UsageError("--batch-depths, --batch-truths and --overwrite are for --batch/--nyu-mat")
+    if args.batch_depths is not None and args.batch is None:
+        raise UsageError("--batch-depths pairs with --batch DIR (the image folder)")
+    if args.batch_truths is not None and args.batch_depths is None:
+        raise UsageError("--batch-truths goes with --batch-depths (--truth-prefix for a --batch folder)")
+
+
+def _check_reader_options(args, mode) -> None:
+    """Reader options apply to the user's files (one frame or a batch); check their combinations."""
+    given = [flag for flag, value in (("--byteorder", args.byteorder), ("--invalid-value", args.invalid_values),
+                                      ("--min-depth", args.min_depth), ("--max-depth", args.max_depth))
+             if value is not None]
+    if args.max_pixels != MAX_PIXELS:
+        given.append("--max-pixels")
+    if given and mode == "demo":
+        raise UsageError(f"{', '.join(given)} apply to your files (--image/--depth or a batch), not the demo")
+    if args.min_depth is not None and args.max_depth is not None and args.min_depth > args.max_depth:
+        raise UsageError(f"--min-depth {args.min_depth:g} is larger than --max-depth {args.max_depth:g}")
+
+
+def _check_cluster_options(args, mode) -> None:
+    given = [name for name, value in (("--scheduler", args.scheduler), ("--scheduler-file", args.scheduler_file),
+                                      ("--scheduler-timeout", args.scheduler_timeout)) if value is not None]
+    if given and mode != "batch":
+        raise UsageError(f"{', '.join(given)} run a batch on a Dask cluster: they need --batch/--nyu-mat")
+    if args.workers is not None and (args.scheduler is not None or args.scheduler_file is not None):
+        raise UsageError("--workers sizes the local process pool; with --scheduler/--scheduler-file the "
+                          "cluster's workers run the frames")
+    if mode == "batch" and cluster_address(args) is not None and importlib.util.find_spec("distributed") is None:
+        raise UsageError("a batch on a Dask cluster needs dask.distributed, which is not installed: "
+                          "pip install 'sparsedepth[distributed]'")
+
+
+def cluster_address(args):
+    """(address, scheduler_file) of the Dask scheduler of a batch, or None for the local process pool."""
+    if args.scheduler_file is not None:
+        return None, args.scheduler_file
+    address = args.scheduler
+    if address is None and args.workers is None:
+        address = os.environ.get("DASK_SCHEDULER_ADDRESS") or None
+    return (address, None) if address is not None else None
+
+
+def check_options(args) -> str:
+    """Check the parsed options together; return the mode: ``"demo"``, ``"files"`` or ``"batch"``."""
+    mode = _check_combinations(args)
+    _check_batch_flags(args, mode)
+    _check_reader_options(args, mode)
+    return mode

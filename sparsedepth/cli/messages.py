@@ -1,0 +1,40 @@
+"""How the command line reports problems: usage errors, library errors and warnings, each one line on stderr.
+
+Imports the standard library and :class:`~sparsedepth.ClampWarning`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import warnings
+
+from ..result import ClampWarning
+
+__all__ = ["LIBRARY_ERRORS", "UsageError", "one_line", "warnings_as_lines"]
+
+LIBRARY_ERRORS = (ValueError, OSError, IndexError, KeyError)  # OSError covers FileNotFoundError
+
+
+class UsageError(Exception):
+    """A bad combination of options, found after parsing."""
+
+
+def one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line (its type name if it has none)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+@contextlib.contextmanager
+def warnings_as_lines(stream):
+    """Library warnings raised inside the block become one ``warning:`` line each on ``stream``.
+
+    Yields the list of caught warnings, complete once the block has ended.
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield caught
+    for record in caught:
+        text = one_line(record.message)
+        if issubclass(record.category, ClampWarning):
+            text += "; --no-clip keeps them"
+        print(f"warning: {text}", file=stream)

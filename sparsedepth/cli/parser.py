@@ -1,0 +1,335 @@
+"""The options of ``python -m sparsedepth.complete``: one argparse parser, built group by group.
+
+Each argument group has its own small function; the types of the option
+values are checked while parsing (an error is one line on stderr, exit
+code 2).  Imports the standard library, :mod:`sparsedepth.io` (scales, pixel
+limit), the solver and fill-method names, :class:`~sparsedepth.Weights` and
+:func:`~sparsedepth.batch.default_workers`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+
+from ..batch import default_workers
+from ..holes import FILL_METHODS
+from ..io import DEPTH_SCALES, MAX_PIXELS
+from ..io.formats import resolve_scale
+from ..objective import DEFAULT_WEIGHTS, Weights
+from ..solvers import SOLVERS
+
+__all__ = ["PROG", "DEMO_DIR", "DEMO_KEEP_FRACTION", "DEMO_DOWNSAMPLE", "EPILOG", "build_parser", "weights_of"]
+
+PROG = "python -m sparsedepth.complete"
+
+
+DEMO_DIR = "sparsedepth-demo"
+
+
+DEMO_KEEP_FRACTION = 0.05
+
+
+DEMO_DOWNSAMPLE = 2
+
+
+_WEIGHT_HELP = {
+    "alpha": "data fidelity at observed pixels",
+    "beta": "first-order L2 smoothness",
+    "gamma": "edge-aware L1 smoothness (0 = quadratic objective)",
+    "delta": "pull towards the nearest-neighbour fill",
+    "kappa": "edge sensitivity of w = exp(-kappa |grad I|)",
+    "beta_image": "image-weighted first-order L2 smoothness",
+    "beta_second": "second-order (thin-plate) smoothness",
+}
+
+
+EPILOG = f"""\
+examples:
+  {PROG}
+      demo: Middlebury 2014 Motorcycle (every 2nd pixel), keep 5 % of the depth,
+      complete it, print nearest-neighbour vs completed, write ./{DEMO_DIR}/
+  {PROG} --image rgb.png --depth sparse.png --depth-scale kitti --out dense.png
+      complete a sparse KITTI depth PNG (metres = value / 256); the PNG output
+      uses the input's scale
+  {PROG} --image rgb.png --depth dense.png --depth-scale nyu --keep-fraction 0.02 \\
+      --solver irls --gamma 0.02 --json run.json --figure run.png
+      simulate 2 % sparse input from a dense NYU map (mm) and score the result
+  {PROG} --fill-holes --image images.png --depth rawdepth.png --depth-scale mm \\
+      --truth depth.png --out filled.png
+      fill the holes of raw Kinect depth the NYU-toolbox way (colorization)
+  {PROG} --nyu-mat nyu_depth_v2_labeled.mat --indices 0:100 --fill-holes \\
+      --csv fill.csv --workers 4
+      a batch: one row of metrics per frame in fill.csv, written as frames
+      finish; the same command again skips the frames already done and runs the
+      missing and failed ones (--overwrite starts afresh)
+  {PROG} --batch image_02/data --batch-depths proj_depth/groundtruth/image_02 \\
+      --depth-scale kitti --keep-fraction 0.05 --csv kitti.csv --outdir dense/
+      a KITTI-style pair of folders (same file names); --batch on a folder of
+      NYU .h5 files (rgb + depth) reads those
+
+depth scales: stored integer value / scale = metres; presets {', '.join(f'{k} ({v:g})' for k, v in DEPTH_SCALES.items())}.
+exit codes: 0 ok; 1 batch with failed frames (rows with an error in the CSV);
+2 bad option or input (one line on stderr, no output written), a CSV written
+with other settings, or the CSV could not be written; 130 SIGINT (Ctrl-C);
+143 SIGTERM.  A stopped batch ends its workers, removes their temporary files
+and keeps the finished rows: rerun the same command to resume.
+"""
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line on stderr (exit code 2)."""
+
+    def error(self, message):  # noqa: D401 - argparse API
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def _positive_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def _fraction(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in (0, 1], got {text!r}") from None
+    if not 0 < value <= 1:
+        raise argparse.ArgumentTypeError(f"expected a number in (0, 1], got {text!r}")
+    return value
+
+
+def _nonnegative(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
+    return value
+
+
+def _finite(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def _positive_float(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds > 0, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number of seconds > 0, got {text!r}")
+    return value
+
+
+def _scale(text):
+    if text.lower() in DEPTH_SCALES:
+        return text.lower()
+    try:
+        return resolve_scale(float(text))
+    except (ValueError, TypeError):
+        raise argparse.ArgumentTypeError(
+            f"expected a positive number or one of {', '.join(DEPTH_SCALES)}, got {text!r}"
+        ) from None
+
+
+def _indices(text):
+    """'5', '0:10', '0:100:10' or '1,4,7' -> slice or list of int."""
+    try:
+        if ":" in text:
+            parts = [int(p) if p.strip() else None for p in text.split(":")]
+            if len(parts) > 3:
+                raise ValueError
+            return slice(*parts)
+        return [int(p) for p in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected an index, a range start:stop[:step] or a list i,j,k, got {text!r}"
+        ) from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The one argument parser of ``python -m sparsedepth.complete``."""
+    parser = _Parser(
+        prog=PROG,
+        description=(
+            "Dense depth from an RGB image and sparse depth by regularised optimisation "
+            "(sparsedepth.complete_depth); hole filling of raw depth (sparsedepth.fill_holes); "
+            "batches of frames.  Without arguments: a demo on the Middlebury 2014 Motorcycle "
+            "frame shipped with scikit-image."
+        ),
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    _add_input_options(parser)
+    _add_simulation_options(parser)
+    _add_method_options(parser)
+    _add_output_options(parser)
+    _add_batch_options(parser)
+    _add_cluster_options(parser)
+    return parser
+
+
+def _add_input_options(parser) -> None:
+    """--image, --depth and the options of reading the files of one frame or a batch."""
+    inp = parser.add_argument_group("input (one frame)")
+    inp.add_argument("--image", metavar="PATH", help="RGB (or grey) image: png, jpg, ppm, pgm, bmp, tif.")
+    inp.add_argument("--depth", metavar="PATH",
+                     help="sparse or raw depth (0/NaN/inf = unknown), or a dense map with --keep-*: "
+                          "png/pgm/tif, npy, npz, h5 (integer data need --depth-scale), pfm (disparity: needs "
+                          "--calib, or --depth-scale m if it holds metres).")
+    inp.add_argument("--mask", metavar="PATH",
+                     help="optional mask of observed pixels: npy/npz/h5 (bool or 0/1) or an image, 1-bit PNG "
+                          "included (non-zero = observed).")
+    inp.add_argument("--truth", metavar="PATH",
+                     help="optional ground-truth depth (same formats and scale as --depth) to score against, "
+                          "on the pixels not observed.")
+    inp.add_argument("--depth-scale", type=_scale, metavar="SCALE",
+                     help="divisor of stored depth values: nyu or mm (1000), kitti (256), tum (5000), m (1), or a "
+                          "number.  Required for integer data (png, pgm, tif, integer npy/npz/h5); float data default "
+                          "to 1, except a pfm, which needs this or --calib.")
+    inp.add_argument("--depth-key", metavar="NAME", help="array name in an .npz or dataset in an .h5 depth file.")
+    inp.add_argument("--calib", metavar="CALIB_TXT",
+                     help="Middlebury/ETH3D calib.txt: --depth holds disparity in pixels, converted to metres; "
+                          "or kinect-nyu: --depth holds raw Kinect v1 disparity (NYU Depth V2 raw .pgm, with "
+                          "--byteorder little), metres = 351.3 / (1092.5 - value), 2047 = missing.")
+    inp.add_argument("--byteorder", choices=["big", "little"],
+                     help="byte order of 16-bit binary pgm/ppm (default: big, the standard, refusing rasters that "
+                          "look byte-swapped); NYU Depth V2 raw .pgm files are little.")
+    inp.add_argument("--invalid-value", dest="invalid_values", action="append", type=_finite, metavar="V",
+                     help="stored value meaning 'no measurement' in --depth/--truth (repeatable; Kinect v1 2047, "
+                          "RealSense 65535); 0, NaN and inf always are.")
+    inp.add_argument("--min-depth", type=_nonnegative, metavar="M",
+                     help="depth below M metres (after --depth-scale/--calib) counts as missing.")
+    inp.add_argument("--max-depth", type=_nonnegative, metavar="M",
+                     help="depth above M metres counts as missing.")
+    inp.add_argument("--max-pixels", type=_positive_int, default=MAX_PIXELS, metavar="N",
+                     help=f"refuse input images declaring more than N pixels, from their header (default {MAX_PIXELS}).")
+    inp.add_argument("--downsample", type=_positive_int, metavar="N",
+                     help=f"keep every N-th row and column (default {DEMO_DOWNSAMPLE} for the demo, 1 otherwise).")
+
+
+
+def _add_simulation_options(parser) -> None:
+    """--keep-fraction / --keep-count and --seed: sparse input sampled from a dense map."""
+    sim = parser.add_argument_group("simulated sparse input (scores against the dense map)")
+    keep = sim.add_mutually_exclusive_group()
+    keep.add_argument("--keep-fraction", type=_fraction, metavar="F",
+                      help=f"keep this fraction of the valid depth pixels (demo default {DEMO_KEEP_FRACTION}).")
+    keep.add_argument("--keep-count", type=_positive_int, metavar="N", help="keep this many valid depth pixels.")
+    sim.add_argument("--seed", type=int, default=0, help="seed of the sampling (default 0).")
+
+
+
+def _add_method_options(parser) -> None:
+    """--solver, one option per term weight, the solver limits and the hole-filling method."""
+    method = parser.add_argument_group("method")
+    method.add_argument("--solver", choices=["auto", *sorted(SOLVERS)], default=None,
+                        help="solver of complete_depth (default auto: amg for gamma = 0, else admm).")
+    for f in dataclasses.fields(Weights):
+        method.add_argument(
+            f"--{f.name.replace('_', '-')}", dest=f"w_{f.name}", type=_nonnegative, metavar="W",
+            help=f"weight {f.name}: {_WEIGHT_HELP.get(f.name, 'a term weight of sparsedepth.Weights')} "
+                 f"(default {getattr(DEFAULT_WEIGHTS, f.name):g}).",
+        )
+    method.add_argument("--tol", type=float, metavar="TOL", help="solver tolerance (meaning per solver).")
+    method.add_argument("--max-iter", type=_positive_int, metavar="N", help="maximum solver iterations.")
+    method.add_argument("--no-clip", dest="clip_to_observed", action="store_false",
+                        help="keep completed depth outside the range of the observed depth (by default the map is "
+                             "clamped to [smallest, largest] observed value and the clamped pixels are counted).")
+    method.add_argument("--fill-holes", action="store_true",
+                        help="hole filling: every valid pixel of --depth is observed, the output is dense.")
+    method.add_argument("--fill-method", choices=FILL_METHODS, default="colorization",
+                        help="hole-filling method: colorization (NYU toolbox fill_depth_colorization, default) "
+                             "or complete (this package's objective).")
+
+
+
+def _add_output_options(parser) -> None:
+    """--out, --json, --figure, --outdir and -q."""
+    out = parser.add_argument_group("output")
+    out.add_argument("--out", metavar="PATH",
+                     help="dense depth: .png (16-bit, in the input's scale or --out-scale), .npy, .npz, .h5 or .pfm.")
+    out.add_argument("--out-scale", type=_scale, metavar="SCALE",
+                     help="scale of a PNG output (default: --depth-scale if given, else mm = 1000).")
+    out.add_argument("--json", metavar="PATH", help="metrics, settings and solver history as JSON.")
+    out.add_argument("--figure", metavar="PATH",
+                     help="image | sparse input | nearest neighbour | completed | absolute error, colour bar in "
+                          "metres (.png, .pdf, .svg, .jpg; needs matplotlib: pip install 'sparsedepth[plot]').")
+    out.add_argument("--outdir", metavar="DIR",
+                     help=f"write depth.npy, depth.png, metrics.json and figure.png (if matplotlib is installed) "
+                          f"here (an existing folder; the demo creates its default ./{DEMO_DIR}/); batch: one depth file "
+                          "per frame.")
+    out.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr.")
+
+
+
+def _add_batch_options(parser) -> None:
+    """--batch / --nyu-mat, the frame selection, --csv, --workers and --overwrite."""
+    bat = parser.add_argument_group("batch")
+    src = bat.add_mutually_exclusive_group()
+    src.add_argument("--batch", metavar="DIR",
+                     help="folder of frames paired by name: <image-prefix><id>.<ext> with <depth-prefix><id>.<ext>; "
+                          "with --batch-depths, the image folder; a folder with no <image-prefix> image but .h5 "
+                          "files (searched recursively) is read as NYU .h5 frames (rgb + depth in metres).")
+    src.add_argument("--nyu-mat", metavar="FILE",
+                     help="NYU Depth V2 labeled .mat (read lazily): --fill-holes fills rawDepths and scores against "
+                          "depths; otherwise depths is sampled with --keep-fraction/--keep-count.")
+    bat.add_argument("--indices", type=_indices, metavar="RANGE",
+                     help="frames of --nyu-mat: 5, 0:10, 0:100:10 or 1,4,7 (default all).")
+    bat.add_argument("--image-prefix", default="rgb_", help="image file prefix in --batch (default rgb_).")
+    bat.add_argument("--depth-prefix", default="depth_", help="depth file prefix in --batch (default depth_).")
+    bat.add_argument("--truth-prefix", default=None, help="optional ground-truth file prefix in --batch.")
+    bat.add_argument("--csv", metavar="PATH",
+                     help="per-frame metrics, one row per frame, written as frames finish.  If it exists (from the "
+                          "same command) the run resumes: frames with an ok row and their output are skipped, "
+                          "missing and failed ones run, and each failed row is replaced by the new one.  The "
+                          "settings are kept beside it in PATH.settings.json.")
+    bat.add_argument("--workers", type=_positive_int, metavar="N",
+                     help=f"worker processes (default {default_workers()} here: half the CPUs, at least 1, "
+                          "at most 8).")
+    bat.add_argument("--out-format", choices=["npy", "npz", "h5", "pfm", "png"], default="npy",
+                     help="format of the per-frame outputs in --outdir (default npy).")
+    bat.add_argument("--batch-depths", metavar="DIR",
+                     help="with --batch DIR: the depth folder, files named like the images (KITTI layout).")
+    bat.add_argument("--batch-truths", metavar="DIR",
+                     help="with --batch-depths: optional ground-truth folder, files named like the images.")
+    bat.add_argument("--overwrite", action="store_true",
+                     help="start the batch afresh: replace an existing --csv (even one written with other "
+                          "settings) and recompute every frame.")
+
+
+def _add_cluster_options(parser) -> None:
+    """--scheduler, --scheduler-file, --scheduler-timeout: a batch on a Dask cluster (sparsedepth.batch.distributed)."""
+    cluster = parser.add_argument_group(
+        "batch on a Dask cluster (pip install 'sparsedepth[distributed]'; frames and --outdir on a file system "
+        "the workers share)")
+    where = cluster.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run the frames on the Dask scheduler at ADDRESS (e.g. tcp://10.0.0.5:8786); default "
+                            "$DASK_SCHEDULER_ADDRESS unless --workers is given.  The CSV is written here.")
+    where.add_argument("--scheduler-file", metavar="PATH",
+                       help="the JSON file of 'dask scheduler --scheduler-file PATH' (e.g. on SLURM).")
+    cluster.add_argument("--scheduler-timeout", type=_positive_float, metavar="SECONDS",
+                         help="wait this long for the scheduler, then for its first worker, before exit code 2 "
+                              "(default 15).")
+
+
+def weights_of(args) -> tuple[Weights, dict]:
+    """(the :class:`~sparsedepth.Weights` of the options, {name: value} of the weights given on the command line)."""
+    given = {f.name: getattr(args, f"w_{f.name}") for f in dataclasses.fields(Weights)}
+    given = {k: v for k, v in given.items() if v is not None}
+    return DEFAULT_WEIGHTS.replace(**given), given

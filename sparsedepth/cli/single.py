@@ -1,0 +1,270 @@
+"""One frame from the command line: the demo or the user's files, completed or hole-filled, its outputs written.
+
+:func:`plan_outputs` names every file of the run (checked before any work),
+:func:`run_one` reads the inputs, runs
+:func:`~sparsedepth.batch.evaluate_frame`, encodes every output, writes them
+all or none (:func:`~sparsedepth.cli.outputs.commit`) and prints the table.
+Imports anything of the library and the other modules of
+:mod:`sparsedepth.cli` except the command and batch modes.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..batch import evaluate_frame
+from ..datasets import load_motorcycle
+from ..io import KINECT_NYU, read_calib, read_depth, read_image, read_mask
+from ..io.formats import depth_writer, resolve_scale
+from .messages import UsageError, one_line, warnings_as_lines
+from .outputs import Named, commit
+from .parser import DEMO_DIR, DEMO_DOWNSAMPLE, DEMO_KEEP_FRACTION, weights_of
+from .report import build_report, matplotlib_classes, print_table, render_figure
+
+__all__ = ["READER_FLAGS", "plan_outputs", "input_files", "run_one"]
+
+_ABSURD_LOW, _ABSURD_HIGH = 1e-3, 1e3  # metres: a median outside this means a wrong scale
+
+
+_PROGRESS_EVERY = 1.0  # seconds between progress lines
+
+
+READER_FLAGS = {
+    "scale": "--depth-scale", "key": "--depth-key", "byteorder": "--byteorder",
+    "invalid_values": "--invalid-value", "min_depth": "--min-depth", "max_depth": "--max-depth",
+    "max_pixels": "--max-pixels", "calib": "--calib",
+}
+
+
+_KINECT_CALIB = "kinect-nyu"
+
+
+class _Progress:
+    """Solver callback printing the iteration at most every second on stderr."""
+
+    def __init__(self, stream, enabled: bool):
+        self.stream, self.enabled = stream, enabled
+        self.start = self.last = time.monotonic()
+
+    def __call__(self, state):
+        now = time.monotonic()
+        if self.enabled and now - self.last >= _PROGRESS_EVERY:
+            self.last = now
+            print(f"  iteration {state.iteration:5d}  F = {state.objective:.6e}  ({now - self.start:.1f} s)",
+                  file=self.stream, flush=True)
+
+
+def _warn_scale(depth, what, scale, stream) -> None:
+    values = depth[np.isfinite(depth) & (depth > 0)]
+    if values.size == 0:
+        return
+    median = float(np.median(values))
+    if not _ABSURD_LOW <= median <= _ABSURD_HIGH:
+        print(f"warning: {what} has median depth {median:.4g} m with --depth-scale {scale if scale else 1}: "
+              "check the scale (presets nyu/mm 1000, kitti 256, tum 5000, m 1)", file=stream)
+
+
+def _check_units(path, flag, args) -> None:
+    """A PFM holds disparity (Middlebury, ETH3D) unless the user says otherwise."""
+    if Path(path).suffix.lower() == ".pfm" and args.calib is None and args.depth_scale is None:
+        raise UsageError(
+            f"{flag} '{path}' is a PFM, the Middlebury/ETH3D disparity format (pixels, not metres): give --calib "
+            "calib.txt to convert disparity to metres, or --depth-scale m if the file holds depth in metres"
+        )
+
+
+def _read_mask(path, shape, max_pixels) -> np.ndarray:
+    array = read_mask(path, max_pixels=max_pixels, name="--mask", option_names=READER_FLAGS)
+    if array.shape != tuple(shape):
+        raise ValueError(f"--mask '{path}' has shape {array.shape} but the depth has shape {tuple(shape)}")
+    return array
+
+
+def _read_depth_flag(path, flag, args, calib, stream) -> np.ndarray:
+    """read_depth with the reader options, library warnings printed as one line each."""
+    _check_units(path, flag, args)
+    with warnings_as_lines(stream) as caught:
+        depth = read_depth(path, scale=args.depth_scale, calib=calib, key=args.depth_key, byteorder=args.byteorder,
+                           invalid_values=args.invalid_values or (), min_depth=args.min_depth,
+                           max_depth=args.max_depth, max_pixels=args.max_pixels, name=flag,
+                           option_names=READER_FLAGS)
+    for record in caught:
+        if "Kinect v1" in str(record.message) and calib is not KINECT_NYU:
+            print(f"warning: raw Kinect v1 disparity (e.g. NYU Depth V2 raw .pgm) is not metres; "
+                  f"--calib {_KINECT_CALIB} converts it", file=stream)
+    return depth
+
+
+def _read_inputs(args, stream):
+    """(image, depth, mask, truth, description) of the one-frame mode, in metres."""
+    image = read_image(args.image, max_pixels=args.max_pixels, name="--image", option_names=READER_FLAGS)
+    calib = None
+    if args.calib is not None:
+        calib = KINECT_NYU if args.calib == _KINECT_CALIB else read_calib(args.calib, name="--calib")
+    depth = _read_depth_flag(args.depth, "--depth", args, calib, stream)
+    if image.shape[:2] != depth.shape:
+        raise ValueError(f"--image '{args.image}' is {image.shape[0]}x{image.shape[1]} but --depth '{args.depth}' is "
+                         f"{depth.shape[0]}x{depth.shape[1]} (H x W); they must have the same size")
+    if not np.any(np.isfinite(depth)):
+        raise ValueError(f"--depth '{args.depth}' has no valid pixel (all 0, NaN, inf or excluded by "
+                         "--invalid-value/--min-depth/--max-depth)")
+    _warn_scale(depth, f"--depth '{args.depth}'", args.depth_scale, stream)
+    mask = None if args.mask is None else _read_mask(args.mask, depth.shape, args.max_pixels)
+    truth = None
+    if args.truth is not None:
+        truth = _read_depth_flag(args.truth, "--truth", args, calib, stream)
+        if truth.shape != depth.shape:
+            raise ValueError(f"--truth '{args.truth}' has shape {truth.shape} but --depth '{args.depth}' has "
+                             f"shape {depth.shape}")
+        _warn_scale(truth, f"--truth '{args.truth}'", args.depth_scale, stream)
+    return image, depth, mask, truth, f"{args.image} + {args.depth}"
+
+
+_DEPTH_OUTPUTS = ("--out", "depth.npy", "depth.png")
+
+
+def plan_outputs(args, mode) -> list[tuple[str, Named]]:
+    """(kind, file) of every output of one frame; kind is the option or the file name in --outdir."""
+    planned = []
+    for flag, value in (("--out", args.out), ("--json", args.json), ("--figure", args.figure)):
+        if value is not None:
+            planned.append((flag, Named(flag, value, Path(value))))
+    outdir = DEMO_DIR if mode == "demo" and args.outdir is None else args.outdir
+    if outdir is not None:
+        names = ["depth.npy", "depth.png", "metrics.json"]
+        if matplotlib_classes() is not None:
+            names.append("figure.png")
+        planned += [(name, Named("--outdir", outdir, Path(outdir) / name, create_parent=mode == "demo"))
+                    for name in names]
+    return planned
+
+
+def input_files(args) -> list[Named]:
+    """Every input file of one frame, named by its option."""
+    return [Named(flag, value, Path(value)) for flag, value in (
+        ("--image", args.image), ("--depth", args.depth), ("--mask", args.mask), ("--truth", args.truth),
+        ("--calib", args.calib)) if value is not None]
+
+
+def _check_png_range(depth, scale, targets, what) -> None:
+    """Refuse a PNG output whose depth would overflow 16 bits or round to 0 at ``scale``."""
+    if not targets:
+        return
+    values = depth[np.isfinite(depth) & (depth > 0)]
+    if values.size == 0:
+        return
+    high, low = float(values.max()), float(values.min())
+    target = targets[0]
+    other = ", or a float format (.npy, .npz, .h5, .pfm)" if target.flag == "--out" else ""
+    if np.rint(high * scale) > np.iinfo(np.uint16).max:
+        raise UsageError(f"{target.label}: {what} reaches {high:.6g} m, which overflows a 16-bit PNG at scale "
+                          f"{scale:g} ({high * scale:.0f} > 65535); give --out-scale {65535 / high:.6g} or "
+                          f"less{other}")
+    if np.rint(low * scale) == 0:
+        raise UsageError(f"{target.label}: {what} has {low:.6g} m, which rounds to 0 (invalid) in a PNG at scale "
+                          f"{scale:g}; give --out-scale above {0.5 / low:.6g}{other}")
+
+
+def _bytes_writer(data: bytes):
+    return lambda tmp: Path(tmp).write_bytes(data)
+
+
+def _load_frame(args, mode, stream):
+    """(image, depth, mask, truth, description, keep_fraction) of the demo or the user's files, downsampled."""
+    if mode == "demo":
+        frame = load_motorcycle()
+        image, depth, mask, truth = frame.image, np.asarray(frame.depth), None, None
+        description = "Middlebury 2014 Motorcycle"
+        downsample = DEMO_DOWNSAMPLE if args.downsample is None else args.downsample
+        keep_fraction = args.keep_fraction
+        if keep_fraction is None and args.keep_count is None:
+            keep_fraction = DEMO_KEEP_FRACTION
+    else:
+        image, depth, mask, truth, description = _read_inputs(args, stream)
+        downsample = 1 if args.downsample is None else args.downsample
+        keep_fraction = args.keep_fraction
+    if downsample > 1:
+        description += f" (downsampled by {downsample})"
+        image, depth = image[::downsample, ::downsample], depth[::downsample, ::downsample]
+        mask = None if mask is None else mask[::downsample, ::downsample]
+        truth = None if truth is None else truth[::downsample, ::downsample]
+    return image, depth, mask, truth, description, keep_fraction
+
+
+def _evaluate(args, image, depth, mask, truth, keep_fraction, weights, stream):
+    """:func:`~sparsedepth.batch.evaluate_frame` with the options; warnings and solver progress go to ``stream``."""
+    complete_fill = args.fill_holes and args.fill_method == "complete"
+    use_solver = not args.fill_holes or complete_fill
+    with warnings_as_lines(stream):
+        return evaluate_frame(
+            image, depth, mask=mask, truth=truth, task="fill" if args.fill_holes else "complete",
+            keep_fraction=keep_fraction, keep_count=args.keep_count, seed=args.seed,
+            fill_method=args.fill_method, weights=weights if use_solver else None,
+            solver=args.solver or "auto", tol=args.tol, max_iter=args.max_iter,
+            callback=_Progress(stream, not args.quiet) if use_solver else None,
+            clip_to_observed=args.clip_to_observed,
+        )
+
+
+def _writers(args, planned, outcome, image, report, png_scale) -> list:
+    """(file, writer) of every planned output, every one encoded and checked before any file is touched."""
+    report_text = (json.dumps(report, indent=2, allow_nan=False) + "\n").encode()
+    kinds = {kind for kind, _ in planned}
+    figure_bytes = None
+    if "--figure" in kinds:
+        figure_bytes = render_figure(image, outcome, Path(args.figure).suffix.lower())
+    if "figure.png" in kinds and not (args.figure or "").lower().endswith(".png"):
+        outdir_figure = render_figure(image, outcome, ".png")
+    else:
+        outdir_figure = figure_bytes
+
+    items = []
+    for kind, target in planned:
+        if kind in _DEPTH_OUTPUTS:
+            try:
+                writer = depth_writer(target.path, outcome.depth, scale=png_scale)
+            except ValueError as exc:
+                raise UsageError(f"{target.label}: {one_line(exc)}") from None
+        elif kind in ("--json", "metrics.json"):
+            writer = _bytes_writer(report_text)
+        else:
+            writer = _bytes_writer(figure_bytes if kind == "--figure" else outdir_figure)
+        items.append((target, writer))
+    return items
+
+
+def run_one(args, argv, mode, stdout, stderr) -> int:
+    """The demo or one frame of the user's files: complete or fill it, write every output or none, print the table.
+
+    Returns the exit code (0); bad options or files raise
+    :class:`~sparsedepth.cli.messages.UsageError` or a library error.
+    """
+    weights, weights_given = weights_of(args)
+    image, depth, mask, truth, description, keep_fraction = _load_frame(args, mode, stderr)
+    png_scale = args.out_scale if args.out_scale is not None else (args.depth_scale or 1000.0)
+    png_scale = resolve_scale(png_scale)
+    planned = plan_outputs(args, mode)
+    png_targets = [target for kind, target in planned
+                   if kind in _DEPTH_OUTPUTS and target.path.suffix.lower() == ".png"]
+    _check_png_range(depth if mask is None else np.where(mask, depth, np.nan), png_scale, png_targets,
+                     f"the depth of {'the demo' if mode == 'demo' else '--depth'}")
+
+    outcome = _evaluate(args, image, depth, mask, truth, keep_fraction, weights, stderr)
+
+    # every output is encoded and checked before any file is touched; commit writes all or none
+    _check_png_range(outcome.depth, png_scale, png_targets, "the completed depth")
+    report = build_report(args, argv, outcome, description, weights, weights_given, png_scale)
+    commit(_writers(args, planned, outcome, image, report, png_scale))
+    written = [target.path for _, target in planned]
+    kinds = {kind for kind, _ in planned}
+    if any(target.flag == "--outdir" for _, target in planned) and "figure.png" not in kinds and not args.quiet:
+        print("note: matplotlib is not installed, no figure.png (pip install 'sparsedepth[plot]')", file=stderr)
+
+    print_table(outcome, description, stdout)
+    for path in written:
+        print(f"wrote {path}", file=stdout)
+    return 0
