@@ -2,7 +2,7 @@
 
 Run (full)::
 
-    python bench/ablation.py --out docs/results_ablation.md
+    python -m bench.ablation --out docs/results_ablation.md
 
 or ``--quick`` for a smoke test.  The paper's rows use the reference paper's
 objective with its own weights (:meth:`sparsedepth.Weights.paper`: α = 1,
@@ -16,7 +16,7 @@ solved with ``solver="auto"``:
   fill there);
 * edge only: α, γ;  L2 only: α, β;  L2 + edge: α, β, γ;
 * full objective of the paper: α, β, γ, δ;
-* extension terms (issue item 7): the paper's objective plus each weight of
+* extension terms: the paper's objective plus each weight of
   ``Weights`` beyond α, β, γ, δ, κ (``beta_image`` image-weighted L2,
   ``beta_second`` second-order, ``beta_second_image`` image-weighted
   second-order), one at a time, at its default weight if > 0, else at the
@@ -25,18 +25,18 @@ solved with ``solver="auto"``:
 
 Variants equal to an earlier one (e.g. when a default weight is 0) are
 listed once.  Frames are subsampled by ``--step`` (default 4).
+
+May import :mod:`sparsedepth` and :mod:`bench.harness`.
 """
 
 from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import harness as H  # noqa: E402
+import sparsedepth as sd
 
-import sparsedepth as sd  # noqa: E402
+from . import harness as H
 
 DEFAULT_STEP = 4
 FRACTION = 0.05
@@ -125,7 +125,7 @@ def run(argv=None):
              f"{sd.DEFAULT_WEIGHTS.kappa:g} throughout. `RMSE / paper` is the mean over frames × seeds of the "
              "per-input RMSE ratio to the paper's full objective; `time × paper` is Σ t / Σ t_paper.\n\n"
              f"Headline: extension terms (issue item 7), {verdict}.")
-    text = H.section("Ablation (paper Table 3.2) and extension terms", command=H.command_line("ablation.py", argv or []),
+    text = H.section("Ablation (paper Table 3.2) and extension terms", command=H.command_line("ablation", argv or []),
                      frames_=frames, seeds=seeds, body=body, notes=notes, elapsed=time.perf_counter() - t0)
     return text, rows
 

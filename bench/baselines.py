@@ -2,7 +2,7 @@
 
 Run (full)::
 
-    python bench/baselines.py --out docs/results_baselines.md
+    python -m bench.baselines --out docs/results_baselines.md
 
 or ``--quick`` for a smoke test.  Methods: nearest-neighbour fill,
 ``scipy.interpolate.griddata`` linear (nearest outside the hull),
@@ -11,17 +11,17 @@ colorization fill (:func:`sparsedepth.colorization_baseline`) and ours
 (``complete_depth`` with ``sd.DEFAULT_WEIGHTS``, ``solver="auto"``).  Frames
 are :data:`frames.REPORT_FRAMES` subsampled by ``--step`` (default 2: the
 biharmonic inpainting takes tens of seconds per full-resolution frame).
+
+May import :mod:`sparsedepth`, :mod:`bench.harness` and :mod:`bench.sparsity` (its table layout).
 """
 
 from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import harness as H  # noqa: E402
-import sparsity  # noqa: E402
+from . import harness as H
+from . import sparsity
 
 DEFAULT_STEP = 2
 
@@ -45,7 +45,7 @@ def run(argv=None):
     at5 = sorted((r for r in rows if r["sampling"] == 0.05), key=lambda r: r["rmse_ratio"][0])
     body = ("Headline: at 5 % observed, RMSE / nearest (mean over frames × seeds), lowest first: "
             + "; ".join(f"{r['method']} {H.fmt(*r['rmse_ratio'])}" for r in at5) + ".\n\n") + body
-    text = H.section("Baselines side by side", command=H.command_line("baselines.py", argv or []), frames_=frames,
+    text = H.section("Baselines side by side", command=H.command_line("baselines", argv or []), frames_=frames,
                      seeds=seeds, body=body, notes=notes, elapsed=time.perf_counter() - t0)
     return text, rows
 

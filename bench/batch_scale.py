@@ -20,34 +20,37 @@ TUM frame, both raw sensor depth with holes).
 
 Prints a markdown table and writes it, with the command, date, machine and
 versions, to ``docs/batch_scale.md`` (``--out`` to change, ``--out -`` for
-none).
+none).  From the repository root::
 
-    python bench/batch_scale.py
+    python -m bench.batch_scale
+
+May import :mod:`sparsedepth` (also ``sparsedepth.batch`` and ``sparsedepth.batch.distributed``), numpy, imageio,
+dask and distributed, and :mod:`bench.harness`.
 """
 
 from __future__ import annotations
 
-import argparse
-import datetime
-import os
-import platform
-import statistics
-import subprocess
-import sys
-import tempfile
-import time
-from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
+from .blas import one_blas_thread
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: one BLAS thread per worker in both engines
+one_blas_thread(("OPENBLAS_NUM_THREADS",))  # before numpy: one BLAS thread per worker in both engines
+
+import argparse  # noqa: E402
+import datetime  # noqa: E402
+import os  # noqa: E402
+import platform  # noqa: E402
+import statistics  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
 import sparsedepth as sd  # noqa: E402
 from sparsedepth.batch import BatchOptions, find_frames, run_batch  # noqa: E402
+
+from . import harness as H  # noqa: E402
 
 COMPLETE_FRAMES = ("nyu_metric3d/00000", "nyu_metric3d/00050", "nyu_metric3d/00100", "tum/0")
 FILL_FRAMES = ("nyu_rcnn_depth/demo", "tum/0")  # raw sensor depth with holes
@@ -100,7 +103,8 @@ def _mean_runtime(csv_path) -> float:
         return statistics.fmean(float(row["runtime"]) for row in csv.DictReader(fh))
 
 
-def main(argv=None) -> int:
+def parse_args(argv):
+    """The command line of :func:`main`."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--workers", type=int, default=2, help="workers of each engine, 1 thread each (default 2)")
     parser.add_argument("--repeat", type=int, default=3, help="times each source frame is used (default 3)")
@@ -115,13 +119,15 @@ def main(argv=None) -> int:
                         help="frames of the dataset to estimate for (default 400000, NYU Depth V2 raw)")
     parser.add_argument("--estimate-workers", default="16,64,256,1024",
                         help="comma-separated worker counts of the estimate (default 16,64,256,1024)")
-    parser.add_argument("--out", default=str(REPO / "docs" / "batch_scale.md"), help="markdown output ('-': none)")
+    parser.add_argument("--out", default=str(H.DOCS / "batch_scale.md"), help="markdown output ('-': none)")
     args = parser.parse_args(argv)
     if args.quick:
         args.rounds, args.repeat = 1, 1
+    return args
 
-    from distributed import Client, LocalCluster
 
+def configure_dask(args) -> None:
+    """Dask's worker profiler and the nanny's ``MALLOC_TRIM_THRESHOLD_`` as ``args`` ask."""
     import dask
 
     # Dask's statistical profiler samples every worker thread every 10 ms; on a loaded machine the GIL
@@ -133,6 +139,89 @@ def main(argv=None) -> int:
         environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ"))
         environ.pop("MALLOC_TRIM_THRESHOLD_", None)
         dask.config.set({"distributed.nanny.pre-spawn-environ": environ})
+
+
+def measure_task(task, tmp, args, pool, client):
+    """Both engines on the frames of ``task``, rounds alternating: ``(table row, detail line)``."""
+    folder = tmp / task
+    folder.mkdir()
+    sources = _write_frames(folder, task, args.repeat, args.quick)
+    frames = find_frames(folder)
+    options = BatchOptions(task=task, keep_fraction=0.05 if task == "complete" else None,
+                           seed=0, out_dir=str(tmp), out_format=".npy")
+    times = {"pool": [], "dask": []}
+    runtimes = {"pool": [], "dask": []}
+    for r in range(args.rounds):
+        for engine in (("pool", "dask") if r % 2 == 0 else ("dask", "pool")):
+            csv_path = tmp / f"{task}_{engine}_{r}.csv"
+            times[engine].append(_run(engine, frames, csv_path, options, args.workers, executor=pool,
+                                      client=client))
+            runtimes[engine].append(_mean_runtime(csv_path))
+            print(f"{task} {engine} round {r}: {len(frames)} frames in {times[engine][-1]:.2f} s",
+                  file=sys.stderr, flush=True)
+    n = len(frames)
+    best = {e: min(t) for e, t in times.items()}
+    fps = {e: n / best[e] for e in best}
+    shapes = sorted({sd.read_depth(f.depth).shape for f in frames})
+    row = (task, n, ", ".join(f"{w}x{h}" for h, w in shapes), fps["pool"], fps["dask"], fps["dask"] / fps["pool"],
+           args.workers * best["dask"] / n, statistics.fmean(runtimes["dask"]))
+    detail = (f"- {task}: sources {', '.join(sorted(set(sources)))}; wall times (s) pool "
+              f"{', '.join(f'{t:.2f}' for t in times['pool'])}, dask "
+              f"{', '.join(f'{t:.2f}' for t in times['dask'])}")
+    return row, detail
+
+
+def tables(rows, args) -> str:
+    """The throughput table and the estimate for ``--dataset-frames`` frames."""
+    counts = [int(c) for c in args.estimate_workers.split(",")]
+    text = H.markdown_table(
+        ["task", "frames", "size", "pool frames/s", "Dask frames/s", "Dask / pool", "worker-s per frame (Dask)",
+         "mean solve s per frame (CSV runtime)"],
+        [[task, n, size, f"{fp:.3f}", f"{fd:.3f}", f"{ratio:.3f}", f"{per_frame:.3f}", f"{solve:.3f}"]
+         for task, n, size, fp, fd, ratio, per_frame, solve in rows])
+    estimate = [[task, f"{args.dataset_frames * per_frame / 3600:.0f}",
+                 *(f"{args.dataset_frames * per_frame / 3600 / c:.2f}" for c in counts)]
+                for task, n, size, fp, fd, ratio, per_frame, solve in rows]
+    return "\n".join([
+        text, "",
+        f"Estimate for {args.dataset_frames} frames of this size (worker-s per frame above x frames; wall time "
+        "assumes the per-worker cost stays the same and ignores start-up and file-system limits):",
+        "",
+        H.markdown_table(["task", "core-hours", *(f"wall h, {c} workers" for c in counts)], estimate)])
+
+
+def header(args, argv, pool_start, dask_start) -> str:
+    """Title, command, date, commit, machine and versions, and what the columns mean."""
+    import dask
+    import distributed
+
+    command = H.command_line("batch_scale", argv if argv is not None else sys.argv[1:])
+    return "\n".join([
+        "# Batch throughput: process pool vs Dask LocalCluster",
+        "",
+        f"Written by `{command}` on {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, commit "
+        f"{H.git_commit() or '?'}; {platform.platform()}, {os.cpu_count()} CPUs, Python "
+        f"{platform.python_version()}, numpy {np.__version__}, scipy {H.version('scipy')}, dask "
+        f"{dask.__version__}, distributed {distributed.__version__}.",
+        "",
+        f"{args.workers} workers with 1 thread each in both engines, OPENBLAS_NUM_THREADS="
+        f"{os.environ.get('OPENBLAS_NUM_THREADS')}, Dask worker profiler "
+        f"{'on' if args.dask_profile else 'off (distributed.worker.profile.enabled=False)'}, "
+        f"MALLOC_TRIM_THRESHOLD_ {'65536 (the Dask nanny default)' if args.malloc_trim else 'unset (not the Dask nanny default)'}; best of {args.rounds} alternating rounds; "
+        f"start-up (not in frames/s): process pool {pool_start:.2f} s, LocalCluster + client "
+        f"{dask_start:.2f} s.  Worker-s per frame = workers x best Dask wall time / frames (the cost to "
+        "multiply by a dataset's frame count); the solve column is the mean `runtime` of the CSV rows "
+        "(method only, without reading, the nearest-neighbour baseline, scoring and writing).",
+        "",
+        "",
+    ])
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    from distributed import Client, LocalCluster
+
+    configure_dask(args)
     rows, details = [], []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -148,84 +237,19 @@ def main(argv=None) -> int:
         dask_start = time.perf_counter() - start
         try:
             for task in args.tasks.split(","):
-                folder = tmp / task
-                folder.mkdir()
-                sources = _write_frames(folder, task, args.repeat, args.quick)
-                frames = find_frames(folder)
-                options = BatchOptions(task=task, keep_fraction=0.05 if task == "complete" else None,
-                                       seed=0, out_dir=str(tmp), out_format=".npy")
-                times = {"pool": [], "dask": []}
-                runtimes = {"pool": [], "dask": []}
-                for r in range(args.rounds):
-                    for engine in (("pool", "dask") if r % 2 == 0 else ("dask", "pool")):
-                        csv_path = tmp / f"{task}_{engine}_{r}.csv"
-                        times[engine].append(_run(engine, frames, csv_path, options, args.workers, executor=pool,
-                                                    client=client))
-                        runtimes[engine].append(_mean_runtime(csv_path))
-                        print(f"{task} {engine} round {r}: {len(frames)} frames in {times[engine][-1]:.2f} s",
-                              file=sys.stderr, flush=True)
-                n = len(frames)
-                best = {e: min(t) for e, t in times.items()}
-                fps = {e: n / best[e] for e in best}
-                shapes = sorted({sd.read_depth(f.depth).shape for f in frames})
-                rows.append((task, n, ", ".join(f"{w}x{h}" for h, w in shapes), fps["pool"], fps["dask"], fps["dask"] / fps["pool"],
-                             args.workers * best["dask"] / n, statistics.fmean(runtimes["dask"])))
-                details.append(f"- {task}: sources {', '.join(sorted(set(sources)))}; wall times (s) pool "
-                               f"{', '.join(f'{t:.2f}' for t in times['pool'])}, dask "
-                               f"{', '.join(f'{t:.2f}' for t in times['dask'])}")
+                row, detail = measure_task(task, tmp, args, pool, client)
+                rows.append(row)
+                details.append(detail)
         finally:
             client.close()
             cluster.close()
             pool.shutdown()
-
-    table = [
-        f"| task | frames | size | pool frames/s | Dask frames/s | Dask / pool | "
-        f"worker-s per frame (Dask) | mean solve s per frame (CSV runtime) |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for task, n, size, fp, fd, ratio, per_frame, solve in rows:
-        table.append(f"| {task} | {n} | {size} | {fp:.3f} | {fd:.3f} | {ratio:.3f} | {per_frame:.3f} | {solve:.3f} |")
-    counts = [int(c) for c in args.estimate_workers.split(",")]
-    table += [
-        "",
-        f"Estimate for {args.dataset_frames} frames of this size (worker-s per frame above x frames; wall time "
-        "assumes the per-worker cost stays the same and ignores start-up and file-system limits):",
-        "",
-        "| task | core-hours | " + " | ".join(f"wall h, {c} workers" for c in counts) + " |",
-        "|---|---|" + "---|" * len(counts),
-    ]
-    for task, n, size, fp, fd, ratio, per_frame, solve in rows:
-        hours = args.dataset_frames * per_frame / 3600
-        table.append(f"| {task} | {hours:.0f} | " + " | ".join(f"{hours / c:.2f}" for c in counts) + " |")
-    text = "\n".join(table)
+    text = tables(rows, args)
     print(text)
     if args.out != "-":
-        import distributed
-        import scipy
-
-        command = " ".join(["python bench/batch_scale.py", *(argv if argv is not None else sys.argv[1:])])
-        git = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True)
-        header = [
-            "# Batch throughput: process pool vs Dask LocalCluster",
-            "",
-            f"Written by `{command}` on {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, commit "
-            f"{git.stdout.strip() or '?'}; {platform.platform()}, {os.cpu_count()} CPUs, Python "
-            f"{platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, dask "
-            f"{dask.__version__}, distributed {distributed.__version__}.",
-            "",
-            f"{args.workers} workers with 1 thread each in both engines, OPENBLAS_NUM_THREADS="
-            f"{os.environ.get('OPENBLAS_NUM_THREADS')}, Dask worker profiler "
-            f"{'on' if args.dask_profile else 'off (distributed.worker.profile.enabled=False)'}, "
-            f"MALLOC_TRIM_THRESHOLD_ {'65536 (the Dask nanny default)' if args.malloc_trim else 'unset (not the Dask nanny default)'}; best of {args.rounds} alternating rounds; "
-            f"start-up (not in frames/s): process pool {pool_start:.2f} s, LocalCluster + client "
-            f"{dask_start:.2f} s.  Worker-s per frame = workers x best Dask wall time / frames (the cost to "
-            "multiply by a dataset's frame count); the solve column is the mean `runtime` of the CSV rows "
-            "(method only, without reading, the nearest-neighbour baseline, scoring and writing).",
-            "",
-            "",
-        ]
         footer = ["", *details, ""]
-        Path(args.out).write_text("\n".join(header) + text + "\n" + "\n".join(footer), encoding="utf-8")
+        Path(args.out).write_text(header(args, argv, pool_start, dask_start) + text + "\n" + "\n".join(footer),
+                                  encoding="utf-8")
         print(f"wrote {args.out}", file=sys.stderr)
     return 0
 

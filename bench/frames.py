@@ -7,6 +7,8 @@ on.  Frames come from ``../shared/data`` (or ``$SPARSEDEPTH_DATA``); see its
 ``SOURCES.md`` for units.  Registered raw NYU frames are cropped to the Eigen
 crop (rows 45:471, cols 41:601), inside the valid region of the registered
 frame; every other frame is used whole.
+
+May import :mod:`sparsedepth` and numpy.
 """
 
 from __future__ import annotations

@@ -24,6 +24,8 @@ Differences from the MATLAB text, all of which leave the solution unchanged:
   ``known=(depth != 0) & (depth != 10)`` for that behaviour).
 * The linear solve is ``scipy.sparse.linalg.spsolve`` (SuperLU) instead of
   MATLAB's backslash (UMFPACK).
+
+May import numpy and scipy only (``tests/test_colorization.py`` loads this file on its own).
 """
 
 from __future__ import annotations

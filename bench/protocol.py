@@ -2,7 +2,7 @@
 
 Run (full)::
 
-    python bench/protocol.py --out docs/results_protocol.md
+    python -m bench.protocol --out docs/results_protocol.md
 
 or ``--quick`` for a smoke test.  As in Ma & Karaman (ICRA 2018) and the
 papers that follow them on NYU Depth V2, each frame is resized to 320x240 and
@@ -19,19 +19,19 @@ labeled/inpainted Gupta-crop frame whole), the ones the literature uses.
 Published numbers are on the 654-frame official test split with dense
 (inpainted) ground truth; ours are on these few frames only, so they sit
 *beside* published numbers, not in the same table.
+
+May import :mod:`bench.harness`, numpy and scikit-image.
 """
 
 from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 from skimage.transform import resize
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import harness as H  # noqa: E402
+from . import harness as H
 
 RESIZE = (240, 320)
 CROP = (228, 304)
@@ -84,7 +84,7 @@ def run(argv=None):
         "Ground truth of the raw NYU frames has holes; they are neither sampled nor scored. The frames are "
         "used at full resolution before the resize (`--step` does not apply). Mean ± std over frames × seeds.")
     text = H.section("Literature protocol (NYU Depth V2, 304x228, 200 / 500 samples)",
-                     command=H.command_line("protocol.py", argv or []), frames_=frames, seeds=seeds, body=body,
+                     command=H.command_line("protocol", argv or []), frames_=frames, seeds=seeds, body=body,
                      notes=notes, elapsed=time.perf_counter() - t0)
     return text, rows
 

@@ -1,10 +1,10 @@
 """Multigrid variants for the default (13-point) quadratic system: iterations and time.
 
-Command (about 1 minute)::
+Command, from the repository root (about 1 minute)::
 
-    python bench/quadratic_variants.py
+    python -m bench.quadratic_variants
 
-The 640x480 NYU frame of ``bench/perf.py`` (5 % observed, default weights
+The 640x480 NYU frame of :mod:`bench.perf` (5 % observed, default weights
 with γ = 0).  Every variant solves ``A z = b`` by PCG from the nearest-neighbour
 fill to ``‖b − Az‖ ≤ 1e-8 ‖b‖``; the time is set-up + solve, best of 2
 interleaved rounds.  It backs the "measured and rejected" list of
@@ -13,30 +13,29 @@ of this fourth-order, edge-weighted operator, and whether they pay.  A
 diagnosis follows: the smallest eigenvalue estimates of the preconditioned
 operator, where the slowest error of the V-cycle iteration lives, and the
 iteration count on the frame cropped to the box of its valid depth.
+
+May import :mod:`sparsedepth` (also ``sparsedepth.linalg.multigrid``), numpy, scipy, pyamg and :mod:`bench.perf`
+(its problem).
 """
 
 from __future__ import annotations
 
-import os
+from .blas import one_blas_thread
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+one_blas_thread()
 
 import sys  # noqa: E402
 import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
 from pyamg.multilevel import MultilevelSolver  # noqa: E402
 from pyamg.relaxation.relaxation import gauss_seidel  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-import perf  # noqa: E402
-
 import sparsedepth as sd  # noqa: E402
 from sparsedepth.linalg.multigrid import GridMultigrid  # noqa: E402
+
+from . import perf  # noqa: E402
 
 
 def _interp_1d(n, cubic):

@@ -1,34 +1,34 @@
-"""Regenerate ``docs/results.md`` (and the solver PNGs) from every benchmark script, in one process.
+"""Regenerate ``docs/results.md`` (and the solver PNGs) from every table module, in one process.
 
-Run::
+Run from the repository root::
 
-    python bench/run_all.py                 # full run, writes docs/results.md
-    python bench/run_all.py --quick --out /tmp/results.md   # seconds-long smoke test
+    python -m bench.run_all                 # full run, writes docs/results.md
+    python -m bench.run_all --quick --out /tmp/results.md   # seconds-long smoke test
 
-Scripts that share runs (ours and the nearest fill at 1/5/10 % in the
+Modules that share runs (ours and the nearest fill at 1/5/10 % in the
 sparsity and baseline tables) run in one process and share an in-process
 cache; the three groups (sparsity + baselines, ablation, solvers + protocol)
 run in ``--jobs`` parallel processes (default 2).  Each section
 records the standalone command that reproduces it, the machine, the frames and
 seeds.  Every number in ``docs/results.md`` comes from here; nothing is typed in
 by hand.
+
+May import :mod:`bench.harness`, :mod:`bench.frames` and the table modules it runs.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import ablation  # noqa: E402
-import baselines  # noqa: E402
-import frames as frame_list  # noqa: E402
-import harness as H  # noqa: E402
-import protocol  # noqa: E402
-import solvers  # noqa: E402
-import sparsity  # noqa: E402
+import sparsedepth as sd
+
+from . import ablation, baselines, protocol, solvers, sparsity
+from . import frames as frame_list
+from . import harness as H
 
 SCRIPTS = {"sparsity": sparsity, "baselines": baselines, "ablation": ablation, "solvers": solvers,
            "protocol": protocol}
@@ -41,7 +41,7 @@ def run_group(names, sub, plot_dir):
 
     ``plot_dir`` None: the solver script draws no figures.
     """
-    H.PROGRESS = True
+    H.show_progress()
     out = []
     for name in names:
         t = time.perf_counter()
@@ -55,7 +55,8 @@ def run_group(names, sub, plot_dir):
     return out
 
 
-def main(argv=None) -> int:
+def parse_args(argv):
+    """The command line of :func:`main`."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="every script in --quick mode")
     p.add_argument("--out", type=Path, default=H.DOCS / "results.md")
@@ -69,27 +70,22 @@ def main(argv=None) -> int:
                         "--out part.md); a later file's section replaces an earlier one with the same title")
     p.add_argument("--no-plot", action="store_true",
                    help="no solver figures (they need matplotlib, the 'plot' extra)")
-    args = p.parse_args(argv)
-    if "solvers" in args.only and not args.no_plot and not args.assemble:
-        import importlib.util
+    return p.parse_args(argv)
 
-        if importlib.util.find_spec("matplotlib") is None:  # fail now, not after the other groups' 15 minutes
-            print("run_all: the solver figures need matplotlib (pip install 'sparsedepth[plot]'); "
-                  "install it or pass --no-plot", file=sys.stderr)
-            return 2
-    plot_dir = None if args.no_plot else args.out.parent
-    t0 = time.perf_counter()
-    H.PROGRESS = True
-    sections = []
-    if args.assemble:
-        args.only = []
-        by_title = {}
-        for path in args.assemble:  # a later file's section replaces an earlier one of the same title
-            for part in ("\n" + path.read_text()).split("\n## ")[1:]:
-                title = part.splitlines()[0]
-                if title != "Headline numbers":
-                    by_title[title] = "## " + part.rstrip() + "\n"
-        sections = list(by_title.values())
+
+def assembled_sections(paths) -> list[str]:
+    """The sections of earlier runs' files; a later file's section replaces an earlier one of the same title."""
+    by_title = {}
+    for path in paths:
+        for part in ("\n" + path.read_text()).split("\n## ")[1:]:
+            title = part.splitlines()[0]
+            if title != "Headline numbers":
+                by_title[title] = "## " + part.rstrip() + "\n"
+    return list(by_title.values())
+
+
+def run_groups(args, plot_dir) -> dict:
+    """Run the selected modules, their groups in ``args.jobs`` processes; ``{name: markdown}``."""
     sub = (["--quick"] if args.quick else []) + (["--seeds", *map(str, args.seeds)] if args.seeds else [])
     groups = [[n for n in g if n in args.only] for g in GROUPS]
     groups = [g for g in groups if g]
@@ -100,16 +96,18 @@ def main(argv=None) -> int:
             done = list(pool.map(run_group, groups, [sub] * len(groups), [plot_dir] * len(groups)))
     else:
         done = [run_group(g, sub, plot_dir) for g in groups]
-    texts = {name: text for group in done for name, text, _ in group}
-    sections += [texts[n] for n in SCRIPTS if n in texts]
-    elapsed = time.perf_counter() - t0
+    return {name: text for group in done for name, text, _ in group}
+
+
+def results_header(args, sections, elapsed) -> list[str]:
+    """The lines of ``results.md`` above the sections: command, machine, frames, headline numbers."""
+    command = H.command_line("run_all", (["--quick"] if args.quick else [])
+                             + (["--seeds", *args.seeds] if args.seeds else []) + (["--assemble", "..."]
+                                                                                   if args.assemble else []))
     head = [
         "# Benchmark results",
         "",
-        "Written by `python bench/run_all.py" + (" --quick" if args.quick else "")
-        + (" --seeds " + " ".join(map(str, args.seeds)) if args.seeds else "")
-        + (" --assemble ...`" if args.assemble else "`") + "; do not edit by hand. "
-        "Each section names the standalone command that reproduces it.",
+        f"Written by `{command}`; do not edit by hand. Each section names the standalone command that reproduces it.",
         "",
         f"Machine: {H.machine_markdown()}. "
         + ("Sections assembled from parallel runs; each gives its own wall time." if args.assemble
@@ -128,12 +126,30 @@ def main(argv=None) -> int:
                  if line.startswith("Headline: ")]
     titles = [text.splitlines()[0][3:] for text in sections]
     head += ["## Headline numbers", "", "Copied by `run_all.py` from the sections below (defaults at run time: "
-             f"{H.weights_markdown(H.sd.DEFAULT_WEIGHTS)}):", ""]
+             f"{H.weights_markdown(sd.DEFAULT_WEIGHTS)}):", ""]
     head += ([f"- {t}: {h}" for t, h in zip(titles, headlines)] if len(titles) == len(headlines)
              else [f"- {h}" for h in headlines])
-    head += [""]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(head) + "\n" + "\n".join(sections))
+    return head + [""]
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    if "solvers" in args.only and not args.no_plot and not args.assemble:
+        if importlib.util.find_spec("matplotlib") is None:  # fail now, not after the other groups' 15 minutes
+            print("run_all: the solver figures need matplotlib (pip install 'sparsedepth[plot]'); "
+                  "install it or pass --no-plot", file=sys.stderr)
+            return 2
+    plot_dir = None if args.no_plot else args.out.parent
+    t0 = time.perf_counter()
+    H.show_progress()
+    sections = []
+    if args.assemble:
+        args.only = []
+        sections = assembled_sections(args.assemble)
+    texts = run_groups(args, plot_dir)
+    sections += [texts[n] for n in SCRIPTS if n in texts]
+    elapsed = time.perf_counter() - t0
+    H.write_text(args.out, "\n".join(results_header(args, sections, elapsed)) + "\n" + "\n".join(sections))
     print(f"[run_all] wrote {args.out} in {elapsed / 60:.1f} min", file=sys.stderr)
     return 0
 

@@ -2,7 +2,7 @@
 
 Run (full)::
 
-    python bench/solvers.py --out docs/results_solvers.md
+    python -m bench.solvers --out docs/results_solvers.md
 
 or ``--quick`` for a smoke test.  At 5 % observed, on :data:`frames.REPORT_FRAMES`
 subsampled by ``--step`` (default 4: L-BFGS-B and Adam need thousands of
@@ -22,6 +22,8 @@ and its gap ``(F − F_best) / F_best`` to the best objective any solver of the
 group reached on that frame and input.  The figures plot ``F_k − F_best``
 (log scale) against iteration and wall time for the first frame:
 ``docs/solver_objective_vs_iter.png`` and ``docs/solver_objective_vs_time.png``.
+
+May import :mod:`sparsedepth`, :mod:`bench.harness`, numpy and (for the figures) matplotlib.
 """
 
 from __future__ import annotations
@@ -32,10 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import harness as H  # noqa: E402
+import sparsedepth as sd
 
-import sparsedepth as sd  # noqa: E402
+from . import harness as H
 
 DEFAULT_STEP = 4
 FRACTION = 0.05
@@ -79,6 +80,82 @@ def plot(curves, path_iter, path_time):
         plt.close(fig)
 
 
+def solve_group(w, solvers, frames, seeds, caps):
+    """Every solver of one group on every frame and seed: ``({solver: [(record, gap, lbfgsb runtime)]}, curves)``.
+
+    ``curves`` are the first frame's and seed's ``[(solver, iterations, times, (F_k - F_best) / F_best)]``.
+    """
+    recs, curves = {s: [] for s in solvers}, None
+    for f in frames:
+        for seed in seeds:
+            runs = {s: H.evaluate(H.ours(f"{s}", weights=w, solver=s, max_iter=caps.get(s), clip_to_observed=False), f,
+                                  fraction=FRACTION, seed=seed, keep_result=True) for s in solvers}
+            best = min(r.objective for r in runs.values())
+            for s, r in runs.items():
+                recs[s].append((r, (r.objective - best) / best, runs["lbfgsb"].runtime))
+            if f is frames[0] and seed == seeds[0]:
+                curves = [(s, r.result.history_array("iteration"), r.result.history_array("time"),
+                           (r.result.history_array("objective") - best) / best) for s, r in runs.items()]
+    return recs, curves
+
+
+def summary_row(group, solver, rs) -> dict:
+    """Mean ± std over frames × seeds of one solver's ``[(record, gap, lbfgsb runtime)]``."""
+    return {"group": group, "solver": solver,
+            "rmse": H.mean_std(r.metrics.rmse for r, _, _ in rs),
+            "mae": H.mean_std(r.metrics.mae for r, _, _ in rs),
+            "runtime": H.mean_std(r.runtime for r, _, _ in rs),
+            "time_ratio": sum(r.runtime for r, _, _ in rs) / max(sum(t for _, _, t in rs), 1e-12),
+            "objective": H.mean_std(r.objective for r, _, _ in rs),
+            "gap": H.mean_std(g for _, g, _ in rs),
+            "gap_max": max(g for _, g, _ in rs),
+            "iterations": H.mean_std(r.result.iterations for r, _, _ in rs),
+            "converged": sum(bool(r.result.converged) for r, _, _ in rs), "n": len(rs)}
+
+
+HEADER = ["objective", "solver", "RMSE", "MAE", "time (s)", "time × L-BFGS-B", "final F", "gap to best",
+          "max gap", "iterations", "converged"]
+
+
+def table_cells(row) -> list:
+    """One line of the table, from :func:`summary_row`."""
+    return [row["group"], row["solver"], H.fmt(*row["rmse"]), H.fmt(*row["mae"]), H.fmt(*row["runtime"], digits=2),
+            H.fmt(row["time_ratio"], digits=2), H.fmt(*row["objective"], digits=4),
+            f"{row['gap'][0]:.1e} ± {row['gap'][1]:.1e}", f"{row['gap_max']:.1e}",
+            f"{row['iterations'][0]:.0f}", f"{row['converged']}/{row['n']}"]
+
+
+def headline(rows) -> str:
+    """The fastest solver within a relative gap of 1e-6 on the default objective, and every other's gap."""
+    first = [r for r in rows if r["group"] == groups()[0][0]]
+    best = min(first, key=lambda r: (r["gap"][0] > 1e-6, r["runtime"][0]))
+    return (f"Headline: on the default objective, {best['solver']} is the fastest solver within a relative gap of "
+            f"1e-6 of the best objective (mean gap {best['gap'][0]:.1e}, {H.fmt(best['time_ratio'], digits=2)} × "
+            "the time of L-BFGS-B); " + ", ".join(f"{r['solver']} gap {r['gap'][0]:.1e} at "
+                                                  f"{H.fmt(r['time_ratio'], digits=2)} ×" for r in first
+                                                  if r is not best) + ".\n\n")
+
+
+def figures_text(frame_name, seed) -> str:
+    """The paragraph and the two image links of Fig. 3."""
+    return (f"\n\nFig. 3 (frame `{frame_name}`, seed {seed}): objective minus the best objective of the "
+            "group, relative, against iteration and wall time (values below 1e-16, i.e. the best itself, drawn at "
+            "1e-16).\n\n"
+            "![objective vs iteration](solver_objective_vs_iter.png)\n\n"
+            "![objective vs time](solver_objective_vs_time.png)")
+
+
+def notes_text(args, caps) -> str:
+    """The section's notes: frames, caps, what ``final F`` and ``gap to best`` mean."""
+    return (H.step_note(args) + f" {FRACTION:.0%} observed. Caps: "
+            + ", ".join(f"{k} max_iter = {v}" for k, v in caps.items())
+            + "; other solvers at their defaults (tolerances in `sparsedepth.solvers`). `final F` is the mean "
+            "exact objective over frames (frames differ in size and depth units, so compare within a frame via "
+            "the gap). `gap to best` = (F − F_best) / F_best with F_best the lowest F of any solver of the same "
+            "objective on that frame and input (mean ± std, and max, over frames × seeds). The smoothed-L1 "
+            "solvers (adam, lbfgsb) minimise a smoothed objective, so they keep a gap even when converged.")
+
+
 def run(argv=None, *, plot_dir=None):
     """Run the comparison; returns ``(markdown, rows)`` with one row per (group, solver)."""
     p = H.parser(__doc__.splitlines()[0], default_step=DEFAULT_STEP)
@@ -92,63 +169,18 @@ def run(argv=None, *, plot_dir=None):
     seeds = H.seeds_of(args)
     caps = QUICK_MAX_ITER if args.quick else MAX_ITER
     plot_dir = H.DOCS if plot_dir is None else Path(plot_dir)
-    table, rows, curves = [], [], {}
+    rows, curves = [], {}
     for group, w, solvers in groups():
-        recs = {s: [] for s in solvers}
-        for f in frames:
-            for seed in seeds:
-                runs = {s: H.evaluate(H.ours(f"{s}", weights=w, solver=s, max_iter=caps.get(s), clip_to_observed=False), f,
-                                      fraction=FRACTION, seed=seed, keep_result=True) for s in solvers}
-                best = min(r.objective for r in runs.values())
-                for s, r in runs.items():
-                    recs[s].append((r, (r.objective - best) / best, runs["lbfgsb"].runtime))
-                if f is frames[0] and seed == seeds[0]:
-                    curves[group] = [(s, r.result.history_array("iteration"), r.result.history_array("time"),
-                                      (r.result.history_array("objective") - best) / best) for s, r in runs.items()]
-        for s in solvers:
-            rs = recs[s]
-            row = {"group": group, "solver": s,
-                   "rmse": H.mean_std(r.metrics.rmse for r, _, _ in rs),
-                   "mae": H.mean_std(r.metrics.mae for r, _, _ in rs),
-                   "runtime": H.mean_std(r.runtime for r, _, _ in rs),
-                   "time_ratio": sum(r.runtime for r, _, _ in rs) / max(sum(t for _, _, t in rs), 1e-12),
-                   "objective": H.mean_std(r.objective for r, _, _ in rs),
-                   "gap": H.mean_std(g for _, g, _ in rs),
-                   "gap_max": max(g for _, g, _ in rs),
-                   "iterations": H.mean_std(r.result.iterations for r, _, _ in rs),
-                   "converged": sum(bool(r.result.converged) for r, _, _ in rs), "n": len(rs)}
-            rows.append(row)
-            table.append([group, s, H.fmt(*row["rmse"]), H.fmt(*row["mae"]), H.fmt(*row["runtime"], digits=2),
-                          H.fmt(row["time_ratio"], digits=2), H.fmt(*row["objective"], digits=4),
-                          f"{row['gap'][0]:.1e} ± {row['gap'][1]:.1e}", f"{row['gap_max']:.1e}",
-                          f"{row['iterations'][0]:.0f}", f"{row['converged']}/{row['n']}"])
-    header = ["objective", "solver", "RMSE", "MAE", "time (s)", "time × L-BFGS-B", "final F", "gap to best",
-              "max gap", "iterations", "converged"]
-    body = H.markdown_table(header, table)
-    first = [r for r in rows if r["group"] == groups()[0][0]]
-    best = min(first, key=lambda r: (r["gap"][0] > 1e-6, r["runtime"][0]))
-    body = (f"Headline: on the default objective, {best['solver']} is the fastest solver within a relative gap of "
-            f"1e-6 of the best objective (mean gap {best['gap'][0]:.1e}, {H.fmt(best['time_ratio'], digits=2)} × "
-            "the time of L-BFGS-B); " + ", ".join(f"{r['solver']} gap {r['gap'][0]:.1e} at "
-                                                  f"{H.fmt(r['time_ratio'], digits=2)} ×" for r in first
-                                                  if r is not best) + ".\n\n") + body
+        recs, curves[group] = solve_group(w, solvers, frames, seeds, caps)
+        rows += [summary_row(group, s, recs[s]) for s in solvers]
+    body = headline(rows) + H.markdown_table(HEADER, [table_cells(r) for r in rows])
     figs = ""
     if not args.no_plot:
         plot(curves, plot_dir / "solver_objective_vs_iter.png", plot_dir / "solver_objective_vs_time.png")
-        figs = (f"\n\nFig. 3 (frame `{frames[0].name}`, seed {seeds[0]}): objective minus the best objective of the "
-                "group, relative, against iteration and wall time (values below 1e-16, i.e. the best itself, drawn at "
-                "1e-16).\n\n"
-                "![objective vs iteration](solver_objective_vs_iter.png)\n\n"
-                "![objective vs time](solver_objective_vs_time.png)")
-    notes = (H.step_note(args) + f" {FRACTION:.0%} observed. Caps: "
-             + ", ".join(f"{k} max_iter = {v}" for k, v in caps.items())
-             + "; other solvers at their defaults (tolerances in `sparsedepth.solvers`). `final F` is the mean "
-             "exact objective over frames (frames differ in size and depth units, so compare within a frame via "
-             "the gap). `gap to best` = (F − F_best) / F_best with F_best the lowest F of any solver of the same "
-             "objective on that frame and input (mean ± std, and max, over frames × seeds). The smoothed-L1 "
-             "solvers (adam, lbfgsb) minimise a smoothed objective, so they keep a gap even when converged.")
-    text = H.section("Solvers (paper Table 3.3 and Fig. 3)", command=H.command_line("solvers.py", argv or []),
-                     frames_=frames, seeds=seeds, body=body + figs, notes=notes, elapsed=time.perf_counter() - t0)
+        figs = figures_text(frames[0].name, seeds[0])
+    text = H.section("Solvers (paper Table 3.3 and Fig. 3)", command=H.command_line("solvers", argv or []),
+                     frames_=frames, seeds=seeds, body=body + figs, notes=notes_text(args, caps),
+                     elapsed=time.perf_counter() - t0)
     return text, rows
 
 

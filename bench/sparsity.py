@@ -2,23 +2,23 @@
 
 Run (full, ~minutes on 2 cores)::
 
-    python bench/sparsity.py --out docs/results_sparsity.md
+    python -m bench.sparsity --out docs/results_sparsity.md
 
 or ``--quick`` for a seconds-long smoke test on tiny frames.  Frames are
 :data:`frames.REPORT_FRAMES` subsampled by ``--step`` (default 2); ours is
 ``sparsedepth.complete_depth`` with ``sd.DEFAULT_WEIGHTS`` and ``solver="auto"``.
 Every number is the mean ± std over frames × seeds, scored on the valid
 ground-truth pixels hidden from the method.
+
+May import :mod:`bench.harness`.
 """
 
 from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import harness as H  # noqa: E402
+from . import harness as H
 
 DEFAULT_STEP = 2
 
@@ -58,7 +58,7 @@ def run(argv=None):
         body = (f"Headline: at 5 % observed, ours has {H.fmt(*o['rmse_ratio'])} × the RMSE of the nearest fill "
                 f"(mean ± std over {o['n']} inputs) at {H.fmt(o['time_ratio'], digits=0)} × its runtime "
                 f"({H.fmt(o['runtime'][0], digits=2)} s per frame).\n\n") + body
-    text = H.section("Sparsity (paper Table 3.1)", command=H.command_line("sparsity.py", argv or []),
+    text = H.section("Sparsity (paper Table 3.1)", command=H.command_line("sparsity", argv or []),
                      frames_=frames, seeds=seeds, body=body, notes=notes, elapsed=time.perf_counter() - t0)
     return text, rows
 

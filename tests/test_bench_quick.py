@@ -1,5 +1,6 @@
 """Smoke tests of the benchmark scripts in --quick mode (tiny frames, one seed; seconds)."""
 
+import importlib
 import importlib.util
 import math
 from pathlib import Path
@@ -11,11 +12,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def load(name):
-    """bench/<name>.py, imported by path (bench/ is not a package)."""
-    spec = importlib.util.spec_from_file_location(f"bench_{name}", REPO / "bench" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    """The benchmark module ``bench.<name>`` (run from the repository root as ``python -m bench.<name>``)."""
+    return importlib.import_module(f"bench.{name}")
 
 
 def first_table(markdown):
@@ -123,7 +121,7 @@ def test_run_all_quick_writes_every_section(tmp_path):
     extra = [] if have_matplotlib else ["--no-plot"]
     assert run_all.main(["--quick", "--jobs", "1", "--out", str(out), *extra]) == 0
     text = out.read_text()
-    assert text.count("\n## ") == 6 and text.count("\nHeadline") == 5 and "Command: `python bench/sparsity.py --quick`" in text
+    assert text.count("\n## ") == 6 and text.count("\nHeadline") == 5 and "Command: `python -m bench.sparsity --quick`" in text
     assert (tmp_path / "solver_objective_vs_iter.png").exists() == have_matplotlib
 
 
@@ -140,14 +138,14 @@ def test_run_all_without_matplotlib_stops_before_running_anything(monkeypatch, t
 def test_committed_results_were_made_with_the_current_defaults():
     """docs/results.md records the default weights of its run: they must be today's defaults.
 
-    A run started before a change of the defaults and committed after it once left the README's figures
-    without a source; this catches that (regenerate with ``python bench/run_all.py``).
+    A run started before a change of the defaults and committed after it would leave the README's figures
+    without a source; this catches that (regenerate with ``python -m bench.run_all``).
     """
     import re
 
     import sparsedepth as sd
 
-    harness = load("run_all").H  # the formatting run_all writes with
+    harness = load("harness")  # the formatting run_all writes with
     text = (REPO / "docs" / "results.md").read_text()
     recorded = re.findall(r"[Dd]efault weights at run time: (.*?)\.\n", text)
     recorded += re.findall(r"defaults at run time: (.*?)\):", text)

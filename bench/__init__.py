@@ -1,0 +1,26 @@
+"""Benchmarks of sparsedepth: every table and figure in ``docs/`` is written by a module of this package.
+
+Run each one as a module from the repository root (``python -m bench.<name>``; ``--help`` lists its options,
+and most have ``--quick`` for a seconds-long smoke test on tiny frames):
+
+* :mod:`bench.run_all` - every table of ``docs/results.md`` (and the solver figures), from the five below;
+* :mod:`bench.sparsity` - nearest-neighbour fill vs completion at 1 %, 5 %, 10 % observed (paper Table 3.1);
+* :mod:`bench.baselines` - every baseline (nearest, linear, biharmonic, colorization) side by side with ours;
+* :mod:`bench.ablation` - which terms of the objective matter (paper Table 3.2) and the extension terms;
+* :mod:`bench.solvers` - every solver on the same objective: accuracy, speed, objective gap (paper Table 3.3, Fig. 3);
+* :mod:`bench.protocol` - the literature's NYU protocol (304x228 crop, 200 / 500 samples);
+* :mod:`bench.perf` - same-run speed ratios and peak memory on a 640x480 NYU frame (``docs/performance.md``);
+* :mod:`bench.quadratic_variants` - multigrid variants of the default quadratic system and their diagnosis;
+* :mod:`bench.holefill` - hole filling against the NYU-provided filled depth (``docs/holefill.md``);
+* :mod:`bench.batch_scale` - batch throughput, process pool vs Dask LocalCluster (``docs/batch_scale.md``);
+* :mod:`bench.tune` - the seeded search that chose ``sparsedepth.DEFAULT_WEIGHTS`` (``docs/tuning.md``).
+
+Shared pieces: :mod:`bench.frames` (the reported and the tuning frames, disjoint), :mod:`bench.harness`
+(inputs, methods, one evaluation, aggregation, timing, markdown tables, machine description, report header,
+command line), :mod:`bench.blas` (one BLAS thread, before numpy is imported), :mod:`bench.naive_colorization`
+(the slow per-pixel reference port of the NYU toolbox fill) and ``bench/templates/`` (the prose of the reports,
+as :class:`string.Template` files).
+
+The benchmark modules may import :mod:`sparsedepth`, numpy, scipy, scikit-image and each other's shared pieces;
+the library never imports this package.  Importing ``bench`` itself imports nothing.
+"""

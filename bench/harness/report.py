@@ -1,0 +1,67 @@
+"""The header every report starts with (command, machine, frames, seeds, weights) and writing reports.
+
+A report names the command that reproduces it, ``python -m bench.<module> <arguments>``
+(:func:`command_line`), then the machine, the frames and the seeds (:func:`section`).
+
+May import :mod:`sparsedepth` and :mod:`.machine`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import sparsedepth as sd
+
+from .machine import machine_markdown
+
+__all__ = ["REPO", "DOCS", "command_line", "weights_markdown", "frames_markdown", "step_note", "section",
+           "write_text"]
+
+REPO = Path(__file__).resolve().parents[2]
+DOCS = REPO / "docs"
+
+
+def command_line(module: str, argv=()) -> str:
+    """``python -m bench.<module> <argv>``: the command that reproduces a report."""
+    return " ".join(["python", "-m", f"bench.{module}", *map(str, argv)])
+
+
+def weights_markdown(w) -> str:
+    """``alpha = 1, beta = ...``: every weight of a :class:`sparsedepth.Weights`."""
+    return ", ".join(f"{k} = {v:g}" for k, v in w.as_dict().items())
+
+
+def frames_markdown(frames_) -> str:
+    """The frames' names and sizes, for a report header."""
+    return ", ".join(f"`{f.name}` {f.shape[1]}x{f.shape[0]}" for f in frames_)
+
+
+def step_note(args) -> str:
+    """One sentence on how the frames were reduced."""
+    if args.quick:
+        return "Quick mode: tiny frames (smoke test only; not a result)."
+    if args.step == 1:
+        return "Frames at full resolution."
+    return (f"Frames subsampled by keeping one pixel in {args.step}x{args.step} (`[::{args.step}, ::{args.step}]` of "
+            "the ground truth and the image alike, no interpolation) to keep the run short.")
+
+
+def section(title, *, command, frames_, seeds, body, notes="", elapsed=None) -> str:
+    """A results section: title, the command, machine, frames, seeds, then the body."""
+    lines = [f"## {title}", "", f"Command: `{command}`", "",
+             f"Machine: {machine_markdown()}.", "",
+             f"Frames ({len(frames_)}): {frames_markdown(frames_)}.", "",
+             f"Seeds: {', '.join(map(str, seeds))}. Default weights at run time: {weights_markdown(sd.DEFAULT_WEIGHTS)}."]
+    if elapsed is not None:
+        lines += ["", f"Wall time of this section: {elapsed:.0f} s."]
+    if notes:
+        lines += ["", notes.strip()]
+    lines += ["", body.strip(), ""]
+    return "\n".join(lines)
+
+
+def write_text(path, text: str) -> None:
+    """Write ``text`` to ``path``, creating its folder."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
