@@ -45,8 +45,8 @@ Problems (frame ``nyu_metric3d/00000``, 5 % of the valid pixels observed,
    measured in a fresh process started before the others (``VmHWM``, image
    decoding included).
 
-The report is rendered by :mod:`bench.perf_report`.  May import :mod:`sparsedepth` (also
-``sparsedepth.holes.colorization``, ``sparsedepth.solvers.core`` and ``sparsedepth.linalg.multigrid``),
+The report is rendered by :mod:`bench.perf_report`.  May import :mod:`sparsedepth` and its
+subpackages (``sparsedepth.holes``, ``sparsedepth.solvers``, ``sparsedepth.linalg``),
 numpy, scipy, scikit-image, :mod:`bench.harness`, :mod:`bench.naive_colorization` and :mod:`bench.perf_report`.
 """
 
@@ -69,8 +69,8 @@ import numpy as np  # noqa: E402
 import scipy.sparse.linalg as spla  # noqa: E402
 
 import sparsedepth as sd  # noqa: E402
-from sparsedepth.holes.colorization import colorization_fill  # noqa: E402
-from sparsedepth.solvers.core import solve  # noqa: E402
+from sparsedepth.holes import colorization_fill  # noqa: E402
+from sparsedepth.solvers import solve  # noqa: E402
 
 from . import harness as H  # noqa: E402
 from . import naive_colorization, perf_report  # noqa: E402

@@ -33,7 +33,9 @@ from pyamg.multilevel import MultilevelSolver  # noqa: E402
 from pyamg.relaxation.relaxation import gauss_seidel  # noqa: E402
 
 import sparsedepth as sd  # noqa: E402
-from sparsedepth.linalg.multigrid import GridMultigrid  # noqa: E402
+from sparsedepth.grid import gradient  # noqa: E402
+from sparsedepth.linalg import GridMultigrid  # noqa: E402
+from sparsedepth.objective import pair_edge_weights  # noqa: E402
 
 from . import perf  # noqa: E402
 
@@ -91,8 +93,8 @@ def main():
     obj, coarse, _ = sd.build_objective(image, sparse, mask, weights=sd.DEFAULT_WEIGHTS.replace(gamma=0))
     A, b, _ = obj.normal_equations()
     shape, x0 = obj.shape, coarse.ravel()
-    pair = sd.objective.pair_edge_weights(image, sd.DEFAULT_WEIGHTS.kappa)
-    G = sd.operators.gradient(shape)
+    pair = pair_edge_weights(image, sd.DEFAULT_WEIGHTS.kappa)
+    G = gradient(shape)
 
     def grid(**options):
         return GridMultigrid(A, shape, interpolation="auto", **options).to_pyamg()

@@ -12,7 +12,7 @@ from .metrics import DepthMetrics, depth_metrics
 from .objective.objective import AbsTerm, Objective, QuadraticTerm, build_objective, edge_weights
 from .result import ClampWarning, CompletionResult, IterationRecord, SolverState
 from .sampling import sample_depth, sample_mask, valid_depth_mask
-from .solvers.core import SOLVER_OPTIONS, SOLVERS
+from .solvers import SOLVER_OPTIONS, SOLVERS
 from .objective.weights import DEFAULT_WEIGHTS, Weights
 from .datasets import (
     Frame,

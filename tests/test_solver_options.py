@@ -50,7 +50,8 @@ def _solver_functions():
 
 
 def test_the_registry_lists_exactly_the_solver_functions():
-    assert SOLVERS == tuple(REGISTRY) == tuple(SOLVER_OPTIONS) == sd.SOLVERS
+    assert tuple(SOLVERS) == tuple(REGISTRY) == tuple(SOLVER_OPTIONS) == tuple(sd.SOLVERS)
+    assert all(SOLVERS[name] is REGISTRY[name].solve for name in SOLVERS)  # sd.SOLVERS stays a name → function mapping
     assert set(SOLVERS) == {"direct", "cg", "amg", "irls", "admm", "lbfgsb", "adam"}
     assert {entry.solve for entry in REGISTRY.values()} == _solver_functions()
     for name, entry in REGISTRY.items():

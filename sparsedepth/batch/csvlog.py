@@ -18,7 +18,7 @@ import io as _io
 import json
 from pathlib import Path
 
-from ..io.formats import atomic_target
+from ..io import atomic_target
 
 __all__ = ["CSV_COLUMNS", "LINE_END", "HEADER", "settings_path", "fingerprint", "settings_difference", "csv_line",
            "append_row", "read_log", "compact", "write_text_atomic", "start_log", "compact_file"]

@@ -19,7 +19,7 @@ from pathlib import Path
 from .._validation import is_int, is_real
 from ..holes import FILL_METHODS
 from ..io import MAX_PIXELS
-from ..io.formats import resolve_scale
+from ..io import resolve_scale
 from ..objective import DEFAULT_WEIGHTS, Weights
 from ..solvers import SOLVERS
 from .evaluate import TASKS

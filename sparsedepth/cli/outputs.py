@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
-from ..io.formats import create_temporary, fsync
+from ..io import create_temporary, fsync
 from .messages import one_line
 
 __all__ = ["Named", "OutputError", "check_distinct", "check_writable", "commit"]

@@ -16,7 +16,7 @@ import math
 from ..batch import default_workers
 from ..holes import FILL_METHODS
 from ..io import DEPTH_SCALES, MAX_PIXELS
-from ..io.formats import resolve_scale
+from ..io import resolve_scale
 from ..objective import DEFAULT_WEIGHTS, Weights
 from ..solvers import SOLVERS
 

@@ -19,7 +19,7 @@ import numpy as np
 from ..batch import evaluate_frame
 from ..datasets import load_motorcycle
 from ..io import KINECT_NYU, read_calib, read_depth, read_image, read_mask
-from ..io.formats import depth_writer, resolve_scale
+from ..io import depth_writer, resolve_scale
 from .messages import UsageError, one_line, warnings_as_lines
 from .outputs import Named, commit
 from .parser import DEMO_DIR, DEMO_DOWNSAMPLE, DEMO_KEEP_FRACTION, weights_of

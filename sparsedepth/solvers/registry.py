@@ -73,8 +73,8 @@ REGISTRY = {
     "adam": SolverEntry(solve_adam, AdamOptions, 1e-7, 20000, smoothed=True, smoothing_ties=True),
 }
 
-#: The solver names, in the order of :data:`REGISTRY`.
-SOLVERS = tuple(REGISTRY)
+#: Solver name → solve function, in the order of :data:`REGISTRY` (the public ``sd.SOLVERS``).
+SOLVERS = {name: entry.solve for name, entry in REGISTRY.items()}
 #: The valid ``options`` of every solver with their defaults (``None``: computed from the problem, see the
 #: solver's docstring).  :func:`~sparsedepth.solvers.solve` rejects any other key and fills in the defaults.
 SOLVER_OPTIONS = {name: entry.options.defaults() for name, entry in REGISTRY.items()}
