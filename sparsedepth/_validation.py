@@ -1,4 +1,8 @@
-"""Input checks shared by the public functions (one place for every message)."""
+"""Input checks shared by the public functions (one place for every message).
+
+One rule per concept: image, depth and mask, grid shape, numbers.  May import
+NumPy (and, inside :func:`check_weights`, :class:`sparsedepth.Weights`).
+"""
 
 from __future__ import annotations
 
@@ -127,3 +131,57 @@ def as_depth_and_mask(sparse_depth, mask=None, *, name: str = "sparse_depth"):
         )
     depth[~observed] = 0.0
     return depth, observed
+
+
+# --- positive number
+__all__ += ["check_positive_real"]
+
+
+def check_positive_real(value, *, name: str) -> float:
+    """Return ``value`` as a float; ``ValueError`` unless it converts to a finite number ``> 0``."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
+    if not np.isfinite(number) or number <= 0:
+        raise ValueError(f"{name} must be finite and > 0, got {number!r}")
+    return number
+
+
+# --- non-negative number
+__all__ += ["check_nonnegative_real"]
+
+
+def check_nonnegative_real(value, *, name: str) -> float:
+    """Return ``value`` as a float; ``ValueError`` unless it converts to a finite number ``>= 0``."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not np.isfinite(number) or number < 0:
+        raise ValueError(f"{name} must be finite and >= 0, got {number!r}")
+    return number
+
+
+# --- count (an integer >= 1)
+__all__ += ["check_count"]
+
+
+def check_count(value, *, name: str) -> int:
+    """Return ``value`` as an int; ``ValueError`` unless it is an integer (not a bool) ``>= 1``."""
+    if not is_int(value) or value < 1:
+        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
+# --- boolean mask
+__all__ += ["check_bool_mask"]
+
+
+def check_bool_mask(mask, shape, *, name: str = "mask", shape_name: str = "depth") -> np.ndarray:
+    """Return ``mask`` as an ndarray; ``ValueError`` unless it is boolean and of ``shape`` (that of ``shape_name``)."""
+    array = np.asarray(mask)
+    if array.dtype != np.bool_:
+        raise ValueError(f"{name} must be a boolean array, got dtype {array.dtype}")
+    check_same_shape(array.shape, shape, name, shape_name)
+    return array

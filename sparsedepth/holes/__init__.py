@@ -3,7 +3,8 @@
 May import :mod:`sparsedepth.completion` and everything below it.
 """
 
-from .colorization import GREY_WEIGHTS, colorization_fill, colorization_weights, rgb_to_grey
+from .affinity import GREY_WEIGHTS, colorization_weights, rgb_to_grey
+from .colorization import colorization_fill
 from .fill import FILL_METHODS, fill_holes
 
 __all__ = ["FILL_METHODS", "fill_holes", "GREY_WEIGHTS", "rgb_to_grey", "colorization_weights", "colorization_fill"]
