@@ -208,3 +208,22 @@ def test_objective_rejects_a_non_number_l1_smoothing_with_value_error():
         Objective((2, 3), [], l1_smoothing="small")
     with pytest.raises(ValueError, match="l1_smoothing must be finite and > 0"):
         Objective((2, 3), [], l1_smoothing=0.0)
+
+
+def test_clamp_warning_points_at_the_caller():
+    # complete_depth's clamp is a named step; its ClampWarning must still name the caller's line
+    import warnings
+
+    from sparsedepth import ClampWarning
+
+    image = np.zeros((6, 20))
+    depth = np.zeros((6, 20))
+    depth[:, 0], depth[:, 9], depth[:, 10], depth[:, 19] = 1.0, 1.0, 5.0, 5.0  # a step: the smoothness overshoots
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = complete_depth(image, depth, weights=Weights(alpha=1.0, delta=1e-6, beta_second=1.0), solver="direct")
+    clamp = [w for w in caught if issubclass(w.category, ClampWarning)]
+    assert result.clamped > 0 and len(clamp) == 1
+    assert clamp[0].filename == __file__
+    assert f"{result.clamped} of 120 pixels" in str(clamp[0].message)
+    assert np.all((result.depth >= 1.0) & (result.depth <= 5.0))
