@@ -1,5 +1,10 @@
 """Filling the holes of raw sensor depth: the NYU toolbox colorization fill and the completion objective.
 
+``fill`` (:func:`fill_holes`, the front door of both methods), ``colorization``
+(the exact NYU toolbox fill), and its parts: ``affinity`` (grey image, window
+weights, sparse rows), ``ordering`` (nested-dissection elimination order),
+``schur`` (the block elimination and GMRES on the Schur complement).
+
 May import :mod:`sparsedepth.completion` and everything below it.
 """
 
