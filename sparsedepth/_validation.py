@@ -1,18 +1,60 @@
-"""Input checks shared by the public functions (one place for every message)."""
+"""Input checks shared by the whole package: one rule per concept, one place for every message.
+
+Every public function checks its arguments here before it works, so the same
+concept is refused with the same exception and message everywhere:
+
+- numbers: :func:`is_int`, :func:`is_real`, :func:`check_count` (an integer
+  ``>= 1``), :func:`check_positive_real` / :func:`check_nonnegative_real`
+  (algorithm parameters: weights, tolerances, ``alpha``, ``kappa``),
+  :func:`check_positive_finite` (physical quantities: depth scales, focal
+  lengths, baselines; a non-number is a ``TypeError``);
+- grid shapes: :func:`check_grid_shape`, :func:`check_same_shape`;
+- images, depth and masks: :func:`as_float_image`, :func:`as_depth_and_mask`,
+  :func:`check_bool_mask`;
+- sparse operators on a grid: :func:`as_grid_operator`;
+- weights: :func:`check_weights`;
+- paths and frame indices: :func:`check_input_file` (a regular file, checked
+  with :func:`os.stat` only), :func:`check_folder`, :func:`check_index`, and
+  :func:`argument_label` (how an argument is named in a message: a
+  command-line flag as typed, a Python name in backticks).
+
+May import NumPy, SciPy and the standard library (and, inside
+:func:`check_weights`, :class:`sparsedepth.Weights`); nothing else of the package.
+"""
 
 from __future__ import annotations
 
+import math
 import numbers
 import operator
 import os
+import stat
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["as_float_image", "as_depth_and_mask", "check_same_shape", "check_weights", "check_grid_shape",
-           "is_int", "is_real",
-           "check_folder", "check_index"]
+__all__ = [
+    "is_int",
+    "is_real",
+    "check_count",
+    "check_positive_real",
+    "check_nonnegative_real",
+    "check_positive_finite",
+    "check_grid_shape",
+    "check_same_shape",
+    "as_float_image",
+    "as_depth_and_mask",
+    "check_bool_mask",
+    "as_grid_operator",
+    "check_weights",
+    "argument_label",
+    "check_input_file",
+    "check_folder",
+    "check_index",
+]
 
+
+# Numbers
 
 def is_int(value) -> bool:
     """True for a Python or NumPy integer that is not a bool."""
@@ -23,6 +65,54 @@ def is_real(value) -> bool:
     """True for a Python or NumPy real number (integers included) that is not a bool."""
     return isinstance(value, (numbers.Real, np.floating, np.integer)) and not isinstance(value, (bool, np.bool_))
 
+
+def check_count(value, *, name: str) -> int:
+    """Return ``value`` as an int; ``ValueError`` unless it is an integer (not a bool) ``>= 1``."""
+    if not is_int(value) or value < 1:
+        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
+def check_positive_real(value, *, name: str) -> float:
+    """Return ``value`` as a float; ``ValueError`` unless it converts to a finite number ``> 0``."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
+    if not np.isfinite(number) or number <= 0:
+        raise ValueError(f"{name} must be finite and > 0, got {number!r}")
+    return number
+
+
+def check_nonnegative_real(value, *, name: str) -> float:
+    """Return ``value`` as a float; ``ValueError`` unless it converts to a finite number ``>= 0``."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not np.isfinite(number) or number < 0:
+        raise ValueError(f"{name} must be finite and >= 0, got {number!r}")
+    return number
+
+
+def check_positive_finite(value, *, label: str, expected: str = "a real number") -> float:
+    """Return ``value`` as a float: ``TypeError`` unless it is a real number, ``ValueError`` unless finite and > 0.
+
+    ``label`` is the argument as it appears in messages (see
+    :func:`argument_label`); ``expected`` ends the type message
+    "<label> must be <expected>" (e.g. "a positive number or a preset name"
+    where a preset name is also accepted).  The rule for depth scales and
+    every other strictly positive quantity (focal length, baseline).
+    """
+    if not is_real(value):
+        raise TypeError(f"{label} must be {expected}, got {type(value).__name__}.")
+    number = float(value)
+    if not math.isfinite(number) or number <= 0:
+        raise ValueError(f"{label} must be a finite positive number, got {value!r}.")
+    return number
+
+
+# Grid shapes
 
 def check_grid_shape(shape, *, name: str = "shape") -> tuple[int, int]:
     """Return ``shape`` as ``(H, W)`` of Python ints; ``ValueError`` unless it is two integers ``>= 1``."""
@@ -35,14 +125,12 @@ def check_grid_shape(shape, *, name: str = "shape") -> tuple[int, int]:
     return int(values[0]), int(values[1])
 
 
-def check_weights(weights, *, name: str = "weights") -> None:
-    """Raise ``TypeError`` unless ``weights`` is a :class:`sparsedepth.Weights`."""
-    from .objective.weights import Weights
+def check_same_shape(shape_a, shape_b, name_a: str, name_b: str) -> None:
+    if tuple(shape_a) != tuple(shape_b):
+        raise ValueError(f"{name_a} has shape {tuple(shape_a)} but {name_b} has shape {tuple(shape_b)}; they must match")
 
-    if not isinstance(weights, Weights):
-        hint = "use sd.Weights(**d)" if isinstance(weights, dict) else "use sd.Weights(alpha=..., gamma=...)"
-        raise TypeError(f"{name} must be a sparsedepth.Weights; got {type(weights).__name__}: {hint}")
 
+# Images, depth and masks
 
 def as_float_image(image, *, name: str = "image") -> np.ndarray:
     """Return ``image`` as float64 ``(H, W, C)`` in [0, 1] (a new array).
@@ -82,11 +170,6 @@ def as_float_image(image, *, name: str = "image") -> np.ndarray:
     if out.ndim == 2:
         out = out[:, :, None]
     return out
-
-
-def check_same_shape(shape_a, shape_b, name_a: str, name_b: str) -> None:
-    if tuple(shape_a) != tuple(shape_b):
-        raise ValueError(f"{name_a} has shape {tuple(shape_a)} but {name_b} has shape {tuple(shape_b)}; they must match")
 
 
 def as_depth_and_mask(sparse_depth, mask=None, *, name: str = "sparse_depth"):
@@ -133,10 +216,16 @@ def as_depth_and_mask(sparse_depth, mask=None, *, name: str = "sparse_depth"):
     return depth, observed
 
 
-# --- square matrix (a sparse operator on a pixel grid)
+def check_bool_mask(mask, shape, *, name: str = "mask", shape_name: str = "depth") -> np.ndarray:
+    """Return ``mask`` as an ndarray; ``ValueError`` unless it is boolean and of ``shape`` (that of ``shape_name``)."""
+    array = np.asarray(mask)
+    if array.dtype != np.bool_:
+        raise ValueError(f"{name} must be a boolean array, got dtype {array.dtype}")
+    check_same_shape(array.shape, shape, name, shape_name)
+    return array
 
-__all__ += ["as_grid_operator"]
 
+# Sparse operators on a grid
 
 def as_grid_operator(A, shape, *, name: str = "A"):
     """Return ``(A, (H, W))``: ``A`` as canonical float64 CSR (no copy when it already is) and the grid shape.
@@ -145,7 +234,7 @@ def as_grid_operator(A, shape, *, name: str = "A"):
     ``ValueError`` unless ``shape`` is a grid shape (see
     :func:`check_grid_shape`) and ``A`` is ``(H W, H W)``.
     """
-    import scipy.sparse as sp  # local: this rule's additions stay in one block
+    import scipy.sparse as sp  # only this rule needs SciPy
 
     if not sp.issparse(A):
         raise TypeError(f"`{name}` must be a scipy.sparse matrix or array, got {type(A).__name__}.")
@@ -163,13 +252,20 @@ def as_grid_operator(A, shape, *, name: str = "A"):
         A = A.copy()
         A.sum_duplicates()
     return A, (h, w)
-# --- path
-import os  # noqa: E402 - kept with the rule that uses it, so that each concept's block stands alone
-import stat  # noqa: E402
-from pathlib import Path  # noqa: E402
 
-__all__ += ["argument_label", "check_input_file"]
 
+# Weights
+
+def check_weights(weights, *, name: str = "weights") -> None:
+    """Raise ``TypeError`` unless ``weights`` is a :class:`sparsedepth.Weights`."""
+    from .objective.weights import Weights
+
+    if not isinstance(weights, Weights):
+        hint = "use sd.Weights(**d)" if isinstance(weights, dict) else "use sd.Weights(alpha=..., gamma=...)"
+        raise TypeError(f"{name} must be a sparsedepth.Weights; got {type(weights).__name__}: {hint}")
+
+
+# Paths and frame indices
 
 def argument_label(name: str) -> str:
     """How an argument appears in messages: command-line flags as typed (``--depth``), Python names in backticks.
@@ -215,28 +311,6 @@ def check_input_file(path, *, name: str = "path") -> Path:
     return path
 
 
-# --- scale
-import math  # noqa: E402
-
-__all__ += ["check_positive_finite"]
-
-
-def check_positive_finite(value, *, label: str, expected: str = "a real number") -> float:
-    """Return ``value`` as a float: ``TypeError`` unless it is a real number, ``ValueError`` unless finite and > 0.
-
-    ``label`` is the argument as it appears in messages (see
-    :func:`argument_label`); ``expected`` ends the type message
-    "<label> must be <expected>" (e.g. "a positive number or a preset name"
-    where a preset name is also accepted).  The rule for depth scales and
-    every other strictly positive quantity (focal length, baseline).
-    """
-    if not is_real(value):
-        raise TypeError(f"{label} must be {expected}, got {type(value).__name__}.")
-    number = float(value)
-    if not math.isfinite(number) or number <= 0:
-        raise ValueError(f"{label} must be a finite positive number, got {value!r}.")
-    return number
-# --- folder path
 def check_folder(folder, name: str) -> Path:
     """Return ``folder`` as a :class:`~pathlib.Path` of an existing directory.
 
@@ -250,7 +324,6 @@ def check_folder(folder, name: str) -> Path:
     return folder
 
 
-# --- frame index
 def check_index(index, count: int) -> int:
     """Return frame ``index`` of ``count`` frames as ``0 <= i < count`` (negative counts from the end).
 

@@ -12,6 +12,11 @@ completion against.
   (``skimage.restoration.inpaint_biharmonic``);
 - :func:`colorization_baseline`: the Levin / NYU-toolbox colorization fill,
   the only one that uses the image.
+
+May import NumPy, SciPy, scikit-image, :mod:`sparsedepth._validation` and, inside
+:func:`colorization_baseline`, :mod:`sparsedepth.holes.colorization` (imported
+there because :mod:`sparsedepth.holes` imports :mod:`sparsedepth.completion`,
+whose objective imports this module's nearest fill).
 """
 
 from __future__ import annotations

@@ -1,4 +1,8 @@
-"""The public entry point: :func:`complete_depth`."""
+"""The public entry point: :func:`complete_depth` (checks, scaling, solve, clamp).
+
+May import every subpackage below the front door: :mod:`~sparsedepth.objective`,
+:mod:`~sparsedepth.solvers`, :mod:`~sparsedepth.result` and :mod:`sparsedepth._validation`.
+"""
 
 from __future__ import annotations
 
@@ -20,6 +24,7 @@ def choose_solver(weights: Weights) -> str:
     return "amg" if weights.gamma == 0 else "admm"
 
 
+# the numpydoc docstring (the objective, scaling and clamp in Notes) is long; the code is short
 def complete_depth(
     image,
     sparse_depth,
@@ -137,51 +142,13 @@ def complete_depth(
     >>> result.depth.shape
     (40, 50)
     """
-    check_weights(weights)
-    name = choose_solver(weights) if solver == "auto" else solver
-    if name not in SOLVERS:
-        raise ValueError(f"unknown solver {solver!r}; choose one of {['auto', *sorted(SOLVERS)]}")
-    tol, max_iter, options = check_solver_arguments(name, tol, max_iter, options)
-    if not isinstance(clip_to_observed, (bool, np.bool_)):
-        raise TypeError(f"clip_to_observed must be True or False; got {type(clip_to_observed).__name__}")
-    depth, observed = as_depth_and_mask(sparse_depth, mask)
-    observed_values = depth[observed]
-    depth_range = (float(observed_values.min()), float(observed_values.max())) if clip_to_observed else (0.0, np.inf)
-    scale = depth_scale(observed_values)
-    del observed_values
-    # the objective is built in units of `scale` (depth / s, gamma / s, eps / s: F / s²), see Notes
-    depth /= scale
-    objective, coarse, observed = build_objective(
-        image, depth, observed, weights=weights.replace(gamma=weights.gamma / scale),
-        l1_smoothing=l1_smoothing / scale)
-    del depth
-    if x0 is None:
-        start = coarse.reshape(-1).view()  # no copy (8-MP memory); every solver copies its start
-        start.flags.writeable = False  # ... and the prior's target must stay intact
-    else:
-        start = np.asarray(x0, dtype=np.float64)
-        if start.shape != objective.shape:
-            raise ValueError(f"x0 has shape {start.shape}, expected {objective.shape}")
-        if not np.all(np.isfinite(start)):
-            raise ValueError("x0 contains NaN or infinite values")
-        start = np.maximum(start.ravel(), 0.0) / scale
+    name, tol, max_iter, options = _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed)
+    objective, coarse, scale, depth_range = _scaled_objective(image, sparse_depth, mask, weights, l1_smoothing,
+                                                              clip_to_observed)
+    start = _starting_point(x0, coarse, objective.shape, scale)
     out, runtime = solve_scaled(objective, start, scale=scale, solver=name, tol=tol, max_iter=max_iter,
                                  callback=callback, options=options)
-    z = out.z  # in the user's units
-    low, high = depth_range
-    if clip_to_observed:
-        # moves of rounding size (a flat input whose solution is the observed value to 1e-15) are not counted
-        slack = 1e-9 * high
-        clamped = int(np.count_nonzero((z < low - slack) | (z > high + slack)))
-    else:
-        clamped = int(np.count_nonzero(z <= 0))
-    z = np.clip(z, low, high)
-    if clamped:
-        warnings.warn(
-            f"complete_depth: {clamped} of {z.size} pixels were outside the depth range "
-            f"[{low:g}, {high:g}] and were clamped to it (result.clamped, result.depth_range)"
-            + ("" if clip_to_observed else "; clip_to_observed=False: they are held at the bound 0"),
-            ClampWarning, stacklevel=2)
+    z, clamped = _clamp(out.z, depth_range, clip_to_observed)  # in the user's units
     scale2 = scale * scale
     terms = {key: value * scale2 for key, value in objective.term_values(z / scale).items()}
     return CompletionResult(
@@ -199,3 +166,72 @@ def complete_depth(
         depth_range=depth_range,
         gap=out.gap,
     )
+
+
+def _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed):
+    """The solver name ``"auto"`` resolves to, and the checked ``tol``, ``max_iter``, ``options``."""
+    check_weights(weights)
+    name = choose_solver(weights) if solver == "auto" else solver
+    if name not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}; choose one of {['auto', *sorted(SOLVERS)]}")
+    tol, max_iter, options = check_solver_arguments(name, tol, max_iter, options)
+    if not isinstance(clip_to_observed, (bool, np.bool_)):
+        raise TypeError(f"clip_to_observed must be True or False; got {type(clip_to_observed).__name__}")
+    return name, tol, max_iter, options
+
+
+def _scaled_objective(image, sparse_depth, mask, weights, l1_smoothing, clip_to_observed):
+    """``(objective, coarse, scale, depth_range)``: the objective in units of the depth scale ``s``.
+
+    Depth, ``gamma`` and ``l1_smoothing`` are divided by ``s``, so the
+    objective is ``F / s²`` (see :func:`complete_depth`, Notes); ``coarse`` is
+    the nearest fill in those units, ``depth_range`` the clamp range in the
+    user's units.
+    """
+    depth, observed = as_depth_and_mask(sparse_depth, mask)
+    observed_values = depth[observed]
+    depth_range = (float(observed_values.min()), float(observed_values.max())) if clip_to_observed else (0.0, np.inf)
+    scale = depth_scale(observed_values)
+    del observed_values
+    depth /= scale
+    objective, coarse, _ = build_objective(
+        image, depth, observed, weights=weights.replace(gamma=weights.gamma / scale),
+        l1_smoothing=l1_smoothing / scale)
+    return objective, coarse, scale, depth_range
+
+
+def _starting_point(x0, coarse, shape, scale):
+    """The flat starting point in units of ``scale``: ``coarse`` without a copy, or ``max(x0, 0) / scale``."""
+    if x0 is None:
+        start = coarse.reshape(-1).view()  # no copy (8-MP memory); every solver copies its start
+        start.flags.writeable = False  # ... and the prior's target must stay intact
+        return start
+    start = np.asarray(x0, dtype=np.float64)
+    if start.shape != shape:
+        raise ValueError(f"x0 has shape {start.shape}, expected {shape}")
+    if not np.all(np.isfinite(start)):
+        raise ValueError("x0 contains NaN or infinite values")
+    return np.maximum(start.ravel(), 0.0) / scale
+
+
+def _clamp(z, depth_range, clip_to_observed):
+    """``(clip(z, *depth_range), clamped)``, warning with a :class:`ClampWarning` when ``clamped`` is not 0.
+
+    With ``clip_to_observed``, moves of rounding size (a flat input whose
+    solution is the observed value to 1e-15) are not counted; without it the
+    range is ``[0, inf)`` and the pixels at 0 are counted.
+    """
+    low, high = depth_range
+    if clip_to_observed:
+        slack = 1e-9 * high
+        clamped = int(np.count_nonzero((z < low - slack) | (z > high + slack)))
+    else:
+        clamped = int(np.count_nonzero(z <= 0))
+    z = np.clip(z, low, high)
+    if clamped:
+        warnings.warn(
+            f"complete_depth: {clamped} of {z.size} pixels were outside the depth range "
+            f"[{low:g}, {high:g}] and were clamped to it (result.clamped, result.depth_range)"
+            + ("" if clip_to_observed else "; clip_to_observed=False: they are held at the bound 0"),
+            ClampWarning, stacklevel=3)
+    return z, clamped

@@ -1,4 +1,7 @@
-"""Error metrics of a depth map against ground truth."""
+"""Error metrics of a depth map against ground truth.
+
+May import NumPy, :mod:`sparsedepth.sampling` and :mod:`sparsedepth._validation`.
+"""
 
 from __future__ import annotations
 

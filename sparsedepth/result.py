@@ -1,4 +1,7 @@
-"""The one result type every solver returns, with a per-iteration history."""
+"""The one result type every solver returns, with a per-iteration history.
+
+May import NumPy and :mod:`sparsedepth.objective.weights`.
+"""
 
 from __future__ import annotations
 

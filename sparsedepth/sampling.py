@@ -1,8 +1,13 @@
-"""Simulating sparse input: keep a seeded random subset of the valid depth pixels."""
+"""Simulating sparse input: keep a random subset (fixed by a seed) of the valid depth pixels.
+
+May import NumPy and :mod:`sparsedepth._validation`.
+"""
 
 from __future__ import annotations
 
 import numpy as np
+
+from ._validation import check_count
 
 __all__ = ["valid_depth_mask", "sample_mask", "sample_depth"]
 
@@ -43,9 +48,7 @@ def sample_mask(depth, *, fraction=None, count=None, seed=0) -> np.ndarray:
             raise ValueError(f"fraction must be in (0, 1], got {fraction}")
         n = max(1, int(round(fraction * idx.size)))
     else:
-        n = int(count)
-        if n != count or n < 1:
-            raise ValueError(f"count must be a positive integer, got {count!r}")
+        n = check_count(count, name="count")
         if n > idx.size:
             raise ValueError(f"count={n} exceeds the {idx.size} valid pixels of depth")
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)

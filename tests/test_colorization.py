@@ -183,11 +183,11 @@ def test_every_public_name_exists():
 
 @pytest.mark.parametrize("shape", [(1, 1), (1, 9), (9, 1), (2, 2), (5, 7), (33, 20)])
 def test_nested_dissection_order_is_a_permutation(shape):
-    from sparsedepth.holes.colorization import _nested_dissection_keys, _nested_dissection_order
+    from sparsedepth.holes.ordering import nested_dissection_keys, nested_dissection_order
 
-    keys = _nested_dissection_keys(*shape)
+    keys = nested_dissection_keys(*shape)
     np.testing.assert_array_equal(np.sort(keys), np.arange(shape[0] * shape[1]))
-    np.testing.assert_array_equal(_nested_dissection_order(*shape), np.argsort(keys))
+    np.testing.assert_array_equal(nested_dissection_order(*shape), np.argsort(keys))
 
 
 def test_large_alpha_matches_direct_solve(naive):
@@ -209,7 +209,9 @@ def _window_count(mask, radius):
 
 @pytest.mark.parametrize("window_radius", [1, 2])
 def test_eliminated_sets_definition(window_radius):
-    from sparsedepth.holes.colorization import _LAYER_MIN_UNKNOWN, _STRIP_WIDTH, _eliminated_sets
+    from sparsedepth.holes.schur import LAYER_MIN_UNKNOWN as _LAYER_MIN_UNKNOWN
+    from sparsedepth.holes.schur import STRIP_WIDTH as _STRIP_WIDTH
+    from sparsedepth.holes.schur import eliminated_sets as _eliminated_sets
 
     _, _, known = _hand_made_frame()
     elim, strip, rim = _eliminated_sets(known, window_radius)
@@ -226,7 +228,9 @@ def test_eliminated_sets_definition(window_radius):
 def test_schur_solve_matches_spsolve(use_strip, window_radius):
     # the elimination of E = holes + coupled known pixels, with and without the strip
     # preconditioner, against a sparse LU of the same system built from colorization_weights
-    from sparsedepth.holes.colorization import _eliminated_sets, _nested_dissection_order, _solve_schur
+    from sparsedepth.holes.ordering import nested_dissection_order as _nested_dissection_order
+    from sparsedepth.holes.schur import eliminated_sets as _eliminated_sets
+    from sparsedepth.holes.schur import solve_schur as _solve_schur
 
     grey, depth, known = _hand_made_frame()
     alpha = 0.7
@@ -257,11 +261,50 @@ def test_schur_solve_matches_spsolve(use_strip, window_radius):
 @pytest.mark.parametrize("height", [48, 61])
 def test_weights_in_two_threads_equal_one_pass(window_radius, height, monkeypatch):
     # the halves carry a halo of window_radius rows: every plane equals the one-pass result exactly
-    from sparsedepth.holes import colorization
+    from sparsedepth.holes import affinity, colorization
 
     monkeypatch.setattr(colorization, "_available_cpus", lambda: 2)
     grey = np.random.default_rng(3).random((height, 37))
-    one, steps_one = colorization._window_weights(grey, window_radius)
+    one, steps_one = affinity.window_weights(grey, window_radius)
     two, steps_two = colorization._window_weights_two_threads(grey, window_radius)
     np.testing.assert_array_equal(two, one)
     np.testing.assert_array_equal(steps_two, steps_one)
+
+
+def test_negative_depth_is_rejected_like_complete_depth():
+    # the depth rule shared with complete_depth and the baselines: without a mask a negative value is an
+    # error (not silently a hole), and under a mask a negative known value is an error
+    grey, depth, known = _hand_made_frame()
+    sparse = np.where(known, depth, 0.0)
+    pixel = tuple(np.argwhere(known)[0])
+    sparse[pixel] = -1.0
+    with pytest.raises(ValueError, match="negative"):
+        colorization_fill(grey, sparse)
+    with pytest.raises(ValueError, match="negative"):
+        colorization_fill(grey, sparse, mask=known)
+    ok = known.copy()
+    ok[pixel] = False  # the negative value is not a known pixel: ignored, as any value outside the mask
+    expected = colorization_fill(grey, np.where(ok, depth, 0.0), mask=ok)
+    np.testing.assert_array_equal(colorization_fill(grey, sparse, mask=ok), expected)
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"mask": "known_as_int"}, "mask must be a boolean array"),
+    ({"alpha": 0.0}, "alpha must be finite and > 0"),
+    ({"rtol": "tight"}, "rtol must be a positive number"),
+    ({"window_radius": 0}, "window_radius must be an integer >= 1"),
+    ({"window_radius": True}, "window_radius must be an integer >= 1"),
+    ({"maxiter": 2.0}, "maxiter must be an integer >= 1"),
+])
+def test_fill_option_checks(options, message):
+    grey, depth, known = _hand_made_frame()
+    if options.get("mask") == "known_as_int":
+        options = {"mask": known.astype(int)}
+    with pytest.raises(ValueError, match=message):
+        colorization_fill(grey, np.where(known, depth, 0.0), **options)
+
+
+def test_depth_of_another_size_than_the_image():
+    grey, depth, known = _hand_made_frame()
+    with pytest.raises(ValueError, match="depth has shape .* but image has shape"):
+        colorization_fill(grey[:, :-1], np.where(known, depth, 0.0))

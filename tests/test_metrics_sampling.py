@@ -66,3 +66,16 @@ def test_sampling_errors():
         sample_mask(depth, count=26)
     with pytest.raises(ValueError, match="no valid pixel"):
         sample_mask(np.zeros((5, 5)), fraction=0.5)
+
+
+@pytest.mark.parametrize("count", [0, -3, 2.0, True, "5"])
+def test_sample_count_must_be_an_integer_of_at_least_one(count):
+    # the shared count rule: a float (even 2.0) or a bool is not a pixel count
+    depth = np.ones((10, 12))
+    with pytest.raises(ValueError, match="count must be an integer >= 1"):
+        sample_mask(depth, count=count, seed=0)
+
+
+def test_sample_count_accepts_numpy_integers():
+    depth = np.ones((10, 12))
+    assert sample_mask(depth, count=np.int64(7), seed=0).sum() == 7

@@ -123,3 +123,107 @@ def test_grey_image_accepted(inputs):
     image, sparse, mask = inputs
     res = complete_depth(image[..., 0], sparse, mask, weights=Weights(gamma=0), solver="direct")
     assert res.depth.shape == sparse.shape
+
+
+# --- the shared number and mask rules (one rule per concept, used by the colorization fill, the
+# edge weights, the objective and the weights)
+@pytest.mark.parametrize("value", [1, 2.5, np.float32(0.1), "3"])
+def test_check_positive_real_accepts_and_converts(value):
+    from sparsedepth._validation import check_positive_real
+
+    assert check_positive_real(value, name="alpha") == float(value)
+
+
+@pytest.mark.parametrize("value, message", [
+    (0.0, "alpha must be finite and > 0, got 0.0"),
+    (-1, r"alpha must be finite and > 0, got -1.0"),
+    (np.inf, "alpha must be finite and > 0"),
+    (np.nan, "alpha must be finite and > 0"),
+    ("abc", "alpha must be a positive number, got 'abc'"),
+    (None, "alpha must be a positive number, got None"),
+])
+def test_check_positive_real_rejects(value, message):
+    from sparsedepth._validation import check_positive_real
+
+    with pytest.raises(ValueError, match=message):
+        check_positive_real(value, name="alpha")
+
+
+def test_check_nonnegative_real():
+    from sparsedepth._validation import check_nonnegative_real
+
+    assert check_nonnegative_real(0, name="kappa") == 0.0
+    assert check_nonnegative_real(np.float64(2.5), name="kappa") == 2.5
+    with pytest.raises(ValueError, match=r"kappa must be finite and >= 0, got -0.5"):
+        check_nonnegative_real(-0.5, name="kappa")
+    with pytest.raises(ValueError, match="kappa must be finite and >= 0"):
+        check_nonnegative_real(np.nan, name="kappa")
+    with pytest.raises(ValueError, match="kappa must be a number, got 'x'"):
+        check_nonnegative_real("x", name="kappa")
+
+
+@pytest.mark.parametrize("value", [1, 7, np.int64(3)])
+def test_check_count_accepts(value):
+    from sparsedepth._validation import check_count
+
+    got = check_count(value, name="maxiter")
+    assert got == int(value) and type(got) is int
+
+
+@pytest.mark.parametrize("value", [0, -2, 1.0, True, np.bool_(True), "2", None])
+def test_check_count_rejects(value):
+    from sparsedepth._validation import check_count
+
+    with pytest.raises(ValueError, match="maxiter must be an integer >= 1"):
+        check_count(value, name="maxiter")
+
+
+def test_check_bool_mask():
+    from sparsedepth._validation import check_bool_mask
+
+    mask = np.zeros((3, 4), dtype=bool)
+    assert check_bool_mask(mask, (3, 4)) is mask or np.array_equal(check_bool_mask(mask, (3, 4)), mask)
+    with pytest.raises(ValueError, match="mask must be a boolean array, got dtype int64"):
+        check_bool_mask(mask.astype(np.int64), (3, 4))
+    with pytest.raises(ValueError, match=r"mask has shape \(3, 4\) but raw_depth has shape \(4, 3\)"):
+        check_bool_mask(mask, (4, 3), shape_name="raw_depth")
+
+
+@pytest.mark.parametrize("kappa", ["strong", None, [1.0]])
+def test_edge_weights_reject_a_non_number_kappa_with_value_error(kappa):
+    # the shared non-negative-number rule: a ValueError naming kappa, not NumPy's TypeError from isfinite
+    from sparsedepth.objective import edge_weights, pair_edge_weights
+
+    image = np.zeros((4, 5))
+    with pytest.raises(ValueError, match="kappa must be a number"):
+        edge_weights(image, kappa)
+    with pytest.raises(ValueError, match="kappa must be a number"):
+        pair_edge_weights(image, kappa)
+
+
+def test_objective_rejects_a_non_number_l1_smoothing_with_value_error():
+    from sparsedepth.objective import Objective
+
+    with pytest.raises(ValueError, match="l1_smoothing must be a positive number"):
+        Objective((2, 3), [], l1_smoothing="small")
+    with pytest.raises(ValueError, match="l1_smoothing must be finite and > 0"):
+        Objective((2, 3), [], l1_smoothing=0.0)
+
+
+def test_clamp_warning_points_at_the_caller():
+    # complete_depth's clamp is a named step; its ClampWarning must still name the caller's line
+    import warnings
+
+    from sparsedepth import ClampWarning
+
+    image = np.zeros((6, 20))
+    depth = np.zeros((6, 20))
+    depth[:, 0], depth[:, 9], depth[:, 10], depth[:, 19] = 1.0, 1.0, 5.0, 5.0  # a step: the smoothness overshoots
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = complete_depth(image, depth, weights=Weights(alpha=1.0, delta=1e-6, beta_second=1.0), solver="direct")
+    clamp = [w for w in caught if issubclass(w.category, ClampWarning)]
+    assert result.clamped > 0 and len(clamp) == 1
+    assert clamp[0].filename == __file__
+    assert f"{result.clamped} of 120 pixels" in str(clamp[0].message)
+    assert np.all((result.depth >= 1.0) & (result.depth <= 5.0))

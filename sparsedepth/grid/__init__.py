@@ -1,10 +1,18 @@
-"""The pixel grid: stencils, finite-difference operators and image-edge weights.
+"""The pixel grid: finite-difference operators, stencils and the image gradient.
 
-Imports NumPy and SciPy only (and :mod:`sparsedepth._validation`).
+``operators`` (sparse and matrix-free difference operators), ``stencil``
+(stencil images and their CSR form), ``edges`` (the image gradient and the
+edge weights built from it).
+
+May import NumPy, SciPy and :mod:`sparsedepth._validation` only.
 """
 
-from .operators import forward_diff, gradient, hessian_operator, mixed_diff, second_diff
+from .edges import edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights
+from .operators import (StencilOperator, forward_diff, gradient, gradient_stencil, hessian_operator, hessian_stencil,
+                        mixed_diff, second_diff)
 from .stencil import csr_to_stencil, full_pattern_offsets, stencil_to_csr
 
-__all__ = ["forward_diff", "gradient", "second_diff", "mixed_diff", "hessian_operator",
-           "stencil_to_csr", "csr_to_stencil", "full_pattern_offsets"]
+__all__ = ["forward_diff", "gradient", "second_diff", "mixed_diff", "hessian_operator", "StencilOperator",
+           "gradient_stencil", "hessian_stencil",
+           "stencil_to_csr", "csr_to_stencil", "full_pattern_offsets",
+           "image_gradient_magnitude", "edge_weights", "pair_edge_weights", "second_order_edge_weights"]

@@ -9,6 +9,11 @@ Boundary convention (Neumann): a forward difference is zero in the last column
 (horizontal) or the last row (vertical); the operators keep one row per pixel so
 that the row of pixel ``(i, j)`` of ``forward_diff(shape, axis=1)`` is
 ``z[i, j+1] - z[i, j]`` (``0`` when ``j = W - 1``).
+
+The same operators exist matrix-free (:class:`StencilOperator`,
+:func:`gradient_stencil`, :func:`hessian_stencil`), applied by array slicing.
+
+May import NumPy, SciPy and :mod:`sparsedepth._validation`.
 """
 
 from __future__ import annotations
@@ -26,6 +31,9 @@ __all__ = [
     "second_diff",
     "mixed_diff",
     "hessian_operator",
+    "StencilOperator",
+    "gradient_stencil",
+    "hessian_stencil",
 ]
 
 

@@ -18,6 +18,8 @@ offset whose neighbour lies inside the grid, in lexicographic offset order
 (= increasing column), zero coefficients included.  A matrix in that layout is
 recognised exactly (its ``indptr`` and ``indices`` are compared with the
 pattern), so :func:`csr_to_stencil` never guesses.
+
+May import NumPy, SciPy and :mod:`sparsedepth._validation`.
 """
 
 from __future__ import annotations
@@ -25,7 +27,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["stencil_to_csr", "csr_to_stencil", "full_pattern_offsets"]
+from .._validation import check_grid_shape
+
+__all__ = ["stencil_to_csr", "csr_to_stencil", "full_pattern_offsets", "index_dtype"]
 
 #: entries per chunk of the conversions (their temporaries stay ~16 MB)
 _CHUNK_ENTRIES = 1 << 21
@@ -194,7 +198,7 @@ def full_pattern_offsets(A, shape):
         ``None`` otherwise (small grids whose centre row misses an offset
         included).
     """
-    H, W = shape
+    H, W = shape = check_grid_shape(shape)
     n = H * W
     if A.format != "csr" or A.shape != (n, n) or A.nnz == 0:
         return None
@@ -235,7 +239,7 @@ def csr_to_stencil(A, shape, *, offsets=None, parity=None):
         :func:`stencil_to_csr` (see :func:`full_pattern_offsets`), in which
         case the caller extracts the stencil by other means.
     """
-    H, W = shape
+    H, W = shape = check_grid_shape(shape)
     if offsets is None:
         offsets = full_pattern_offsets(A, shape)
         if offsets is None:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import check_same_shape
+from .._validation import check_bool_mask, check_same_shape
 from .colorization import colorization_fill
 from ..completion import complete_depth
 from ..sampling import valid_depth_mask
@@ -26,6 +26,38 @@ FILL_METHODS = ("colorization", "complete")
 _COMPLETE_ONLY = ("weights", "solver", "tol", "max_iter", "callback")
 
 
+def _check_method_options(method, alpha, **complete_options):
+    """``ValueError`` for an unknown ``method`` or an option of the other method."""
+    if method not in FILL_METHODS:
+        raise ValueError(f"unknown hole-filling method {method!r}; choose one of {list(FILL_METHODS)}")
+    if method == "colorization":
+        wrong = [name for name in _COMPLETE_ONLY if complete_options[name] is not None]
+        if wrong:
+            raise ValueError(f"{', '.join(wrong)} only apply to method='complete', not 'colorization'")
+    elif alpha is not None:
+        raise ValueError("alpha only applies to method='colorization'; use weights=Weights(alpha=...)")
+
+
+def _raw_depth_and_mask(image, raw_depth, mask):
+    """``(raw, mask)`` as arrays: raw 2-D and of the image's size, mask boolean, with a valid and no negative pixel."""
+    raw = np.asarray(raw_depth)
+    if raw.ndim != 2:
+        raise ValueError(f"raw_depth must be a 2-D (H, W) array, got shape {raw.shape}")
+    check_same_shape(np.shape(image)[:2], raw.shape, "image", "raw_depth")
+    if mask is None:
+        mask = valid_depth_mask(raw)
+    else:
+        mask = check_bool_mask(mask, raw.shape, shape_name="raw_depth")
+    if not mask.any():
+        raise ValueError("raw_depth has no valid pixel (finite and > 0, or in mask); nothing to fill from")
+    with np.errstate(invalid="ignore"):
+        negative = int(np.count_nonzero(raw[mask] < 0))
+    if negative:
+        raise ValueError(f"raw_depth has {negative} negative value(s) at valid pixels; depth must be >= 0")
+    return raw, mask
+
+
+# the numpydoc docstring is long (options of two methods, Notes); the code is short
 def fill_holes(
     image,
     raw_depth,
@@ -114,34 +146,9 @@ def fill_holes(
     >>> bool(np.allclose(dense, 2.0))
     True
     """
-    if method not in FILL_METHODS:
-        raise ValueError(f"unknown hole-filling method {method!r}; choose one of {list(FILL_METHODS)}")
-    given = {"weights": weights, "solver": solver, "tol": tol, "max_iter": max_iter, "callback": callback}
-    if method == "colorization":
-        wrong = [name for name in _COMPLETE_ONLY if given[name] is not None]
-        if wrong:
-            raise ValueError(f"{', '.join(wrong)} only apply to method='complete', not 'colorization'")
-    elif alpha is not None:
-        raise ValueError("alpha only applies to method='colorization'; use weights=Weights(alpha=...)")
-
-    raw = np.asarray(raw_depth)
-    if raw.ndim != 2:
-        raise ValueError(f"raw_depth must be a 2-D (H, W) array, got shape {raw.shape}")
-    check_same_shape(np.shape(image)[:2], raw.shape, "image", "raw_depth")
-    if mask is None:
-        mask = valid_depth_mask(raw)
-    else:
-        mask = np.asarray(mask)
-        if mask.dtype != bool:
-            raise ValueError(f"mask must be a boolean array, got dtype {mask.dtype}")
-        check_same_shape(mask.shape, raw.shape, "mask", "raw_depth")
-    if not mask.any():
-        raise ValueError("raw_depth has no valid pixel (finite and > 0, or in mask); nothing to fill from")
-    with np.errstate(invalid="ignore"):
-        negative = int(np.count_nonzero(raw[mask] < 0))
-    if negative:
-        raise ValueError(f"raw_depth has {negative} negative value(s) at valid pixels; depth must be >= 0")
-
+    _check_method_options(method, alpha, weights=weights, solver=solver, tol=tol, max_iter=max_iter,
+                          callback=callback)
+    raw, mask = _raw_depth_and_mask(image, raw_depth, mask)
     if method == "colorization":
         return colorization_fill(image, raw, mask=mask, alpha=1.0 if alpha is None else alpha)
     result = complete_depth(

@@ -1,20 +1,18 @@
 """The completion objective: named terms, their weights, and the objective as their sum.
 
-May import :mod:`sparsedepth.grid` and the nearest fill of :mod:`sparsedepth.baselines`.
+``terms`` (the quadratic and L1 terms), ``objective`` (their sum and its
+assembly for a frame), ``weights`` (the term weights), ``l1`` (the stacked L1
+operator the non-smooth solvers use).  The image edge weights live in
+:mod:`sparsedepth.grid.edges` and are re-exported here.
+
+May import :mod:`sparsedepth.grid`, the nearest fill of
+:mod:`sparsedepth.baselines` and :mod:`sparsedepth._validation`.
 """
 
 from .l1 import StackedL1, is_grid_gradient
-from .objective import (
-    DEFAULT_L1_SMOOTHING,
-    AbsTerm,
-    Objective,
-    QuadraticTerm,
-    build_objective,
-    edge_weights,
-    image_gradient_magnitude,
-    pair_edge_weights,
-    second_order_edge_weights,
-)
+from ..grid.edges import edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights
+from .objective import DEFAULT_L1_SMOOTHING, Objective, build_objective
+from .terms import AbsTerm, QuadraticTerm
 from .weights import DEFAULT_WEIGHTS, Weights
 
 __all__ = ["QuadraticTerm", "AbsTerm", "Objective", "build_objective", "edge_weights", "pair_edge_weights",

@@ -1,12 +1,12 @@
-"""The completion objective as a sum of named terms.
+"""The completion objective as a sum of named terms, and its assembly for one frame.
 
-Every term is data: a weight, a sparse linear operator ``K`` and per-row
-weights ``r``.  Two kinds exist:
+Every term is data (:mod:`sparsedepth.objective.terms`): a weight, a sparse
+linear operator ``K`` and per-row weights ``r``.  Two kinds exist:
 
-* :class:`QuadraticTerm`  ``weight · Σ_k r_k ((K z)_k − d_k)²``
-* :class:`AbsTerm`        ``weight · Σ_k r_k |(K z)_k|``
+* :class:`~sparsedepth.objective.terms.QuadraticTerm`  ``weight · Σ_k r_k ((K z)_k − d_k)²``
+* :class:`~sparsedepth.objective.terms.AbsTerm`        ``weight · Σ_k r_k |(K z)_k|``
 
-:func:`build_objective` assembles the terms of the depth-completion problem
+:class:`Objective` is their sum.  :func:`build_objective` assembles the terms of the depth-completion problem
 from an image, sparse depth and :class:`~sparsedepth.objective.weights.Weights`; a
 variant of the problem ("L2 only", "data only", ...) is a choice of weights,
 never a code path of its own.
@@ -18,20 +18,23 @@ minimise the smoothed objective in which ``|t|`` is replaced by
 ``sqrt(t² + ε²)``; its gradient is ``t / sqrt(t² + ε²)``.  ``ε`` (in depth
 units, metres by default) is :attr:`Objective.l1_smoothing`, default
 ``DEFAULT_L1_SMOOTHING = 1e-4``.  Every solver reports the *exact* objective.
+
+The terms and the image edge weights (:mod:`sparsedepth.grid.edges`) are
+re-exported here.  May import :mod:`sparsedepth.grid`, the nearest fill of
+:mod:`sparsedepth.baselines` and :mod:`sparsedepth._validation`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Optional
-
 import numpy as np
 import scipy.sparse as sp
 
-from .._validation import as_depth_and_mask, as_float_image, check_same_shape, check_weights
+from .._validation import as_depth_and_mask, as_float_image, check_positive_real, check_same_shape, check_weights
 from ..baselines import nearest_fill
+from ..grid.edges import edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights
 from ..grid.operators import StencilOperator, gradient_stencil, hessian_stencil
 from ..grid.stencil import stencil_to_csr
+from .terms import AbsTerm, QuadraticTerm
 from .weights import DEFAULT_WEIGHTS, Weights
 
 __all__ = [
@@ -47,185 +50,6 @@ __all__ = [
 ]
 
 DEFAULT_L1_SMOOTHING = 1e-4
-
-
-def _apply(operator, z):
-    return z if operator is None else operator @ z
-
-
-def _apply_adjoint(operator, v):
-    return v if operator is None else operator.T @ v
-
-
-@dataclass(frozen=True, eq=False)
-class QuadraticTerm:
-    """``weight · Σ_k r_k ((K z)_k − d_k)²``.
-
-    Parameters
-    ----------
-    name : str
-        Name used in per-term reports.
-    weight : float
-        Non-negative scalar weight.
-    operator : scipy.sparse matrix or StencilOperator of shape (m, N), or None
-        ``K``; ``None`` means the identity (``m = N``).  A
-        :class:`~sparsedepth.grid.operators.StencilOperator` is applied matrix-free
-        and lets :meth:`Objective.normal_equations` assemble ``KᵀK`` as a
-        stencil.
-    row_weights : ndarray of shape (m,), or None
-        ``r >= 0`` (float, or bool for a 0/1 selection such as the data
-        term's observation mask); ``None`` means all ones.
-    target : ndarray of shape (m,), or None
-        ``d``; ``None`` means zeros.
-    """
-
-    name: str
-    weight: float
-    operator: Optional[object] = None
-    row_weights: Optional[np.ndarray] = None
-    target: Optional[np.ndarray] = None
-
-    def residual(self, z):
-        t = _apply(self.operator, z)
-        return t if self.target is None else t - self.target
-
-    def _block_residuals(self, z):
-        """``(rows, K_b z − d_b)`` per block: one ``H*W`` work vector for a StencilOperator."""
-        K = self.operator
-        if not isinstance(K, StencilOperator):
-            yield slice(None), self.residual(z)
-            return
-        n = K.shape[1]
-        work = np.empty(n)
-        for b in range(len(K.blocks)):
-            rows = slice(b * n, (b + 1) * n)
-            K.block_matvec(z, b, out=work)
-            if self.target is not None:
-                work -= self.target[rows]
-            yield rows, work
-
-    def value(self, z) -> float:
-        if self.weight == 0:
-            return 0.0
-        total = 0.0
-        for rows, res in self._block_residuals(z):
-            sq = res * res
-            if self.row_weights is not None:
-                sq *= self.row_weights[rows]
-            total += float(np.sum(sq))
-        return float(self.weight * total)
-
-    def gradient(self, z):
-        """``2 · weight · Kᵀ (r ⊙ (K z − d))``."""
-        if self.weight == 0:
-            return np.zeros_like(z)
-        if not isinstance(self.operator, StencilOperator):
-            res = self.residual(z)
-            if self.row_weights is not None:
-                res = res * self.row_weights
-            return 2.0 * self.weight * _apply_adjoint(self.operator, res)
-        grad = np.zeros(self.operator.shape[1])
-        for b, (rows, res) in enumerate(self._block_residuals(z)):
-            if self.row_weights is not None:
-                res *= self.row_weights[rows]
-            self.operator.block_rmatvec_add(grad, b, res)
-        grad *= 2.0 * self.weight
-        return grad
-
-    def normal_matrix(self, n: int) -> sp.csr_matrix:
-        """Half the Hessian: ``weight · Kᵀ diag(r) K`` (sparse, ``(n, n)``)."""
-        r = np.ones(n if self.operator is None else self.operator.shape[0]) if self.row_weights is None else self.row_weights
-        if self.operator is None:
-            return sp.diags(self.weight * r, format="csr")
-        K = self.operator
-        if isinstance(K, StencilOperator):
-            offsets = K.offsets()
-            stencil = np.zeros((len(offsets),) + K.grid_shape)
-            K.add_normal_stencil(stencil, offsets, self.row_weights, self.weight)
-            return sp.csr_matrix(stencil_to_csr(offsets, stencil))
-        return (K.T @ sp.diags(self.weight * r) @ K).tocsr()
-
-    def normal_rhs(self, n: int):
-        """``weight · Kᵀ (r ⊙ d)``: the right-hand side contribution."""
-        if self.target is None or self.weight == 0:
-            return np.zeros(n)
-        d = self.target if self.row_weights is None else self.row_weights * self.target
-        return self.weight * _apply_adjoint(self.operator, d)
-
-    def constant(self) -> float:
-        """``weight · Σ r d²``: the value at ``K z = 0``."""
-        if self.target is None:
-            return 0.0
-        d2 = self.target**2
-        if self.row_weights is not None:
-            d2 = d2 * self.row_weights
-        return float(self.weight * np.sum(d2))
-
-
-@dataclass(frozen=True, eq=False)
-class AbsTerm:
-    """``weight · Σ_k r_k |(K z)_k|`` (weighted L1 of a linear map of ``z``).
-
-    Parameters
-    ----------
-    name : str
-    weight : float
-    operator : scipy.sparse matrix or StencilOperator of shape (m, N)
-        ``build_objective`` passes the matrix-free
-        :func:`~sparsedepth.grid.operators.gradient_stencil`; the L1 solvers
-        recognise it (:class:`~sparsedepth.objective.l1.StackedL1`) and apply it by
-        slicing.
-    row_weights : ndarray of shape (m,) or (N,), or None
-        ``r``; shape ``(N,)`` (with ``m`` a multiple of ``N``, e.g. the two
-        blocks of the gradient) means the same weights for every block of
-        ``N`` rows, stored once (``build_objective`` passes the edge weights
-        of the pixels so: half the memory of the stacked ``r``).
-    """
-
-    name: str
-    weight: float
-    operator: object
-    row_weights: Optional[np.ndarray] = None
-
-    def __post_init__(self):
-        if self.row_weights is not None:
-            m, n = self.operator.shape
-            size = np.shape(self.row_weights)[0] if np.ndim(self.row_weights) == 1 else -1
-            if size != m and not (size == n and n > 0 and m % n == 0):
-                raise ValueError(f"row_weights of term {self.name!r} must have shape ({m},) or ({n},) "
-                                 f"(shared by the {m // max(n, 1)} blocks), got {np.shape(self.row_weights)}")
-
-    def row_weight_blocks(self) -> int:
-        """How many times the stored ``row_weights`` repeat along the rows (1 when of shape (m,))."""
-        if self.row_weights is None:
-            return 1
-        return self.operator.shape[0] // np.shape(self.row_weights)[0]
-
-    def scaled_row_weights(self):
-        """``weight · r`` as an array of shape (m,)."""
-        m = self.operator.shape[0]
-        if self.row_weights is None:
-            return np.full(m, float(self.weight))
-        return self.weight * np.tile(np.asarray(self.row_weights, dtype=np.float64), self.row_weight_blocks())
-
-    def value(self, z) -> float:
-        if self.weight == 0:
-            return 0.0
-        return float(np.sum(self.scaled_row_weights() * np.abs(self.operator @ z)))
-
-    def smoothed_value(self, z, eps: float) -> float:
-        """``weight · Σ r sqrt((K z)² + ε²)``."""
-        if self.weight == 0:
-            return 0.0
-        t = self.operator @ z
-        return float(np.sum(self.scaled_row_weights() * np.sqrt(t * t + eps * eps)))
-
-    def smoothed_gradient(self, z, eps: float):
-        """``weight · Kᵀ (r ⊙ t / sqrt(t² + ε²))`` with ``t = K z``."""
-        if self.weight == 0:
-            return np.zeros_like(z)
-        t = self.operator @ z
-        return self.operator.T @ (self.scaled_row_weights() * t / np.sqrt(t * t + eps * eps))
 
 
 class Objective:
@@ -255,10 +79,8 @@ class Objective:
         names = [t.name for t in terms]
         if len(set(names)) != len(names):
             raise ValueError(f"term names must be unique, got {names}")
-        if not (np.isfinite(l1_smoothing) and l1_smoothing > 0):
-            raise ValueError(f"l1_smoothing must be > 0, got {l1_smoothing!r}")
         self.terms = tuple(terms)
-        self.l1_smoothing = float(l1_smoothing)
+        self.l1_smoothing = check_positive_real(l1_smoothing, name="l1_smoothing")
         self._normal = None
 
     # -- structure ---------------------------------------------------------
@@ -421,85 +243,6 @@ class Objective:
         return z.reshape(-1)
 
 
-def image_gradient_magnitude(image) -> np.ndarray:
-    """``‖∇I‖ = sqrt(Σ_c (∂x I_c)² + (∂y I_c)²)`` per pixel, shape ``(H, W)``.
-
-    ``image`` is converted to [0, 1] floats first (uint8 ÷ 255, uint16 ÷ 65535);
-    the differences are the forward differences of :mod:`sparsedepth.grid.operators`
-    (zero in the last column / row).
-    """
-    img = as_float_image(image)
-    gx = np.zeros_like(img)
-    gy = np.zeros_like(img)
-    gx[:, :-1] = img[:, 1:] - img[:, :-1]
-    gy[:-1, :] = img[1:, :] - img[:-1, :]
-    return np.sqrt(np.sum(gx * gx + gy * gy, axis=2))
-
-
-def edge_weights(image, kappa: float) -> np.ndarray:
-    """The reference paper's edge weight ``w = exp(−κ ‖∇I‖)``, shape ``(H, W)``."""
-    if not (np.isfinite(kappa) and kappa >= 0):
-        raise ValueError(f"kappa must be finite and >= 0, got {kappa!r}")
-    return np.exp(-float(kappa) * image_gradient_magnitude(image))
-
-
-def pair_edge_weights(image, kappa: float) -> np.ndarray:
-    """Per-pair image weights aligned with the rows of :func:`~sparsedepth.grid.operators.gradient`.
-
-    Row ``(i, j)`` of the horizontal block gets ``exp(−κ ‖I[i, j+1] − I[i, j]‖)``
-    and row ``(i, j)`` of the vertical block ``exp(−κ ‖I[i+1, j] − I[i, j]‖)``,
-    with ``‖·‖`` the Euclidean norm over the channels of the [0, 1]-scaled
-    image.  Unlike the reference paper's per-pixel :func:`edge_weights`, a
-    horizontal difference is not weakened by a vertical image edge.  The rows
-    of the last column / last row (whose differences are zero) get 1.
-
-    Returns
-    -------
-    ndarray, shape (2*H*W,)
-    """
-    if not (np.isfinite(kappa) and kappa >= 0):
-        raise ValueError(f"kappa must be finite and >= 0, got {kappa!r}")
-    img = as_float_image(image)
-    H, W = img.shape[:2]
-    dx = np.zeros((H, W))
-    dy = np.zeros((H, W))
-    dx[:, :-1] = np.sqrt(np.sum((img[:, 1:] - img[:, :-1]) ** 2, axis=2))
-    dy[:-1, :] = np.sqrt(np.sum((img[1:, :] - img[:-1, :]) ** 2, axis=2))
-    return np.exp(-float(kappa) * np.concatenate([dx.ravel(), dy.ravel()]))
-
-
-def second_order_edge_weights(pair_weights, shape) -> np.ndarray:
-    """Row weights for :func:`~sparsedepth.grid.operators.hessian_operator` from pair weights.
-
-    A second-difference row gets the smallest pair weight among the pixel
-    pairs it spans: ``∂xx`` at ``(i, j)`` spans ``(i, j−1)–(i, j)`` and
-    ``(i, j)–(i, j+1)``; ``∂yy`` likewise vertically; ``∂xy`` at ``(i, j)``
-    spans the four sides of the square ``(i, j), (i, j+1), (i+1, j), (i+1, j+1)``.
-
-    Parameters
-    ----------
-    pair_weights : ndarray, shape (2*H*W,)
-        From :func:`pair_edge_weights`.
-    shape : tuple of int
-        ``(H, W)``.
-
-    Returns
-    -------
-    ndarray, shape (3*H*W,)
-    """
-    H, W = shape
-    wx = np.asarray(pair_weights[: H * W]).reshape(H, W)
-    wy = np.asarray(pair_weights[H * W :]).reshape(H, W)
-    wxx = wx.copy()
-    wxx[:, 1:] = np.minimum(wx[:, 1:], wx[:, :-1])
-    wyy = wy.copy()
-    wyy[1:, :] = np.minimum(wy[1:, :], wy[:-1, :])
-    wxy = np.minimum(wx, wy)
-    wxy[:-1, :] = np.minimum(wxy[:-1, :], wx[1:, :])
-    wxy[:, :-1] = np.minimum(wxy[:, :-1], wy[:, 1:])
-    return np.concatenate([wxx.ravel(), wyy.ravel(), wxy.ravel()])
-
-
 def build_objective(
     image,
     sparse_depth,
@@ -544,7 +287,6 @@ def build_objective(
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     check_same_shape(img.shape[:2], depth.shape, "image", "sparse_depth")
     shape = depth.shape
-    n = depth.size
     coarse = nearest_fill(depth, observed)
     w = edge_weights(img, weights.kappa).ravel() if weights.gamma > 0 else None
     pair = pair_edge_weights(img, weights.kappa) if (weights.beta_image > 0 or weights.beta_second_image > 0) else None

@@ -1,9 +1,13 @@
-"""The weights of the objective terms, as one small immutable object."""
+"""The weights of the objective terms, as one small immutable object.
+
+May import :mod:`sparsedepth._validation`.
+"""
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, fields, replace
+
+from .._validation import check_nonnegative_real
 
 __all__ = ["Weights", "DEFAULT_WEIGHTS"]
 
@@ -26,7 +30,7 @@ class Weights:
     paper, the per-pair weights ``wx = exp(-kappa ‖I[i, j+1] - I[i, j]‖)``,
     ``wy = exp(-kappa ‖I[i+1, j] - I[i, j]‖)``, and ``w2`` the smallest pair
     weight a second-difference row spans (see
-    :func:`sparsedepth.objective.second_order_edge_weights`).
+    :func:`sparsedepth.grid.edges.second_order_edge_weights`).
     A weight of 0 removes its term, so "L2 only" or "data only" is a choice of weights.
 
     Parameters
@@ -54,12 +58,12 @@ class Weights:
 
     Notes
     -----
-    The defaults come from the seeded weight search of ``bench/tune.py``
-    (written to ``docs/tuning.md``), chosen on RMSE and MAE together: on the
-    tuning frames they lower the hidden-pixel RMSE relative to nearest-neighbour
-    fill from 0.88 (the reference paper's objective) to 0.78.  The reported
-    frames' numbers are in ``docs/results.md``.  The default ``gamma`` is 0: the
-    edge-aware L1 term did not lower the error measurably there and costs a
+    The defaults are the weights chosen by the weight search of
+    ``bench/tune.py`` on RMSE and MAE together; on the tuning frames they
+    complete with a lower hidden-pixel error than the reference paper's
+    objective (the numbers are in ``docs/tuning.md``, the reported frames'
+    in ``docs/results.md``).  The default ``gamma`` is 0: the
+    edge-aware L1 term does not lower the error measurably there and costs a
     non-smooth solve; set ``gamma > 0`` (in units of depth: it scales linearly
     with depth, unlike the quadratic terms) to use it.  With ``gamma = 0``
     multiplying every weight by one number leaves the solution unchanged.
@@ -79,13 +83,7 @@ class Weights:
 
     def __post_init__(self):
         for f in fields(self):
-            value = getattr(self, f.name)
-            try:
-                value = float(value)
-            except (TypeError, ValueError):
-                raise ValueError(f"weight {f.name} must be a number, got {value!r}") from None
-            if not math.isfinite(value) or value < 0:
-                raise ValueError(f"weight {f.name} must be finite and >= 0, got {value!r}")
+            value = check_nonnegative_real(getattr(self, f.name), name=f"weight {f.name}")
             object.__setattr__(self, f.name, value)
 
     @classmethod
@@ -94,7 +92,7 @@ class Weights:
 
         ``Weights(alpha=..., beta=...)`` keeps the *default* extension weights
         for the fields it does not name; this constructor sets them to 0.  Its
-        own defaults are this project's original (untuned) paper weights.
+        own defaults are untuned weights for the paper's four terms.
 
         Examples
         --------

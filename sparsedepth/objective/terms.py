@@ -1,0 +1,203 @@
+"""The terms of the completion objective: data, each a weight, a sparse operator and row weights.
+
+* :class:`QuadraticTerm`  ``weight · Σ_k r_k ((K z)_k − d_k)²``
+* :class:`AbsTerm`        ``weight · Σ_k r_k |(K z)_k|``
+
+A term knows its value, its (smoothed) gradient and, for a quadratic term,
+its contribution ``weight · Kᵀ diag(r) K`` to the normal equations; the sum of
+terms is :class:`~sparsedepth.objective.objective.Objective`.
+
+May import NumPy, SciPy and :mod:`sparsedepth.grid`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..grid.operators import StencilOperator
+from ..grid.stencil import stencil_to_csr
+
+__all__ = ["QuadraticTerm", "AbsTerm"]
+
+
+def _apply(operator, z):
+    return z if operator is None else operator @ z
+
+
+def _apply_adjoint(operator, v):
+    return v if operator is None else operator.T @ v
+
+
+@dataclass(frozen=True, eq=False)
+class QuadraticTerm:
+    """``weight · Σ_k r_k ((K z)_k − d_k)²``.
+
+    Parameters
+    ----------
+    name : str
+        Name used in per-term reports.
+    weight : float
+        Non-negative scalar weight.
+    operator : scipy.sparse matrix or StencilOperator of shape (m, N), or None
+        ``K``; ``None`` means the identity (``m = N``).  A
+        :class:`~sparsedepth.grid.operators.StencilOperator` is applied matrix-free
+        and lets :meth:`Objective.normal_equations` assemble ``KᵀK`` as a
+        stencil.
+    row_weights : ndarray of shape (m,), or None
+        ``r >= 0`` (float, or bool for a 0/1 selection such as the data
+        term's observation mask); ``None`` means all ones.
+    target : ndarray of shape (m,), or None
+        ``d``; ``None`` means zeros.
+    """
+
+    name: str
+    weight: float
+    operator: Optional[object] = None
+    row_weights: Optional[np.ndarray] = None
+    target: Optional[np.ndarray] = None
+
+    def residual(self, z):
+        t = _apply(self.operator, z)
+        return t if self.target is None else t - self.target
+
+    def _block_residuals(self, z):
+        """``(rows, K_b z − d_b)`` per block: one ``H*W`` work vector for a StencilOperator."""
+        K = self.operator
+        if not isinstance(K, StencilOperator):
+            yield slice(None), self.residual(z)
+            return
+        n = K.shape[1]
+        work = np.empty(n)
+        for b in range(len(K.blocks)):
+            rows = slice(b * n, (b + 1) * n)
+            K.block_matvec(z, b, out=work)
+            if self.target is not None:
+                work -= self.target[rows]
+            yield rows, work
+
+    def value(self, z) -> float:
+        if self.weight == 0:
+            return 0.0
+        total = 0.0
+        for rows, res in self._block_residuals(z):
+            sq = res * res
+            if self.row_weights is not None:
+                sq *= self.row_weights[rows]
+            total += float(np.sum(sq))
+        return float(self.weight * total)
+
+    def gradient(self, z):
+        """``2 · weight · Kᵀ (r ⊙ (K z − d))``."""
+        if self.weight == 0:
+            return np.zeros_like(z)
+        if not isinstance(self.operator, StencilOperator):
+            res = self.residual(z)
+            if self.row_weights is not None:
+                res = res * self.row_weights
+            return 2.0 * self.weight * _apply_adjoint(self.operator, res)
+        grad = np.zeros(self.operator.shape[1])
+        for b, (rows, res) in enumerate(self._block_residuals(z)):
+            if self.row_weights is not None:
+                res *= self.row_weights[rows]
+            self.operator.block_rmatvec_add(grad, b, res)
+        grad *= 2.0 * self.weight
+        return grad
+
+    def normal_matrix(self, n: int) -> sp.csr_matrix:
+        """Half the Hessian: ``weight · Kᵀ diag(r) K`` (sparse, ``(n, n)``)."""
+        r = np.ones(n if self.operator is None else self.operator.shape[0]) if self.row_weights is None else self.row_weights
+        if self.operator is None:
+            return sp.diags(self.weight * r, format="csr")
+        K = self.operator
+        if isinstance(K, StencilOperator):
+            offsets = K.offsets()
+            stencil = np.zeros((len(offsets),) + K.grid_shape)
+            K.add_normal_stencil(stencil, offsets, self.row_weights, self.weight)
+            return sp.csr_matrix(stencil_to_csr(offsets, stencil))
+        return (K.T @ sp.diags(self.weight * r) @ K).tocsr()
+
+    def normal_rhs(self, n: int):
+        """``weight · Kᵀ (r ⊙ d)``: the right-hand side contribution."""
+        if self.target is None or self.weight == 0:
+            return np.zeros(n)
+        d = self.target if self.row_weights is None else self.row_weights * self.target
+        return self.weight * _apply_adjoint(self.operator, d)
+
+    def constant(self) -> float:
+        """``weight · Σ r d²``: the value at ``K z = 0``."""
+        if self.target is None:
+            return 0.0
+        d2 = self.target**2
+        if self.row_weights is not None:
+            d2 = d2 * self.row_weights
+        return float(self.weight * np.sum(d2))
+
+
+@dataclass(frozen=True, eq=False)
+class AbsTerm:
+    """``weight · Σ_k r_k |(K z)_k|`` (weighted L1 of a linear map of ``z``).
+
+    Parameters
+    ----------
+    name : str
+    weight : float
+    operator : scipy.sparse matrix or StencilOperator of shape (m, N)
+        ``build_objective`` passes the matrix-free
+        :func:`~sparsedepth.grid.operators.gradient_stencil`; the L1 solvers
+        recognise it (:class:`~sparsedepth.objective.l1.StackedL1`) and apply it by
+        slicing.
+    row_weights : ndarray of shape (m,) or (N,), or None
+        ``r``; shape ``(N,)`` (with ``m`` a multiple of ``N``, e.g. the two
+        blocks of the gradient) means the same weights for every block of
+        ``N`` rows, stored once (``build_objective`` passes the edge weights
+        of the pixels so: half the memory of the stacked ``r``).
+    """
+
+    name: str
+    weight: float
+    operator: object
+    row_weights: Optional[np.ndarray] = None
+
+    def __post_init__(self):
+        if self.row_weights is not None:
+            m, n = self.operator.shape
+            size = np.shape(self.row_weights)[0] if np.ndim(self.row_weights) == 1 else -1
+            if size != m and not (size == n and n > 0 and m % n == 0):
+                raise ValueError(f"row_weights of term {self.name!r} must have shape ({m},) or ({n},) "
+                                 f"(shared by the {m // max(n, 1)} blocks), got {np.shape(self.row_weights)}")
+
+    def row_weight_blocks(self) -> int:
+        """How many times the stored ``row_weights`` repeat along the rows (1 when of shape (m,))."""
+        if self.row_weights is None:
+            return 1
+        return self.operator.shape[0] // np.shape(self.row_weights)[0]
+
+    def scaled_row_weights(self):
+        """``weight · r`` as an array of shape (m,)."""
+        m = self.operator.shape[0]
+        if self.row_weights is None:
+            return np.full(m, float(self.weight))
+        return self.weight * np.tile(np.asarray(self.row_weights, dtype=np.float64), self.row_weight_blocks())
+
+    def value(self, z) -> float:
+        if self.weight == 0:
+            return 0.0
+        return float(np.sum(self.scaled_row_weights() * np.abs(self.operator @ z)))
+
+    def smoothed_value(self, z, eps: float) -> float:
+        """``weight · Σ r sqrt((K z)² + ε²)``."""
+        if self.weight == 0:
+            return 0.0
+        t = self.operator @ z
+        return float(np.sum(self.scaled_row_weights() * np.sqrt(t * t + eps * eps)))
+
+    def smoothed_gradient(self, z, eps: float):
+        """``weight · Kᵀ (r ⊙ t / sqrt(t² + ε²))`` with ``t = K z``."""
+        if self.weight == 0:
+            return np.zeros_like(z)
+        t = self.operator @ z
+        return self.operator.T @ (self.scaled_row_weights() * t / np.sqrt(t * t + eps * eps))
