@@ -2,7 +2,73 @@
 
 Depth completion and hole filling by regularised optimisation with sparse
 linear algebra (scipy.sparse, pyamg).  The main entry point is
-:func:`complete_depth`.
+:func:`complete_depth`; :func:`fill_holes` fills raw sensor depth;
+``python -m sparsedepth.complete`` is the command line.
+
+The map of the package, from the bottom layer up (each part may import only
+the parts listed before it, NumPy, SciPy, pyamg, scikit-image and h5py;
+``docs/architecture.md`` follows one frame through it):
+
+``_validation``
+    Every input check, one rule per concept (numbers, grid shapes, images,
+    depth and masks, sparse grid operators, weights, paths).  Imports nothing
+    of the package.
+``result``
+    :class:`CompletionResult`, :class:`IterationRecord`, :class:`SolverState`,
+    :class:`ClampWarning`: the types every solver and :func:`complete_depth`
+    return.
+``grid/``
+    The pixel grid: stencils (``stencil``), finite-difference operators
+    (``operators``), the image gradient and edge weights (``edges``).
+``io/``
+    Files: images, depth formats and their units, calibration, NumPy/HDF5
+    arrays, NYU Depth V2 files, atomic writes.  Imports ``_validation`` only.
+``linalg/``
+    Sparse SPD solves: every Krylov loop (``krylov``: CG, warm-started CG
+    steps, GMRES), preconditioners by name, and the geometric multigrid
+    (``multigrid/``).  Imports ``grid``.
+``sampling``, ``metrics``, ``baselines``
+    Sparse input from dense depth, error metrics, and the fills a user would
+    otherwise reach for (nearest, linear, biharmonic, colorization;
+    ``colorization_baseline`` imports ``holes.colorization`` when called).
+``objective/``
+    The objective as a sum of named terms (``terms``, ``objective``), their
+    :class:`Weights` (``weights``), and the stacked L1 operator (``l1``).
+    Imports ``grid`` and the nearest fill of ``baselines``.
+``solvers/``
+    One module per solver family (``quadratic``, ``irls``, ``admm`` with
+    ``active_set``, ``lbfgsb``, ``adam``), one ``registry``, one options
+    dataclass per solver (``options``), the duality-gap ``certificate``, and
+    the front door ``core`` (checks, depth scaling, :func:`solve`).  Imports
+    ``objective``, ``linalg``, ``grid``, ``result``.
+``completion``
+    :func:`complete_depth`: checks, objective, scaled solve, clamp.
+``holes/``
+    :func:`fill_holes`: the NYU toolbox colorization fill (``affinity``,
+    ``ordering``, ``schur``, ``colorization``) and the completion objective
+    with every valid raw pixel observed (``fill``).  Imports ``completion``,
+    ``linalg``, ``grid``.
+``datasets``
+    Real frames: the shipped samples, the shared data folder, NYU files.
+    Imports ``io``.
+``batch/``
+    Whole datasets: frame discovery (``frames``), one frame (``evaluate``,
+    ``worker``), options, the resumable CSV (``csvlog``), the worker pool
+    (``pool``), :func:`~sparsedepth.batch.run_batch` (``run``) and Dask
+    clusters (``distributed``, the only module that imports Dask, when
+    called).  Imports everything above except ``cli``.
+``cli/``
+    The command line: the parser, option checks, one frame, batches, output
+    planning (all or nothing), reports.  Imported only by ``complete``, the
+    ``python -m sparsedepth.complete`` entry point.
+
+Where a change goes: a new solver is a module in ``solvers/`` plus a line in
+``solvers/registry.py`` and an options class in ``solvers/options.py``; a new
+term is a :class:`QuadraticTerm`/:class:`AbsTerm` built in
+``objective/objective.py`` with its weight in ``objective/weights.py``; a new
+file format is a module in ``io/`` dispatched from ``io/depth.py`` or
+``io/images.py``; a new command-line flag is an argument group in
+``cli/parser.py`` and its use in ``cli/single.py`` or ``cli/batch_mode.py``.
 """
 
 from . import datasets, io
