@@ -191,7 +191,7 @@ def tables(rows, args) -> str:
 
 
 def header(args, argv, pool_start, dask_start) -> str:
-    """Title, command, date, commit, machine and versions, and what the columns mean."""
+    """Title, command, date, machine and versions, and what the columns mean."""
     import dask
     import distributed
 
@@ -199,8 +199,8 @@ def header(args, argv, pool_start, dask_start) -> str:
     return "\n".join([
         "# Batch throughput: process pool vs Dask LocalCluster",
         "",
-        f"Written by `{command}` on {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, commit "
-        f"{H.git_commit() or '?'}; {platform.platform()}, {os.cpu_count()} CPUs, Python "
+        f"Written by `{command}` on {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC; "
+        f"{platform.platform()}, {os.cpu_count()} CPUs, Python "
         f"{platform.python_version()}, numpy {np.__version__}, scipy {H.version('scipy')}, dask "
         f"{dask.__version__}, distributed {distributed.__version__}.",
         "",

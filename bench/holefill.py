@@ -43,8 +43,8 @@ TEMPLATE = Path(__file__).resolve().parent / "templates" / "holefill.md"
 
 
 def versions() -> str:
-    """sparsedepth (with the git commit), Python, NumPy, SciPy and pyamg versions."""
-    return (f"sparsedepth {sd.__version__} (git {H.git_commit() or 'unknown'}), Python {platform.python_version()}, "
+    """sparsedepth, Python, NumPy, SciPy and pyamg versions."""
+    return (f"sparsedepth {sd.__version__}, Python {platform.python_version()}, "
             f"NumPy {H.version('numpy')}, SciPy {H.version('scipy')}, pyamg {H.version('pyamg')}")
 
 

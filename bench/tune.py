@@ -199,7 +199,7 @@ def report(args, *, frames, fractions, cands, n_refine, table, near, chosen, l1_
     paper_row = next(row for row in table if row[2] == PAPER_WEIGHTS.replace(gamma=0.0))  # an anchor
     lines += [
         "",
-        f"The seed's weights (the reference paper's objective, γ = 0): score {paper_row[0]:.3f}, "
+        f"The reference paper's objective (γ = 0): score {paper_row[0]:.3f}, "
         f"RMSE ratio {paper_row[4]:.3f}.",
         "",
         "Best weight set per sparsity (what a per-sparsity default would gain):",

@@ -5,7 +5,7 @@
 * :mod:`.evaluation` - one scored run (:func:`evaluate`, cached in-process) and aggregation (:func:`summarise`);
 * :mod:`.timing` - wall-clock timing with ``time.perf_counter`` (one call, best of / median of repeats);
 * :mod:`.tables` - number formatting and markdown tables from rows;
-* :mod:`.machine` - CPU, cores, OS, library versions, BLAS threads, git commit;
+* :mod:`.machine` - CPU, cores, OS, library versions, BLAS threads;
 * :mod:`.report` - the header every report starts with (command, machine, frames, seeds) and writing it;
 * :mod:`.cli` - the command line shared by the table modules (``--quick``, ``--step``, ``--seeds``, ...).
 
@@ -18,7 +18,7 @@ from .cli import finish, parser, script_main, seeds_of
 from .evaluation import Record, evaluate, mean_std, metric, show_progress, summarise
 from .inputs import (DEFAULT_SEEDS, FRACTIONS, FrameData, get_frames, load_frame, quick_frames, report_frame_names,
                      sample, synthetic_frame)
-from .machine import blas_threads, cpu_model, git_commit, machine_info, machine_markdown, version
+from .machine import blas_threads, cpu_model, machine_info, machine_markdown, version
 from .methods import BIHARMONIC, COLORIZATION, LINEAR, NEAREST, Method, ours
 from .report import DOCS, REPO, command_line, frames_markdown, section, step_note, weights_markdown, write_text
 from .tables import fmt, markdown_table, per_frame_table
@@ -29,7 +29,7 @@ __all__ = [
     "Record", "evaluate", "mean_std", "metric", "show_progress", "summarise",
     "DEFAULT_SEEDS", "FRACTIONS", "FrameData", "get_frames", "load_frame", "quick_frames", "report_frame_names",
     "sample", "synthetic_frame",
-    "blas_threads", "cpu_model", "git_commit", "machine_info", "machine_markdown", "version",
+    "blas_threads", "cpu_model", "machine_info", "machine_markdown", "version",
     "BIHARMONIC", "COLORIZATION", "LINEAR", "NEAREST", "Method", "ours",
     "DOCS", "REPO", "command_line", "frames_markdown", "section", "step_note", "weights_markdown", "write_text",
     "fmt", "markdown_table", "per_frame_table",

@@ -1,4 +1,4 @@
-"""What the reports say about the machine: CPU model, cores, OS, Python and library versions, BLAS threads, commit.
+"""What the reports say about the machine: CPU model, cores, OS, Python and library versions, BLAS threads.
 
 May import :mod:`sparsedepth` and the standard library.
 """
@@ -8,14 +8,12 @@ from __future__ import annotations
 import datetime
 import os
 import platform
-import subprocess
 from pathlib import Path
 
 import sparsedepth as sd
 
-__all__ = ["version", "cpu_model", "blas_threads", "git_commit", "machine_info", "machine_markdown"]
+__all__ = ["version", "cpu_model", "blas_threads", "machine_info", "machine_markdown"]
 
-_REPO = Path(__file__).resolve().parents[2]
 
 
 def version(module: str) -> str:
@@ -40,16 +38,6 @@ def cpu_model() -> str:
 def blas_threads():
     """``$OPENBLAS_NUM_THREADS`` (``None`` when unset)."""
     return os.environ.get("OPENBLAS_NUM_THREADS")
-
-
-def git_commit():
-    """Short hash of the checked-out commit of this repository, or ``None`` without git."""
-    try:
-        out = subprocess.run(["git", "-C", str(_REPO), "rev-parse", "--short", "HEAD"], capture_output=True,
-                             text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
-    return out or None
 
 
 def machine_info() -> dict:
