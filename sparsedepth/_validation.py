@@ -12,14 +12,13 @@ concept is refused with the same exception and message everywhere:
 - images, depth and masks: :func:`as_float_image`, :func:`as_depth_and_mask`,
   :func:`check_bool_mask`;
 - sparse operators on a grid: :func:`as_grid_operator`;
-- weights: :func:`check_weights`;
 - paths and frame indices: :func:`check_input_file` (a regular file, checked
   with :func:`os.stat` only), :func:`check_folder`, :func:`check_index`, and
   :func:`argument_label` (how an argument is named in a message: a
   command-line flag as typed, a Python name in backticks).
 
-May import NumPy, SciPy and the standard library (and, inside
-:func:`check_weights`, :class:`sparsedepth.Weights`); nothing else of the package.
+May import NumPy, SciPy and the standard library; nothing of the package (the
+rule for :class:`~sparsedepth.Weights` is :func:`sparsedepth.objective.weights.check_weights`).
 """
 
 from __future__ import annotations
@@ -46,7 +45,6 @@ __all__ = [
     "as_depth_and_mask",
     "check_bool_mask",
     "as_grid_operator",
-    "check_weights",
     "argument_label",
     "check_input_file",
     "check_folder",
@@ -252,17 +250,6 @@ def as_grid_operator(A, shape, *, name: str = "A"):
         A = A.copy()
         A.sum_duplicates()
     return A, (h, w)
-
-
-# Weights
-
-def check_weights(weights, *, name: str = "weights") -> None:
-    """Raise ``TypeError`` unless ``weights`` is a :class:`sparsedepth.Weights`."""
-    from .objective.weights import Weights
-
-    if not isinstance(weights, Weights):
-        hint = "use sd.Weights(**d)" if isinstance(weights, dict) else "use sd.Weights(alpha=..., gamma=...)"
-        raise TypeError(f"{name} must be a sparsedepth.Weights; got {type(weights).__name__}: {hint}")
 
 
 # Paths and frame indices

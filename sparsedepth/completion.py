@@ -10,11 +10,11 @@ import warnings
 
 import numpy as np
 
-from ._validation import as_depth_and_mask, check_weights
+from ._validation import as_depth_and_mask
 from .objective.objective import DEFAULT_L1_SMOOTHING, build_objective
 from .result import ClampWarning, CompletionResult
 from .solvers import SOLVERS, solve_scaled, check_solver_arguments, depth_scale
-from .objective.weights import DEFAULT_WEIGHTS, Weights
+from .objective.weights import DEFAULT_WEIGHTS, Weights, check_weights
 
 __all__ = ["complete_depth", "choose_solver"]
 

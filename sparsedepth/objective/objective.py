@@ -29,13 +29,13 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .._validation import as_depth_and_mask, as_float_image, check_positive_real, check_same_shape, check_weights
+from .._validation import as_depth_and_mask, as_float_image, check_positive_real, check_same_shape
 from ..baselines import nearest_fill
 from ..grid.edges import edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights
 from ..grid.operators import StencilOperator, gradient_stencil, hessian_stencil
 from ..grid.stencil import stencil_to_csr
 from .terms import AbsTerm, QuadraticTerm
-from .weights import DEFAULT_WEIGHTS, Weights
+from .weights import DEFAULT_WEIGHTS, Weights, check_weights
 
 __all__ = [
     "QuadraticTerm",

@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, fields, replace
 
 from .._validation import check_nonnegative_real
 
-__all__ = ["Weights", "DEFAULT_WEIGHTS"]
+__all__ = ["Weights", "DEFAULT_WEIGHTS", "check_weights"]
 
 
 @dataclass(frozen=True)
@@ -111,3 +111,11 @@ class Weights:
 
 
 DEFAULT_WEIGHTS = Weights()
+
+
+def check_weights(weights, *, name: str = "weights") -> None:
+    """Raise ``TypeError`` unless ``weights`` is a :class:`sparsedepth.Weights`."""
+    if not isinstance(weights, Weights):
+        hint = "use sd.Weights(**d)" if isinstance(weights, dict) else "use sd.Weights(alpha=..., gamma=...)"
+        raise TypeError(f"{name} must be a sparsedepth.Weights; got {type(weights).__name__}: {hint}")
+

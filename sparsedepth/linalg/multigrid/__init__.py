@@ -41,7 +41,8 @@ with a choice of preconditioners and returns an honest residual history.
 
 Modules, from the bottom up: :mod:`.stencils` (reading stencils from CSR),
 :mod:`.interpolation` (prolongation weights), :mod:`.transfer` (prolongation
-operators), :mod:`.galerkin` (coarse operators), :mod:`.smoothers`,
+operators), :mod:`.galerkin` (coarse operators), :mod:`.smoothers`, :mod:`.iteration` (PCG
+and V-cycle iterations with their residual history),
 :mod:`.hierarchy` (:class:`GridMultigrid`), :mod:`.solve` (:func:`solve_spd`).
 The subpackage may import :mod:`sparsedepth.linalg.krylov`,
 :mod:`sparsedepth.grid`, :mod:`sparsedepth._validation`, NumPy, SciPy and

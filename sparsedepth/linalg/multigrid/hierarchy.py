@@ -10,6 +10,8 @@ pyamg; :mod:`.solve` only inside :meth:`GridMultigrid.solve`.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
@@ -18,6 +20,7 @@ import scipy.sparse.linalg as spla
 from ..._validation import as_grid_operator
 from ...grid.stencil import full_pattern_offsets, stencil_to_csr
 from .galerkin import galerkin_offsets, galerkin_stencil
+from .iteration import preconditioned_cg, prepare_rhs, vcycle_iteration
 from .interpolation import bilinear_weights, operator_weights
 from .smoothers import gauss_seidel_backward, gauss_seidel_forward, jacobi_damping, jacobi_sweeps
 from .stencils import StencilSource, extract_stencil, fine_stencil_source
@@ -463,12 +466,14 @@ class GridMultigrid:
         info : SolveInfo
             Convergence flag, iteration count, residual history.
         """
-        from .solve import solve_spd, vcycle_iteration  # solve.py builds GridMultigrids: imported on use
-
         if accel == "cg":
-            return solve_spd(self.levels[0].A, b, self.shape, x0=x0, rtol=rtol,
-                             atol=atol, maxiter=maxiter, preconditioner=self,
-                             callback=callback)
+            A = self.levels[0].A
+            b_arr, x_init, bnorm = prepare_rhs(b, x0, A.shape[0])
+            t0 = time.perf_counter()
+            M = self.aspreconditioner()
+            return preconditioned_cg(A, b_arr, x_init, bnorm, M=M, name=type(self).__name__, rtol=rtol, atol=atol,
+                                     maxiter=maxiter, callback=callback, setup_time=time.perf_counter() - t0,
+                                     out_shape=np.shape(b))
         if accel is not None:
             raise ValueError(f"unknown accel {accel!r}; use 'cg' or None.")
         return vcycle_iteration(self, b, x0=x0, rtol=rtol, atol=atol, maxiter=maxiter, callback=callback)
