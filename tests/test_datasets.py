@@ -13,7 +13,9 @@ import numpy as np
 import pytest
 import skimage.data
 
+import sparsedepth
 from sparsedepth import datasets as ds
+from sparsedepth.datasets import embedded, shared
 
 ALL_SHARED = [
     "nyu_metric3d/00000",
@@ -164,7 +166,7 @@ def test_load_motorcycle():
 def test_embedded_frame():
     assert ds.list_embedded_frames() == ["nyu_mmseg_pseudo/bookstore_0001d_00001"]
     frame = ds.load_embedded_frame("nyu_mmseg_pseudo/bookstore_0001d_00001")
-    data = Path(ds.__file__).parent / "data"
+    data = Path(sparsedepth.__file__).parent / "data"
     stored = iio.imread(data / "bookstore_0001d_00001.png")
     assert stored.dtype == np.uint16 and stored.shape == (120, 160)
     expected = _nan_where(stored / 1000, (stored == 0) | (stored == 10000))
@@ -177,15 +179,15 @@ def test_embedded_frame():
 
 
 def test_embedded_sources_document_the_checksums():
-    text = (Path(ds.__file__).parent / "data" / "SOURCES.md").read_text()
-    for file_name, digest in ds._EMBEDDED_SHA256.items():
+    text = (Path(sparsedepth.__file__).parent / "data" / "SOURCES.md").read_text()
+    for file_name, digest in embedded._EMBEDDED_SHA256.items():
         assert file_name in text and digest in text
 
 
 def test_embedded_frame_errors(monkeypatch):
     with pytest.raises(ValueError, match="unknown embedded frame 'nope'"):
         ds.load_embedded_frame("nope")
-    monkeypatch.setitem(ds._EMBEDDED_SHA256, "bookstore_0001d_00001.png", "0" * 64)
+    monkeypatch.setitem(embedded._EMBEDDED_SHA256, "bookstore_0001d_00001.png", "0" * 64)
     with pytest.raises(ValueError, match="is corrupt"):
         ds.load_embedded_frame()
 
@@ -288,7 +290,16 @@ def test_shared_data_dir_env(monkeypatch, fake_root):
         ds.list_shared_frames()
     monkeypatch.setenv("SPARSEDEPTH_DATA", "")
     default = ds.shared_data_dir()
-    assert default is None or default == (Path(ds.__file__).resolve().parents[2] / "shared" / "data")
+    assert default is None or default == (Path(sparsedepth.__file__).resolve().parents[2] / "shared" / "data")
+
+
+def test_shared_data_dir_default_is_beside_the_repository(monkeypatch):
+    beside = Path(sparsedepth.__file__).resolve().parents[2] / "shared" / "data"
+    if not beside.is_dir():
+        pytest.skip(f"no shared data folder at {beside}")
+    monkeypatch.delenv("SPARSEDEPTH_DATA", raising=False)
+    assert ds.shared_data_dir() == beside
+    assert shared.shared_data_dir() == beside
 
 
 def test_shared_errors(monkeypatch, fake_root):
@@ -300,7 +311,7 @@ def test_shared_errors(monkeypatch, fake_root):
         ds.list_shared_frames(fake_root / "missing")
     with pytest.raises(TypeError, match="`root`"):
         ds.list_shared_frames(3)
-    monkeypatch.setattr(ds, "shared_data_dir", lambda: None)
+    monkeypatch.setattr(shared, "shared_data_dir", lambda: None)
     assert ds.list_shared_frames() == []
     with pytest.raises(FileNotFoundError, match="SPARSEDEPTH_DATA"):
         ds.load_shared_frame("tum/0")
