@@ -15,7 +15,9 @@ concept is refused with the same exception and message everywhere:
 - paths and frame indices: :func:`check_input_file` (a regular file, checked
   with :func:`os.stat` only), :func:`check_folder`, :func:`check_index`, and
   :func:`argument_label` (how an argument is named in a message: a
-  command-line flag as typed, a Python name in backticks).
+  command-line flag as typed, a Python name in backticks);
+- options passed on as keywords: :func:`check_option_names` (a misspelt key
+  is a ``ValueError`` naming it and listing the valid ones).
 
 May import NumPy, SciPy and the standard library; nothing of the package (the
 rule for :class:`~sparsedepth.Weights` is :func:`sparsedepth.objective.weights.check_weights`).
@@ -49,6 +51,7 @@ __all__ = [
     "check_input_file",
     "check_folder",
     "check_index",
+    "check_option_names",
 ]
 
 
@@ -323,3 +326,15 @@ def check_index(index, count: int) -> int:
     if not -count <= index < count:
         raise IndexError(f"frame index {index} out of range for {count} frames.")
     return index % count
+
+
+# Options passed on as keywords
+
+def check_option_names(options, valid, *, where: str) -> None:
+    """``ValueError`` naming the first key of ``options`` that is not in ``valid``, with the valid keys listed.
+
+    ``where`` says whose options they are (e.g. ``"colorization_baseline"``).
+    """
+    unknown = [key for key in options if key not in valid]
+    if unknown:
+        raise ValueError(f"unknown option {unknown[0]!r} for {where}; valid options: {', '.join(sorted(valid))}")

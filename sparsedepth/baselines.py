@@ -21,10 +21,12 @@ whose objective imports this module's nearest fill).
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 from scipy import ndimage
 
-from ._validation import as_depth_and_mask, check_same_shape
+from ._validation import as_depth_and_mask, check_option_names, check_same_shape
 
 __all__ = ["nearest_fill", "linear_fill", "biharmonic_fill", "colorization_baseline"]
 
@@ -196,4 +198,11 @@ def colorization_baseline(image, sparse_depth, mask=None, **options) -> np.ndarr
 
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     check_same_shape(np.shape(image)[:2], depth.shape, "image", "sparse_depth")
+    check_option_names(options, set(_keyword_only_parameters(colorization_fill)) - {"mask"}, where="colorization_baseline")
     return colorization_fill(image, depth, mask=observed, **options)
+
+
+def _keyword_only_parameters(function) -> tuple[str, ...]:
+    """The keyword-only parameter names of ``function`` (the options it accepts)."""
+    return tuple(name for name, parameter in inspect.signature(function).parameters.items()
+                 if parameter.kind is inspect.Parameter.KEYWORD_ONLY)

@@ -14,13 +14,16 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..._validation import as_grid_operator
+from ..._validation import as_grid_operator, check_option_names
 from .hierarchy import GridMultigrid
 from .iteration import SolveInfo, preconditioned_cg, prepare_rhs
 
 __all__ = ["SolveInfo", "solve_spd"]
 
 _PRECONDITIONERS = ("grid", "amg", "sa", "jacobi", "none")
+#: The options of :class:`GridMultigrid` that ``solve_spd(..., preconditioner="grid", **options)`` passes on.
+GRID_OPTIONS = ("interpolation", "smoother", "sweeps", "max_coarse", "max_levels", "coarse_precision",
+                "fine_precision")
 
 
 def _solve_preconditioner(A, shape, preconditioner, options):
@@ -37,6 +40,7 @@ def _solve_preconditioner(A, shape, preconditioner, options):
                 f"{sorted(options)}."
             )
         if preconditioner == "grid":
+            check_option_names(options, GRID_OPTIONS, where="preconditioner='grid'")
             return GridMultigrid(A, shape, **options).aspreconditioner(), "grid"
         if preconditioner in ("amg", "sa"):
             import pyamg
