@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from .._validation import check_folder
 from ..io import read_calib, read_depth, read_depth_array, read_depth_png, read_image
 from .frame import MMSEG_NAME, MOTORCYCLE_CALIBRATION, Frame, as_rgb, nyu_mmseg_frame
 
@@ -219,12 +220,7 @@ def _shared_root(root, *, required: bool) -> Path | None:
                     "no shared data folder: set the SPARSEDEPTH_DATA environment variable or pass `root=`."
                 )
             return None
-    elif not isinstance(root, (str, os.PathLike)):
-        raise TypeError(f"`root` must be a str or os.PathLike, got {type(root).__name__}.")
-    root = Path(root)
-    if not root.is_dir():
-        raise FileNotFoundError(f"`root`: shared data folder '{root}' does not exist.")
-    return root
+    return check_folder(root, "`root` (the shared data folder)")
 
 
 def list_shared_frames(root=None) -> list[str]:
