@@ -263,7 +263,7 @@ def test_weights_in_two_threads_equal_one_pass(window_radius, height, monkeypatc
     # the halves carry a halo of window_radius rows: every plane equals the one-pass result exactly
     from sparsedepth.holes import affinity, colorization
 
-    monkeypatch.setattr(colorization, "_available_cpus", lambda: 2)
+    monkeypatch.setattr(colorization, "available_cpus", lambda: 2)
     grey = np.random.default_rng(3).random((height, 37))
     one, steps_one = affinity.window_weights(grey, window_radius)
     two, steps_two = colorization._window_weights_two_threads(grey, window_radius)

@@ -29,6 +29,7 @@ from .._validation import is_real
 from .frames import absolute_frame
 from .options import BatchOptions, BatchSummary
 from .run import run_batch
+from .worker import one_line
 
 __all__ = [
     "DEFAULT_TIMEOUT",
@@ -126,7 +127,7 @@ def connect(address: str | None = None, *, scheduler_file=None, timeout: float =
     try:
         client = distributed.Client(address, timeout=timeout, set_as_default=False)
     except OSError as exc:
-        raise OSError(f"no Dask scheduler answered at {address} within {timeout:g} s ({_one_line(exc)})") from None
+        raise OSError(f"no Dask scheduler answered at {address} within {timeout:g} s ({one_line(exc)})") from None
     try:
         client.wait_for_workers(1, timeout=timeout)
     except (TimeoutError, asyncio.TimeoutError, OSError) as exc:
@@ -139,10 +140,6 @@ def connect(address: str | None = None, *, scheduler_file=None, timeout: float =
         client.close()
         raise
     return client
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def cluster_threads(client) -> int:

@@ -15,6 +15,8 @@ import os
 import signal
 from concurrent.futures import ProcessPoolExecutor
 
+from .._system import available_cpus
+
 __all__ = ["default_workers", "init_worker", "new_pool", "stop_pool", "loaded_openblas", "openblas_function"]
 
 
@@ -24,11 +26,7 @@ def default_workers() -> int:
     On a machine shared with other work (or with hyper-threading) one worker
     per core oversubscribes it: on a 2-core machine 1 worker is chosen.
     """
-    try:
-        cpus = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on every platform
-        cpus = os.cpu_count() or 1
-    return max(1, min(cpus // 2, 8))
+    return max(1, min(available_cpus() // 2, 8))
 
 
 def stop_pool(executor: ProcessPoolExecutor, *, terminate: bool) -> None:

@@ -26,7 +26,7 @@ from .evaluate import evaluate_frame
 from .frames import NYUFrame, NYUH5Frame
 from .options import BatchOptions
 
-__all__ = ["process_frame", "output_path", "remove_temporaries", "error_text"]
+__all__ = ["process_frame", "output_path", "remove_temporaries", "error_text", "one_line"]
 
 
 def _read_frame(source, options: BatchOptions):
@@ -124,10 +124,14 @@ def process_frame(position: int, source, options: BatchOptions) -> dict:
     return row
 
 
+def one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line (its type name if it has none)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
 def error_text(exc: BaseException) -> str:
     """The ``error`` cell of a failed frame: ``"<exception type>: <message on one line>"``."""
-    text = " ".join(str(exc).split()) or type(exc).__name__
-    return f"{type(exc).__name__}: {text}"
+    return f"{type(exc).__name__}: {one_line(exc)}"
 
 
 def remove_temporaries(names, options: BatchOptions) -> None:

@@ -1,6 +1,7 @@
 """How the command line reports problems: usage errors, library errors and warnings, each one line on stderr.
 
-Imports the standard library and :class:`~sparsedepth.ClampWarning`.
+Imports the standard library, :class:`~sparsedepth.ClampWarning` and the one-line form of an exception
+(:func:`sparsedepth.batch.worker.one_line`, which the batch CSV uses too).
 """
 
 from __future__ import annotations
@@ -8,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import warnings
 
+from ..batch.worker import one_line
 from ..result import ClampWarning
 
 __all__ = ["LIBRARY_ERRORS", "UsageError", "one_line", "warnings_as_lines"]
@@ -17,11 +19,6 @@ LIBRARY_ERRORS = (ValueError, OSError, IndexError, KeyError)  # OSError covers F
 
 class UsageError(Exception):
     """A bad combination of options, found after parsing."""
-
-
-def one_line(exc: BaseException) -> str:
-    """The message of ``exc`` on one line (its type name if it has none)."""
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 @contextlib.contextmanager

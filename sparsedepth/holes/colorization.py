@@ -30,10 +30,10 @@ colorization_fill
 from __future__ import annotations
 
 import concurrent.futures
-import os
 
 import numpy as np
 
+from .._system import available_cpus
 from .._validation import as_depth_and_mask, check_bool_mask, check_count, check_positive_real, check_same_shape
 from .affinity import GREY_WEIGHTS, as_grey, colorization_weights, rgb_to_grey, window_entries, window_rows, window_weights
 from .ordering import nested_dissection_order
@@ -47,14 +47,6 @@ __all__ = [
 ]
 
 
-def _available_cpus():
-    """CPUs this process may run on."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
-
-
 def _window_weights_two_threads(grey, radius):
     """:func:`~sparsedepth.holes.affinity.window_weights` computed for the top and the bottom half in two threads.
 
@@ -65,7 +57,7 @@ def _window_weights_two_threads(grey, radius):
     images and single-CPU processes use one pass.
     """
     H = grey.shape[0]
-    if H < 16 * (radius + 1) or _available_cpus() < 2:
+    if H < 16 * (radius + 1) or available_cpus() < 2:
         return window_weights(grey, radius)
     half = H // 2
     with concurrent.futures.ThreadPoolExecutor(max_workers=1) as worker:
