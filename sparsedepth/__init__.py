@@ -15,7 +15,7 @@ the parts listed before it, NumPy, SciPy, pyamg, scikit-image and h5py;
     of the package.
 ``result``
     :class:`CompletionResult`, :class:`IterationRecord`, :class:`SolverState`,
-    :class:`ClampWarning`: the types every solver and :func:`complete_depth`
+    :class:`UncertaintyCalibration`, :class:`ClampWarning`: the types every solver and :func:`complete_depth`
     return.
 ``grid/``
     The pixel grid: stencils (``stencil``), finite-difference operators
@@ -41,8 +41,12 @@ the parts listed before it, NumPy, SciPy, pyamg, scikit-image and h5py;
     dataclass per solver (``options``), the duality-gap ``certificate``, and
     the front door ``core`` (checks, depth scaling, :func:`solve`).  Imports
     ``objective``, ``linalg``, ``grid``, ``result``.
+``uncertainty``
+    The per-pixel error estimate of a completion and its calibration on
+    held-out observations (never solves; imports ``result``).
 ``completion``
-    :func:`complete_depth`: checks, objective, scaled solve, clamp.
+    :func:`complete_depth`: checks, objective, scaled solve, clamp, and the
+    uncertainty map from two half-sample solves.
 ``holes/``
     :func:`fill_holes`: the NYU toolbox colorization fill (``affinity``,
     ``ordering``, ``schur``, ``colorization``) and the completion objective
@@ -76,7 +80,7 @@ from .baselines import biharmonic_fill, colorization_baseline, linear_fill, near
 from .completion import choose_solver, complete_depth
 from .metrics import DepthMetrics, depth_metrics
 from .objective.objective import AbsTerm, Objective, QuadraticTerm, build_objective, edge_weights
-from .result import ClampWarning, CompletionResult, IterationRecord, SolverState
+from .result import ClampWarning, CompletionResult, IterationRecord, SolverState, UncertaintyCalibration
 from .sampling import sample_depth, sample_mask, valid_depth_mask
 from .solvers import SOLVER_OPTIONS, SOLVERS
 from .objective.weights import DEFAULT_WEIGHTS, Weights
@@ -100,6 +104,7 @@ __all__ = [
     "DEFAULT_WEIGHTS",
     "CompletionResult",
     "ClampWarning",
+    "UncertaintyCalibration",
     "IterationRecord",
     "SolverState",
     "Objective",

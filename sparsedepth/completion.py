@@ -1,20 +1,23 @@
 """The public entry point: :func:`complete_depth` (checks, scaling, solve, clamp).
 
 May import every subpackage below the front door: :mod:`~sparsedepth.objective`,
-:mod:`~sparsedepth.solvers`, :mod:`~sparsedepth.result` and :mod:`sparsedepth._validation`.
+:mod:`~sparsedepth.solvers`, :mod:`~sparsedepth.result`, :mod:`~sparsedepth.uncertainty` and
+:mod:`sparsedepth._validation`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import numpy as np
 
-from ._validation import as_depth_and_mask
+from ._validation import as_depth_and_mask, check_nonnegative_real
 from .objective.objective import DEFAULT_L1_SMOOTHING, build_objective
 from .result import ClampWarning, CompletionResult
 from .solvers import SOLVERS, solve_scaled, check_solver_arguments, depth_scale
 from .objective.weights import DEFAULT_WEIGHTS, Weights, check_weights
+from .uncertainty import MIN_OBSERVED, estimate_uncertainty, split_samples
 
 __all__ = ["complete_depth", "choose_solver"]
 
@@ -39,6 +42,8 @@ def complete_depth(
     l1_smoothing: float = DEFAULT_L1_SMOOTHING,
     options: dict | None = None,
     clip_to_observed: bool = True,
+    uncertainty: bool = False,
+    max_uncertainty: float | None = None,
 ) -> CompletionResult:
     """Complete a sparse depth map into a dense one, guided by an image.
 
@@ -82,6 +87,14 @@ def complete_depth(
     clip_to_observed : bool
         Clamp the completed depth to ``[min, max]`` of the observed depth
         (default); ``False`` keeps the solver's values (``>= 0``).
+    uncertainty : bool
+        Also estimate each pixel's error (``result.uncertainty``, in the
+        units of ``sparse_depth``); costs two more solves, each from half of
+        the samples.  Needs at least 16 observed pixels.
+    max_uncertainty : float, optional
+        Leave the pixels whose uncertainty exceeds this (units of
+        ``sparse_depth``) missing: NaN in ``result.depth``, counted in
+        ``result.removed``.  Implies ``uncertainty=True``.
 
     Returns
     -------
@@ -95,9 +108,12 @@ def complete_depth(
         depth (observed, or anywhere without a mask), wrong number of
         dimensions, a negative weight, an unknown solver or option key, or a
         quadratic-only solver with γ > 0.
+        Fewer than 16 observed pixels with ``uncertainty``; a negative or
+        non-finite ``max_uncertainty``.
     TypeError
         ``weights`` not a :class:`Weights`, ``max_iter`` not an int, ``tol``
-        not a number, ``options`` not a dict, or an option of the wrong type.
+        not a number, ``options`` not a dict, an option of the wrong type, or
+        ``uncertainty`` not a bool.
 
     Warns
     -----
@@ -143,10 +159,22 @@ def complete_depth(
     (40, 50)
     """
     name, tol, max_iter, options = _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed)
+    want_uncertainty = _check_uncertainty_arguments(uncertainty, max_uncertainty)
+    settings = dict(weights=weights, solver=name, tol=tol, max_iter=max_iter, options=options,
+                    l1_smoothing=l1_smoothing, clip_to_observed=clip_to_observed)
+    result = _complete(image, sparse_depth, mask, x0=x0, callback=callback, **settings)
+    if not want_uncertainty:
+        return result
+    return _with_uncertainty(result, image, sparse_depth, mask, settings, max_uncertainty)
+
+
+def _complete(image, sparse_depth, mask, *, weights, solver, tol, max_iter, callback, x0, l1_smoothing,
+              options, clip_to_observed) -> CompletionResult:
+    """One completion with checked arguments (``solver`` a name of :data:`SOLVERS`)."""
     objective, coarse, scale, depth_range = _scaled_objective(image, sparse_depth, mask, weights, l1_smoothing,
                                                               clip_to_observed)
     start = _starting_point(x0, coarse, objective.shape, scale)
-    out, runtime = solve_scaled(objective, start, scale=scale, solver=name, tol=tol, max_iter=max_iter,
+    out, runtime = solve_scaled(objective, start, scale=scale, solver=solver, tol=tol, max_iter=max_iter,
                                  callback=callback, options=options)
     z, clamped = _clamp(out.z, depth_range, clip_to_observed)  # in the user's units
     scale2 = scale * scale
@@ -160,12 +188,43 @@ def complete_depth(
         message=out.message,
         clamped=clamped,
         history=out.history,
-        solver=name,
+        solver=solver,
         weights=weights,
         runtime=runtime,
         depth_range=depth_range,
         gap=out.gap,
     )
+
+
+def _check_uncertainty_arguments(uncertainty, max_uncertainty) -> bool:
+    """Whether the uncertainty is wanted; ``TypeError``/``ValueError`` for a bad flag or threshold."""
+    if not isinstance(uncertainty, (bool, np.bool_)):
+        raise TypeError(f"uncertainty must be True or False; got {type(uncertainty).__name__}")
+    if max_uncertainty is None:
+        return bool(uncertainty)
+    check_nonnegative_real(max_uncertainty, name="max_uncertainty")
+    return True
+
+
+def _with_uncertainty(result, image, sparse_depth, mask, settings, max_uncertainty) -> CompletionResult:
+    """``result`` with the uncertainty map (two half-sample completions) and, past ``max_uncertainty``, NaN."""
+    depth, observed = as_depth_and_mask(sparse_depth, mask)
+    if np.count_nonzero(observed) < MIN_OBSERVED:
+        raise ValueError(f"uncertainty needs at least {MIN_OBSERVED} observed pixels (two halves of at least "
+                         f"{MIN_OBSERVED // 2}); got {np.count_nonzero(observed)}")
+    half_a, half_b = split_samples(observed, seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ClampWarning)  # the halves' clamps are not the user's result
+        halves = [_complete(image, np.where(half, depth, np.nan), half, x0=None, callback=None, **settings).depth
+                  for half in (half_a, half_b)]
+    sigma, calibration = estimate_uncertainty(result.depth, *halves, depth, half_a, half_b)
+    dense, removed = result.depth, 0
+    if max_uncertainty is not None:
+        too_uncertain = sigma > max_uncertainty
+        removed = int(np.count_nonzero(too_uncertain))
+        dense = np.where(too_uncertain, np.nan, dense)
+    return dataclasses.replace(result, depth=dense, uncertainty=sigma, uncertainty_calibration=calibration,
+                               removed=removed)
 
 
 def _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed):
@@ -233,5 +292,5 @@ def _clamp(z, depth_range, clip_to_observed):
             f"complete_depth: {clamped} of {z.size} pixels were outside the depth range "
             f"[{low:g}, {high:g}] and were clamped to it (result.clamped, result.depth_range)"
             + ("" if clip_to_observed else "; clip_to_observed=False: they are held at the bound 0"),
-            ClampWarning, stacklevel=3)
+            ClampWarning, stacklevel=4)
     return z, clamped

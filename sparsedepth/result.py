@@ -12,7 +12,7 @@ import numpy as np
 
 from .objective.weights import Weights
 
-__all__ = ["IterationRecord", "SolverState", "CompletionResult", "ClampWarning"]
+__all__ = ["IterationRecord", "SolverState", "UncertaintyCalibration", "CompletionResult", "ClampWarning"]
 
 
 class ClampWarning(UserWarning):
@@ -67,13 +67,37 @@ class SolverState:
 
 
 @dataclass(frozen=True)
+class UncertaintyCalibration:
+    """How :attr:`CompletionResult.uncertainty` was calibrated.
+
+    Attributes
+    ----------
+    slope, offset : float
+        ``sigma = slope * cue + offset`` (``offset`` in the depth's units).
+    held_out : int
+        Observations the calibration was fitted on (every observed pixel,
+        each predicted by the completion from the other half).
+    coverage_1sigma, coverage_2sigma : float
+        Fraction of those held-out observations with ``|error| <= sigma``
+        and ``<= 2 sigma``.
+    """
+
+    slope: float
+    offset: float
+    held_out: int
+    coverage_1sigma: float
+    coverage_2sigma: float
+
+
+@dataclass(frozen=True)
 class CompletionResult:
     """Result of :func:`sparsedepth.complete_depth`.
 
     Attributes
     ----------
     depth : ndarray, (H, W)
-        Completed depth, inside :attr:`depth_range` everywhere.
+        Completed depth, inside :attr:`depth_range` everywhere except the
+        :attr:`removed` pixels, which are NaN.
     objective : float
         Exact objective ``F(depth)``.
     terms : dict of str to float
@@ -112,6 +136,15 @@ class CompletionResult:
         quadratic part's matrix is singular (``delta = 0`` with no quadratic
         smoothness term).  ``converged`` requires ``gap <= gap_tol ·
         max(F, 1e-7 F(0))`` (solver option ``gap_tol``).
+    uncertainty : ndarray, (H, W), or None
+        With ``uncertainty=True``: a standard-deviation-like estimate of each
+        pixel's error, in the units of :attr:`depth`
+        (:func:`sparsedepth.uncertainty.estimate_uncertainty`).
+    uncertainty_calibration : UncertaintyCalibration or None
+        How :attr:`uncertainty` was calibrated on held-out observations.
+    removed : int
+        Pixels set to NaN in :attr:`depth` because their uncertainty exceeds
+        ``max_uncertainty`` (0 without it).
     """
 
     depth: np.ndarray
@@ -127,6 +160,9 @@ class CompletionResult:
     runtime: float = 0.0
     depth_range: tuple = (0.0, float("inf"))
     gap: float = float("nan")
+    uncertainty: Optional[np.ndarray] = field(default=None, repr=False)
+    uncertainty_calibration: Optional[UncertaintyCalibration] = None
+    removed: int = 0
 
     def history_array(self, name: str) -> np.ndarray:
         """One field of :attr:`history` as an array (``None`` becomes NaN)."""

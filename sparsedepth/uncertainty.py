@@ -1,0 +1,224 @@
+"""Per-pixel uncertainty of a completed depth map, calibrated on the observations.
+
+:func:`estimate_uncertainty` turns a completion and two completions from the
+two halves of the samples into a map of standard-deviation-like errors;
+:func:`error_cues`, :func:`fit_calibration` and :func:`split_samples` are its
+steps.  :func:`sparsedepth.complete_depth` calls it for ``uncertainty=True``.
+
+May import NumPy, SciPy and :mod:`sparsedepth.result`; it never solves (the
+caller passes the completions).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from .result import UncertaintyCalibration
+
+__all__ = ["MIN_OBSERVED", "TARGET_COVERAGE", "split_samples", "error_cues", "fit_calibration",
+           "estimate_uncertainty"]
+
+#: Fewest observed pixels for which the uncertainty is estimated (each half keeps at least 8).
+MIN_OBSERVED = 16
+
+#: Coverage the calibration aims at: |error| <= 1 sigma and <= 2 sigma.
+TARGET_COVERAGE = (0.68, 0.94)
+#: How far each coverage may stray from its target before the other is preferred (the loss weights).
+_COVERAGE_TOLERANCE = (0.08, 0.04)
+#: A calibration loss this small is good enough to prefer a smaller offset (see :func:`fit_calibration`).
+_GOOD_LOSS = 0.5
+
+
+def split_samples(observed, seed=0):
+    """Two disjoint random halves ``(half_a, half_b)`` of the observed pixels (boolean (H, W) masks)."""
+    index = np.flatnonzero(observed)
+    order = np.random.default_rng(seed).permutation(index)
+    half_a = np.zeros(observed.size, dtype=bool)
+    half_a[order[: index.size // 2]] = True
+    half_a = half_a.reshape(observed.shape)
+    return half_a, observed & ~half_a
+
+
+def _nearest_and_distance(values, observed):
+    """Nearest-sample fill of ``values`` and the Euclidean distance (pixels) to the nearest sample."""
+    distance, (rows, cols) = ndimage.distance_transform_edt(~observed, return_indices=True)
+    return values[rows, cols], distance
+
+
+def _local_range(image, radius):
+    """max - min of ``image`` over a (2 ceil(radius) + 1)² window around each pixel."""
+    size = 2 * int(np.ceil(radius)) + 1
+    return ndimage.maximum_filter(image, size) - ndimage.minimum_filter(image, size)
+
+
+def error_cues(depth, sparse, observed):
+    """The single-completion error cue of :func:`estimate_uncertainty` (same units as ``depth``).
+
+    Parameters
+    ----------
+    depth : ndarray, (H, W)
+        A completion from the samples ``observed``.
+    sparse : ndarray, (H, W)
+        Observed depth (read only where ``observed``).
+    observed : ndarray of bool, (H, W)
+
+    Returns
+    -------
+    ndarray, (H, W)
+        ``|depth - z_nn| + |grad depth| d + R d / h`` (see Notes).
+
+    Notes
+    -----
+    With ``z_nn`` the nearest-sample fill, ``d`` the distance to the nearest
+    sample in pixels, ``h = (observed fraction)^(-1/2)`` the mean sample
+    spacing and ``R`` the range (max - min) of ``z_nn`` over a window of
+    half-width ``h``:
+
+    * ``|depth - z_nn|`` is large where two interpolants disagree;
+    * ``|grad depth| d`` is the change of depth between the pixel and its
+      nearest sample if the slope holds;
+    * ``R d / h`` is the depth step near the pixel (a depth edge among the
+      nearby samples), weighted by how far the pixel is from a sample.
+    """
+    nearest, distance = _nearest_and_distance(np.where(observed, sparse, 0.0), observed)
+    spacing = 1.0 / np.sqrt(np.count_nonzero(observed) / observed.size)
+    grad_rows, grad_cols = np.gradient(depth)
+    cue = np.abs(depth - nearest)
+    cue += np.hypot(grad_rows, grad_cols) * distance
+    cue += _local_range(nearest, spacing) * (distance / spacing)
+    return cue
+
+
+def fit_calibration(errors, cue):
+    """``(slope, offset)`` of ``sigma = slope * cue + offset`` fitted to held-out ``|errors|``.
+
+    Parameters
+    ----------
+    errors : array_like
+        Held-out errors (signed or absolute).
+    cue : array_like
+        The cue at the same pixels (``>= 0``).
+
+    Returns
+    -------
+    slope, offset : float
+
+    Notes
+    -----
+    With ``c1`` and ``c2`` the fractions of ``|errors| <= sigma`` and
+    ``<= 2 sigma``, the loss is ``max(|c1 - 0.68| / 0.08, |c2 - 0.94| /
+    0.04)`` (1 on the edge of the windows 0.60-0.76 and 0.90-0.98).  For each
+    offset on a grid (0 and quantiles of ``|errors|``) the slope minimising
+    the loss is found on a grid; the smallest offset whose loss is at most
+    1/2 wins (the plain scale ``sigma = slope * cue`` when it covers well),
+    else the pair of least loss.  The errors are heavy-tailed: the scale
+    that covers 68 % at 1 sigma covers too little at 2 sigma, and the
+    offset (a floor) lets both hold.
+    """
+    errors = np.abs(np.asarray(errors, dtype=np.float64))
+    cue = np.asarray(cue, dtype=np.float64)
+    cue = np.maximum(cue, 1e-12 * max(float(cue.max(initial=0.0)), float(errors.max(initial=0.0)), 1e-300))
+    (c1, c2), (w1, w2) = TARGET_COVERAGE, _COVERAGE_TOLERANCE
+    fits = []
+    for offset in np.concatenate([[0.0], np.quantile(errors, np.linspace(0.02, 0.8, 40))]):
+        ratio_1 = np.sort((errors - offset) / cue)        # sigma covers e  <=>  slope >= ratio_1
+        ratio_2 = np.sort((errors / 2 - offset) / cue)    # 2 sigma covers e  <=>  slope >= ratio_2
+        low = max(np.quantile(ratio_1, 0.3), 1e-12)
+        high = max(np.quantile(ratio_2, 0.999), 1.01 * low)
+        slopes = np.geomspace(low, high, 200)
+        cover_1 = np.searchsorted(ratio_1, slopes, side="right") / ratio_1.size
+        cover_2 = np.searchsorted(ratio_2, slopes, side="right") / ratio_2.size
+        loss = np.maximum(np.abs(cover_1 - c1) / w1, np.abs(cover_2 - c2) / w2)
+        k = int(np.argmin(loss))
+        fits.append((float(loss[k]), float(offset), float(slopes[k])))
+    good = [fit for fit in fits if fit[0] <= _GOOD_LOSS]
+    loss, offset, slope = min(good, key=lambda fit: fit[1]) if good else min(fits)
+    return slope, offset
+
+
+def _held_out_error_map(held_out_a, held_out_b, half_a, half_b):
+    """The held-out errors, nearest-filled from the observed pixels and averaged over a window of half-width h."""
+    observed = half_a | half_b
+    errors = np.zeros(observed.shape)
+    errors[half_b] = held_out_a
+    errors[half_a] = held_out_b
+    filled, _ = _nearest_and_distance(errors, observed)
+    spacing = 1.0 / np.sqrt(np.count_nonzero(observed) / observed.size)
+    return ndimage.uniform_filter(filled, 2 * int(np.ceil(spacing)) + 1)
+
+
+def _quantile_map(values, reference, where):
+    """``values`` mapped monotonically onto the distribution of ``reference`` (both sampled at ``where``)."""
+    return np.interp(values, np.sort(values[where]), np.sort(reference[where]))
+
+
+def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b):
+    """Per-pixel uncertainty of ``depth`` from two completions of disjoint halves of its samples.
+
+    Parameters
+    ----------
+    depth : ndarray, (H, W)
+        The completion from all samples ``half_a | half_b``.
+    depth_a, depth_b : ndarray, (H, W)
+        Completions (same method and weights) from ``half_a`` and ``half_b`` only.
+    sparse : ndarray, (H, W)
+        Observed depth (read where observed).
+    half_a, half_b : ndarray of bool, (H, W)
+        Disjoint halves of the observed pixels (:func:`split_samples`).
+
+    Returns
+    -------
+    sigma : ndarray, (H, W)
+        Standard-deviation-like error estimate in the units of ``depth``;
+        at an observed pixel, ``|depth - observation|``.
+    calibration : UncertaintyCalibration
+
+    Notes
+    -----
+    The cue ranks the unobserved pixels by expected error; the calibration
+    gives it units.
+
+    *Cue.*  ``u = c(depth) + |depth_a - depth_b| + max(|depth - depth_a|,
+    |depth - depth_b|) + E``, with ``c`` of :func:`error_cues`: the single-
+    completion cue, how much the completion moves when half of the samples
+    are left out (the split-sample jackknife spread), and ``E`` the local
+    held-out error: each observation's error in the completion of the other
+    half, nearest-filled and averaged over a window of half-width ``h`` (the
+    mean sample spacing).  Every part uses the depth values, not only where
+    the samples are.
+
+    *Calibration (on observations only).*  ``depth_a`` predicts each
+    observation of ``half_b`` without having seen it, and ``depth_b`` each
+    one of ``half_a``; these held-out errors ``e`` and the cue
+    ``c(depth_a)`` (``c(depth_b)``) at the same pixels give
+    ``sigma = slope * c + offset`` by :func:`fit_calibration`.  The
+    single-completion cue transfers from half the samples to all of them
+    (it scales with the sample spacing), the spread terms do not exist for
+    a half; so ``u`` is first mapped monotonically onto the distribution of
+    ``c(depth)`` over the unobserved pixels (same order as ``u``, the scale
+    of ``c``), then calibrated: ``sigma = slope * map(u) + offset``.
+    """
+    observed = half_a | half_b
+    unobserved = ~observed
+    held_out_a = np.abs(depth_a - sparse)[half_b]  # half a's errors where half b observed
+    held_out_b = np.abs(depth_b - sparse)[half_a]
+    cue_full = error_cues(depth, sparse, observed)
+    cue = (cue_full + np.abs(depth_a - depth_b) + np.maximum(np.abs(depth - depth_a), np.abs(depth - depth_b))
+           + _held_out_error_map(held_out_a, held_out_b, half_a, half_b))
+
+    cue_a, cue_b = error_cues(depth_a, sparse, half_a), error_cues(depth_b, sparse, half_b)
+    held_out_errors = np.concatenate([held_out_a, held_out_b])
+    held_out_cue = np.concatenate([cue_a[half_b], cue_b[half_a]])
+    slope, offset = fit_calibration(held_out_errors, held_out_cue)
+    held_out_sigma = slope * held_out_cue + offset
+    calibration = UncertaintyCalibration(
+        slope=slope, offset=offset, held_out=int(held_out_errors.size),
+        coverage_1sigma=float(np.mean(held_out_errors <= held_out_sigma)),
+        coverage_2sigma=float(np.mean(held_out_errors <= 2 * held_out_sigma)),
+    )
+
+    sigma = np.abs(depth - np.where(observed, sparse, depth))
+    if unobserved.any():
+        sigma[unobserved] = slope * _quantile_map(cue, cue_full, unobserved)[unobserved] + offset
+    return sigma, calibration

@@ -1,0 +1,225 @@
+"""The uncertainty map: its cues, calibration and the complete_depth arguments."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+import sparsedepth as sd
+from sparsedepth.uncertainty import (MIN_OBSERVED, TARGET_COVERAGE, error_cues, estimate_uncertainty,
+                                     fit_calibration, split_samples)
+
+
+def _scene(shape=(40, 56), fraction=0.06, seed=0):
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    rows, cols = np.mgrid[0:h, 0:w].astype(float)
+    box = (rows > h / 4) & (rows < 3 * h / 4) & (cols > w / 3) & (cols < 2 * w / 3)
+    truth = np.where(box, 1.5 + 0.01 * cols, 3.0 + 0.02 * rows - 0.01 * cols)
+    image = np.where(box[..., None], [0.8, 0.2, 0.1], [0.1, 0.3, 0.7]) + 0.02 * rng.standard_normal((h, w, 3))
+    sparse, mask = sd.sample_depth(truth, fraction=fraction, seed=seed)
+    return np.clip(image, 0, 1), truth, sparse, mask
+
+
+def _brute_force_cue(depth, sparse, observed, nearest):
+    """error_cues by loops, given a nearest fill (checked against exhaustive search by the caller)."""
+    h, w = depth.shape
+    distance = np.empty((h, w))
+    samples = np.argwhere(observed)
+    for i in range(h):
+        for j in range(w):
+            distance[i, j] = np.sqrt(((samples - (i, j)) ** 2).sum(axis=1).min())
+    spacing = 1 / np.sqrt(observed.mean())
+    r = int(np.ceil(spacing))
+    local_range = np.empty((h, w))
+    slope = np.empty((h, w))
+    for i in range(h):
+        for j in range(w):
+            window = nearest[max(i - r, 0): i + r + 1, max(j - r, 0): j + r + 1]
+            local_range[i, j] = window.max() - window.min()
+            up, down = max(i - 1, 0), min(i + 1, h - 1)
+            left, right = max(j - 1, 0), min(j + 1, w - 1)
+            gy = (depth[down, j] - depth[up, j]) / (down - up)
+            gx = (depth[i, right] - depth[i, left]) / (right - left)
+            slope[i, j] = np.hypot(gx, gy)
+    return np.abs(depth - nearest) + slope * distance + local_range * distance / spacing
+
+
+def test_split_samples_halves_the_observations_disjointly():
+    observed = np.random.default_rng(3).random((30, 40)) < 0.1
+    a, b = split_samples(observed, seed=5)
+    assert not np.any(a & b)
+    np.testing.assert_array_equal(a | b, observed)
+    assert abs(int(a.sum()) - int(b.sum())) <= 1
+    a2, b2 = split_samples(observed, seed=5)
+    np.testing.assert_array_equal(a, a2)
+
+
+def test_error_cues_match_a_brute_force_computation():
+    rng = np.random.default_rng(1)
+    depth = 2 + rng.random((17, 23)).cumsum(axis=1) / 10
+    observed = rng.random(depth.shape) < 0.12
+    sparse = np.where(observed, depth + 0.05 * rng.standard_normal(depth.shape), np.nan)
+    nearest = sd.nearest_fill(sparse, observed)
+    samples = np.argwhere(observed)
+    for i, j in np.ndindex(depth.shape):  # the fill takes one of the equally near samples
+        d2 = ((samples - (i, j)) ** 2).sum(axis=1)
+        assert nearest[i, j] in sparse[tuple(samples[d2 == d2.min()].T)]
+    np.testing.assert_allclose(error_cues(depth, sparse, observed), _brute_force_cue(depth, sparse, observed, nearest),
+                               rtol=1e-12, atol=1e-12)
+
+
+def test_error_cues_vanish_on_a_constant_scene():
+    depth = np.full((20, 30), 4.0)
+    observed = np.zeros(depth.shape, bool)
+    observed[::5, ::5] = True
+    np.testing.assert_array_equal(error_cues(depth, np.where(observed, 4.0, np.nan), observed), 0.0)
+
+
+def _calibration_loss(errors, sigma):
+    c1, c2 = np.mean(np.abs(errors) <= sigma), np.mean(np.abs(errors) <= 2 * sigma)
+    return max(abs(c1 - TARGET_COVERAGE[0]) / 0.08, abs(c2 - TARGET_COVERAGE[1]) / 0.04)
+
+
+@pytest.mark.parametrize("tail", ["laplace", "student3"])
+def test_fit_calibration_is_as_good_as_a_grid_search(tail):
+    rng = np.random.default_rng(11)
+    cue = rng.uniform(0.05, 2.0, 4000)
+    noise = rng.laplace(size=cue.size) if tail == "laplace" else rng.standard_t(3, cue.size)
+    errors = cue * noise
+    slope, offset = fit_calibration(errors, cue)
+    scale = np.median(np.abs(errors))
+    best = min(_calibration_loss(errors, s * cue + t)
+               for s in np.geomspace(0.01, 10, 150) for t in scale * np.linspace(0, 2, 41))
+    assert _calibration_loss(errors, slope * cue + offset) <= max(best + 0.05, 0.5)
+
+
+@pytest.mark.parametrize("tail", ["normal", "student3"])
+def test_fit_calibration_meets_both_coverages_on_its_data(tail):
+    rng = np.random.default_rng(7)
+    cue = rng.uniform(0.05, 2.0, 20000)
+    noise = {"normal": rng.standard_normal, "student3": lambda n: rng.standard_t(3, n)}[tail](cue.size)
+    errors = cue * noise
+    slope, offset = fit_calibration(errors, cue)
+    sigma = slope * cue + offset
+    cover_1 = np.mean(np.abs(errors) <= sigma)
+    cover_2 = np.mean(np.abs(errors) <= 2 * sigma)
+    assert slope > 0 and offset >= 0
+    assert abs(cover_1 - TARGET_COVERAGE[0]) <= 0.08
+    assert abs(cover_2 - TARGET_COVERAGE[1]) <= 0.04
+
+
+def test_fit_calibration_recovers_a_gaussian_scale():
+    rng = np.random.default_rng(2)
+    cue = rng.uniform(0.5, 1.5, 50000)
+    errors = 0.3 * cue * rng.standard_normal(cue.size)
+    slope, offset = fit_calibration(errors, cue)
+    # sigma = 0.3 cue covers 68.3 % and 95.4 %; the fit may trade slope for offset but not by much
+    probe = np.array([0.5, 1.0, 1.5])
+    np.testing.assert_allclose(slope * probe + offset, 0.3 * probe, rtol=0.15)
+
+
+def test_estimate_uncertainty_orders_pixels_by_the_cue_and_is_the_residual_at_observations():
+    image, truth, sparse, mask = _scene()
+    a, b = split_samples(mask, seed=0)
+    full = sd.complete_depth(image, sparse, mask).depth
+    za = sd.complete_depth(image, np.where(a, sparse, np.nan), a).depth
+    zb = sd.complete_depth(image, np.where(b, sparse, np.nan), b).depth
+    sigma, cal = estimate_uncertainty(full, za, zb, sparse, a, b)
+    np.testing.assert_allclose(sigma[mask], np.abs(full - sparse)[mask])
+    held = np.zeros(mask.shape)
+    held[b], held[a] = np.abs(za - sparse)[b], np.abs(zb - sparse)[a]
+    spacing = 1 / np.sqrt(mask.mean())
+    r = int(np.ceil(spacing))
+    held_filled = sd.nearest_fill(np.where(mask, held, np.nan), mask)
+    padded = np.pad(held_filled, r, mode="symmetric")
+    local_mean = np.array([[padded[i:i + 2 * r + 1, j:j + 2 * r + 1].mean() for j in range(mask.shape[1])]
+                           for i in range(mask.shape[0])])
+    cue = (error_cues(full, sparse, mask) + np.abs(za - zb) + np.maximum(np.abs(full - za), np.abs(full - zb))
+           + local_mean)
+    unobserved = ~mask
+    order = np.argsort(cue[unobserved], kind="stable")
+    assert np.all(np.diff(sigma[unobserved][order]) >= -1e-12)
+    assert np.all(np.isfinite(sigma)) and np.all(sigma >= 0)
+    assert cal.held_out == mask.sum()
+    held = np.concatenate([np.abs(za - sparse)[b], np.abs(zb - sparse)[a]])
+    held_cue = np.concatenate([error_cues(za, sparse, a)[b], error_cues(zb, sparse, b)[a]])
+    assert cal.coverage_1sigma == pytest.approx(np.mean(held <= cal.slope * held_cue + cal.offset))
+
+
+def test_complete_depth_uncertainty_keeps_the_depth_and_fills_the_fields():
+    image, truth, sparse, mask = _scene()
+    plain = sd.complete_depth(image, sparse, mask)
+    result = sd.complete_depth(image, sparse, mask, uncertainty=True)
+    np.testing.assert_array_equal(result.depth, plain.depth)
+    assert plain.uncertainty is None and plain.uncertainty_calibration is None and plain.removed == 0
+    assert result.uncertainty.shape == truth.shape
+    assert result.uncertainty_calibration.held_out == mask.sum()
+    assert result.removed == 0
+
+
+def test_max_uncertainty_removes_exactly_the_pixels_above_it():
+    image, truth, sparse, mask = _scene()
+    full = sd.complete_depth(image, sparse, mask, uncertainty=True)
+    threshold = float(np.median(full.uncertainty[~mask]))
+    cut = sd.complete_depth(image, sparse, mask, max_uncertainty=threshold)
+    np.testing.assert_array_equal(cut.uncertainty, full.uncertainty)
+    removed = full.uncertainty > threshold
+    np.testing.assert_array_equal(np.isnan(cut.depth), removed)
+    np.testing.assert_array_equal(cut.depth[~removed], full.depth[~removed])
+    assert cut.removed == removed.sum() > 0
+
+
+def test_uncertainty_ranks_errors_on_a_real_frame():
+    frame = sd.load_embedded_frame()
+    truth = np.array(frame.depth, dtype=float)
+    sparse, mask = sd.sample_depth(truth, fraction=0.05, seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sd.ClampWarning)
+        result = sd.complete_depth(frame.image, sparse, mask, uncertainty=True)
+    hidden = np.isfinite(truth) & (truth > 0) & ~mask
+    errors = np.abs(result.depth - truth)[hidden]
+    sigma = result.uncertainty[hidden]
+    better_half = errors[np.argsort(sigma)[: errors.size // 2]]
+    worse_half = errors[np.argsort(sigma)[errors.size // 2:]]
+    assert np.sqrt(np.mean(better_half ** 2)) < 0.5 * np.sqrt(np.mean(worse_half ** 2))
+    assert 0.5 <= np.mean(errors <= sigma) <= 0.9
+    assert 0.8 <= np.mean(errors <= 2 * sigma) <= 1.0
+
+
+@pytest.mark.parametrize("kwargs, error", [
+    (dict(uncertainty=1), TypeError),
+    (dict(uncertainty="yes"), TypeError),
+    (dict(max_uncertainty=-1.0), ValueError),
+    (dict(max_uncertainty=float("nan")), ValueError),
+    (dict(max_uncertainty="far"), ValueError),
+])
+def test_bad_uncertainty_arguments(kwargs, error):
+    image, truth, sparse, mask = _scene()
+    with pytest.raises(error, match="uncertainty"):
+        sd.complete_depth(image, sparse, mask, **kwargs)
+
+
+def test_too_few_samples_for_uncertainty():
+    image, truth, _, _ = _scene()
+    mask = np.zeros(truth.shape, bool)
+    mask.flat[:: truth.size // (MIN_OBSERVED - 1)] = True
+    mask.flat[-1] = False
+    mask &= np.cumsum(mask.ravel()).reshape(mask.shape) < MIN_OBSERVED
+    sparse = np.where(mask, truth, np.nan)
+    assert mask.sum() == MIN_OBSERVED - 1
+    sd.complete_depth(image, sparse, mask)  # fine without uncertainty
+    with pytest.raises(ValueError, match=f"at least {MIN_OBSERVED} observed"):
+        sd.complete_depth(image, sparse, mask, uncertainty=True)
+
+
+def test_the_halves_clamp_warnings_stay_quiet():
+    image, truth, sparse, mask = _scene()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        plain = sd.complete_depth(image, sparse, mask)
+        n_plain = len(caught)
+        sd.complete_depth(image, sparse, mask, uncertainty=True)
+    assert len(caught) == 2 * n_plain
+    assert all(w.filename == __file__ for w in caught) or not caught
+    assert plain.clamped >= 0
