@@ -51,7 +51,8 @@ class FrameOutcome:
     truth : ndarray or None, (H, W)
         Ground truth used for scoring, NaN where unknown.
     scored : ndarray of bool or None, (H, W)
-        Pixels scored: valid ``truth`` and not ``observed``.
+        Pixels scored: valid ``truth``, not ``observed``, and not left
+        missing in ``depth`` by ``max_uncertainty``.
     metrics, nearest_metrics : DepthMetrics or None
         Scores of ``depth`` and ``nearest`` on ``scored`` (None without
         ground truth or without a pixel to score).
@@ -62,6 +63,8 @@ class FrameOutcome:
         Wall-clock seconds of the method and of the baseline.
     result : CompletionResult or None
         The solver result (None for the colorization fill).
+    uncertainty : ndarray, (H, W), or None
+        ``result.uncertainty`` when it was asked for.
     """
 
     depth: np.ndarray
@@ -76,6 +79,7 @@ class FrameOutcome:
     runtime: float
     nearest_runtime: float
     result: CompletionResult | None = None
+    uncertainty: np.ndarray | None = None
 
 
 
@@ -130,7 +134,7 @@ def _score(dense, nearest, truth, observed):
     """(scored pixels, metrics of ``dense``, metrics of ``nearest``) on valid ``truth`` not observed; Nones without."""
     scored = metrics = nearest_metrics = None
     if truth is not None:
-        scored = valid_depth_mask(truth) & ~observed
+        scored = valid_depth_mask(truth) & ~observed & ~np.isnan(dense)
         if scored.any():
             metrics = depth_metrics(dense, truth, mask=scored)
             nearest_metrics = depth_metrics(nearest, truth, mask=scored)
@@ -155,6 +159,8 @@ def evaluate_frame(
     max_iter: int | None = None,
     callback=None,
     clip_to_observed: bool = True,
+    uncertainty: bool = False,
+    max_uncertainty: float | None = None,
 ) -> FrameOutcome:
     """Complete (or hole-fill) one frame and score it and the nearest-neighbour baseline.
 
@@ -180,9 +186,10 @@ def evaluate_frame(
         Seed of the sampling.
     fill_method : {"colorization", "complete"}
         ``"fill"`` only.
-    weights, solver, tol, max_iter, callback, clip_to_observed
+    weights, solver, tol, max_iter, callback, clip_to_observed, uncertainty, max_uncertainty
         Passed to :func:`~sparsedepth.complete_depth` (not used by the
-        colorization fill).
+        colorization fill, which refuses ``uncertainty`` and
+        ``max_uncertainty``).
 
     Returns
     -------
@@ -198,6 +205,9 @@ def evaluate_frame(
         called.
     """
     _check_task(task, fill_method, keep_fraction, keep_count)
+    if task == "fill" and fill_method == "colorization" and (uncertainty or max_uncertainty is not None):
+        raise ValueError("uncertainty and max_uncertainty estimate the completion solver's error; the colorization "
+                         "fill has none: use fill_method='complete'")
     weights = DEFAULT_WEIGHTS if weights is None else weights
     values = _depth_2d(depth, "depth")
     valid = _valid_pixels(image, values, mask)
@@ -217,7 +227,7 @@ def evaluate_frame(
     dense, method, result, runtime = _run_method(
         image, sparse, observed, task, fill_method,
         dict(weights=weights, solver=solver, tol=tol, max_iter=max_iter, callback=callback,
-             clip_to_observed=clip_to_observed),
+             clip_to_observed=clip_to_observed, uncertainty=uncertainty, max_uncertainty=max_uncertainty),
     )
     start = time.perf_counter()
     nearest = nearest_fill(sparse, observed)
@@ -227,5 +237,5 @@ def evaluate_frame(
     return FrameOutcome(
         depth=dense, observed=observed, sparse=sparse, nearest=nearest, truth=truth, scored=scored, metrics=metrics,
         nearest_metrics=nearest_metrics, method=method, runtime=runtime, nearest_runtime=nearest_runtime,
-        result=result,
+        result=result, uncertainty=None if result is None else result.uncertainty,
     )

@@ -59,7 +59,12 @@ def _check_combinations(args) -> str:
         if weight_options or solver_options:
             raise UsageError(f"{', '.join(weight_options + solver_options)} apply to --fill-method complete, "
                               "not colorization")
+    if colorization and (args.uncertainty is not None or args.max_uncertainty is not None):
+        raise UsageError("--uncertainty and --max-uncertainty estimate the error of the completion solver: they "
+                          "apply to completion and --fill-method complete, not the colorization fill")
     if mode == "batch":
+        if args.uncertainty is not None or args.max_uncertainty is not None:
+            raise UsageError("--uncertainty and --max-uncertainty are for one frame, not a batch")
         if args.csv is None:
             raise UsageError("a batch needs --csv PATH for the per-frame metrics")
         if args.out or args.json or args.figure or args.mask or args.truth or args.calib:
@@ -77,6 +82,8 @@ def _check_combinations(args) -> str:
             raise UsageError("--csv, --workers and --indices are for --batch/--nyu-mat")
         if args.out:
             _check_output(args.out, _OUT_EXTENSIONS, "--out")
+        if args.uncertainty:
+            _check_output(args.uncertainty, _OUT_EXTENSIONS, "--uncertainty")
         if args.json:
             _check_output(args.json, (".json",), "--json")
         if args.figure:

@@ -259,18 +259,26 @@ def _add_method_options(parser) -> None:
 
 
 def _add_output_options(parser) -> None:
-    """--out, --json, --figure, --outdir and -q."""
+    """--out, --uncertainty, --max-uncertainty, --json, --figure, --outdir and -q."""
     out = parser.add_argument_group("output")
     out.add_argument("--out", metavar="PATH",
                      help="dense depth: .png (16-bit, in the input's scale or --out-scale), .npy, .npz, .h5 or .pfm.")
     out.add_argument("--out-scale", type=_scale, metavar="SCALE",
                      help="scale of a PNG output (default: --depth-scale if given, else mm = 1000).")
+    out.add_argument("--uncertainty", metavar="PATH",
+                     help="per-pixel uncertainty in metres (a standard-deviation-like error estimate, calibrated "
+                          "on held-out samples; two more solves), in any --out format; a PNG stores at least one "
+                          "unit of its scale.")
+    out.add_argument("--max-uncertainty", type=_nonnegative, metavar="M",
+                     help="leave the pixels whose uncertainty exceeds M metres missing in --out (0 in PNG, NaN in "
+                          "float formats) instead of extrapolating; the count is reported.")
     out.add_argument("--json", metavar="PATH", help="metrics, settings and solver history as JSON.")
     out.add_argument("--figure", metavar="PATH",
                      help="image | sparse input | nearest neighbour | completed | absolute error, colour bar in "
                           "metres (.png, .pdf, .svg, .jpg; needs matplotlib: pip install 'sparsedepth[plot]').")
     out.add_argument("--outdir", metavar="DIR",
-                     help=f"write depth.npy, depth.png, metrics.json and figure.png (if matplotlib is installed) "
+                     help=f"write depth.npy, depth.png, metrics.json, figure.png (if matplotlib is installed) and, with "
+                          "--uncertainty or --max-uncertainty, uncertainty.npy "
                           f"here (an existing folder; the demo creates its default ./{DEMO_DIR}/); batch: one depth file "
                           "per frame.")
     out.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr.")

@@ -75,7 +75,28 @@ def build_report(args, argv, outcome, description, weights, weights_given, png_s
             solver_runtime=result.runtime,
             history=[dataclasses.asdict(record) for record in result.history],
         )
+    if result is not None and result.uncertainty is not None:
+        report["uncertainty"] = _uncertainty_summary(outcome)
     return _jsonable(report)
+
+
+def _uncertainty_summary(outcome) -> dict:
+    """Calibration, quantiles over the unobserved pixels, pixels removed, and (with truth) the coverage."""
+    result = outcome.result
+    sigma = result.uncertainty[~outcome.observed]
+    summary = {
+        "calibration": dataclasses.asdict(result.uncertainty_calibration),
+        "median": float(np.median(sigma)) if sigma.size else None,
+        "p90": float(np.percentile(sigma, 90)) if sigma.size else None,
+        "removed": result.removed,
+    }
+    if outcome.truth is not None:
+        hidden = np.isfinite(outcome.truth) & ~outcome.observed & ~np.isnan(outcome.depth)
+        if hidden.any():
+            error = np.abs(outcome.depth - outcome.truth)[hidden]
+            summary["coverage_1sigma"] = float(np.mean(error <= result.uncertainty[hidden]))
+            summary["coverage_2sigma"] = float(np.mean(error <= 2 * result.uncertainty[hidden]))
+    return summary
 
 
 def print_table(outcome, description, stream) -> None:
@@ -87,6 +108,17 @@ def print_table(outcome, description, stream) -> None:
         r = outcome.result
         print(f"solver {r.solver}: {'converged' if r.converged else 'NOT converged'} after {r.iterations} "
               f"iterations ({r.message})", file=stream)
+    if outcome.result is not None and outcome.result.uncertainty is not None:
+        summary = _uncertainty_summary(outcome)
+        line = (f"uncertainty: median {summary['median']:.3g} m, 90th percentile {summary['p90']:.3g} m over the "
+                f"unobserved pixels" if summary["median"] is not None else "uncertainty: every pixel observed")
+        if "coverage_1sigma" in summary:
+            line += (f"; |error| <= 1 sigma on {summary['coverage_1sigma']:.0%}, <= 2 sigma on "
+                     f"{summary['coverage_2sigma']:.0%} of the scored pixels")
+        print(line, file=stream)
+        if summary["removed"]:
+            print(f"--max-uncertainty: {summary['removed']} pixels ({summary['removed'] / h / w:.1%}) left missing",
+                  file=stream)
     if outcome.metrics is None:
         print(f"{outcome.method}: {outcome.runtime:.2f} s; no ground truth to score against "
               "(give --truth, or a dense --depth with --keep-fraction)", file=stream)

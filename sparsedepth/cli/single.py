@@ -25,7 +25,7 @@ from .outputs import Named, commit
 from .parser import DEMO_DIR, DEMO_DOWNSAMPLE, DEMO_KEEP_FRACTION, weights_of
 from .report import build_report, matplotlib_classes, print_table, render_figure
 
-__all__ = ["READER_FLAGS", "plan_outputs", "input_files", "run_one"]
+__all__ = ["READER_FLAGS", "plan_outputs", "wants_uncertainty", "input_files", "run_one"]
 
 _ABSURD_LOW, _ABSURD_HIGH = 1e-3, 1e3  # metres: a median outside this means a wrong scale
 
@@ -125,22 +125,31 @@ def _read_inputs(args, stream):
 
 
 _DEPTH_OUTPUTS = ("--out", "depth.npy", "depth.png")
+_UNCERTAINTY_OUTPUTS = ("--uncertainty", "uncertainty.npy")
 
 
 def plan_outputs(args, mode) -> list[tuple[str, Named]]:
     """(kind, file) of every output of one frame; kind is the option or the file name in --outdir."""
     planned = []
-    for flag, value in (("--out", args.out), ("--json", args.json), ("--figure", args.figure)):
+    for flag, value in (("--out", args.out), ("--uncertainty", args.uncertainty), ("--json", args.json),
+                        ("--figure", args.figure)):
         if value is not None:
             planned.append((flag, Named(flag, value, Path(value))))
     outdir = DEMO_DIR if mode == "demo" and args.outdir is None else args.outdir
     if outdir is not None:
         names = ["depth.npy", "depth.png", "metrics.json"]
+        if wants_uncertainty(args):
+            names.append("uncertainty.npy")
         if matplotlib_classes() is not None:
             names.append("figure.png")
         planned += [(name, Named("--outdir", outdir, Path(outdir) / name, create_parent=mode == "demo"))
                     for name in names]
     return planned
+
+
+def wants_uncertainty(args) -> bool:
+    """Whether the run estimates the uncertainty (``--uncertainty`` or ``--max-uncertainty`` given)."""
+    return args.uncertainty is not None or args.max_uncertainty is not None
 
 
 def input_files(args) -> list[Named]:
@@ -207,7 +216,19 @@ def _evaluate(args, image, depth, mask, truth, keep_fraction, weights, stream):
             solver=args.solver or "auto", tol=args.tol, max_iter=args.max_iter,
             callback=_Progress(stream, not args.quiet) if use_solver else None,
             clip_to_observed=args.clip_to_observed,
+            uncertainty=wants_uncertainty(args), max_uncertainty=args.max_uncertainty,
         )
+
+
+def _uncertainty_writer(target, uncertainty, png_scale):
+    """The writer of the uncertainty map; a PNG stores at least one unit of its scale (0 means missing)."""
+    values = uncertainty
+    if target.path.suffix.lower() == ".png":
+        values = np.maximum(uncertainty, 1.0 / png_scale)
+    try:
+        return depth_writer(target.path, values, scale=png_scale)
+    except ValueError as exc:
+        raise UsageError(f"{target.label}: {one_line(exc)}") from None
 
 
 def _writers(args, planned, outcome, image, report, png_scale) -> list:
@@ -229,6 +250,8 @@ def _writers(args, planned, outcome, image, report, png_scale) -> list:
                 writer = depth_writer(target.path, outcome.depth, scale=png_scale)
             except ValueError as exc:
                 raise UsageError(f"{target.label}: {one_line(exc)}") from None
+        elif kind in _UNCERTAINTY_OUTPUTS:
+            writer = _uncertainty_writer(target, outcome.uncertainty, png_scale)
         elif kind in ("--json", "metrics.json"):
             writer = _bytes_writer(report_text)
         else:

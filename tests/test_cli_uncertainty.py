@@ -1,0 +1,125 @@
+"""--uncertainty and --max-uncertainty on the command line: files, the removed pixels, reports and bad input."""
+
+import json
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+import sparsedepth as sd
+
+from conftest import make_scene
+from sparsedepth.complete import main
+
+FAST = ["--gamma", "0", "--solver", "direct"]
+
+
+@pytest.fixture
+def files(tmp_path):
+    image, depth = make_scene((48, 64))
+    iio.imwrite(tmp_path / "rgb.png", image)
+    sd.write_depth(tmp_path / "dense.png", depth, scale=1000)
+    return tmp_path
+
+
+def _base(files):
+    return ["--image", str(files / "rgb.png"), "--depth", str(files / "dense.png"), "--depth-scale", "mm",
+            "--keep-fraction", "0.08", *FAST]
+
+
+def _library_result(files, **kwargs):
+    image = sd.read_image(files / "rgb.png")
+    dense = sd.read_depth(files / "dense.png", scale=1000)
+    sparse, mask = sd.sample_depth(dense, fraction=0.08, seed=0)
+    return sd.complete_depth(image, sparse, mask, weights=sd.Weights(gamma=0.0), solver="direct", **kwargs)
+
+
+def test_uncertainty_file_is_the_library_map(files, capsys):
+    rc = main([*_base(files), "--out", str(files / "d.npy"), "--uncertainty", str(files / "u.npy")])
+    assert rc == 0
+    expected = _library_result(files, uncertainty=True)
+    np.testing.assert_allclose(np.load(files / "u.npy"), expected.uncertainty, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(np.load(files / "d.npy"), expected.depth, rtol=1e-9, atol=1e-12)
+    assert "uncertainty: median" in capsys.readouterr().out
+
+
+def test_max_uncertainty_leaves_the_pixels_above_it_missing(files, capsys):
+    reference = _library_result(files, uncertainty=True)
+    threshold = float(np.percentile(reference.uncertainty, 80))
+    rc = main([*_base(files), "--out", str(files / "d.npy"), "--uncertainty", str(files / "u.npy"),
+               "--max-uncertainty", repr(threshold), "--json", str(files / "r.json")])
+    assert rc == 0
+    depth, sigma = np.load(files / "d.npy"), np.load(files / "u.npy")
+    removed = sigma > threshold
+    assert removed.any()
+    np.testing.assert_array_equal(np.isnan(depth), removed)
+    out = capsys.readouterr().out
+    assert f"--max-uncertainty: {removed.sum()} pixels" in out
+    report = json.loads((files / "r.json").read_text())
+    assert report["uncertainty"]["removed"] == removed.sum()
+    # scored on the kept hidden pixels only, against the dense input as truth
+    truth = sd.read_depth(files / "dense.png", scale=1000)
+    _, mask = sd.sample_depth(truth, fraction=0.08, seed=0)
+    kept = ~mask & ~removed
+    assert report["metrics"]["scored"] == kept.sum()
+    assert report["metrics"]["completed"]["rmse"] == pytest.approx(
+        sd.depth_metrics(depth, truth, mask=kept).rmse, rel=1e-12)
+
+
+def test_png_outputs_zero_where_missing_and_at_least_one_unit_of_uncertainty(files):
+    reference = _library_result(files, uncertainty=True)
+    threshold = float(np.percentile(reference.uncertainty, 80))
+    rc = main([*_base(files), "--out", str(files / "d.png"), "--uncertainty", str(files / "u.png"),
+               "--max-uncertainty", repr(threshold)])
+    assert rc == 0
+    stored_depth = iio.imread(files / "d.png")
+    stored_sigma = iio.imread(files / "u.png")
+    removed = reference.uncertainty > threshold
+    np.testing.assert_array_equal(stored_depth == 0, removed)
+    assert stored_sigma.dtype == np.uint16 and stored_sigma.min() >= 1
+    np.testing.assert_array_equal(stored_sigma, np.maximum(np.rint(reference.uncertainty * 1000), 1))
+
+
+def test_outdir_writes_the_uncertainty_map(files):
+    outdir = files / "out"
+    outdir.mkdir()
+    assert main([*_base(files), "--outdir", str(outdir), "--max-uncertainty", "100"]) == 0
+    sigma = np.load(outdir / "uncertainty.npy")
+    assert sigma.shape == (48, 64) and np.all(np.isfinite(sigma))
+    assert not np.any(np.isnan(np.load(outdir / "depth.npy")))  # 100 m removes nothing here
+
+
+def _listing(folder):
+    return sorted(p.name for p in folder.rglob("*"))
+
+
+@pytest.mark.parametrize("extra, expect", [
+    (["--max-uncertainty", "-1"], "--max-uncertainty"),
+    (["--max-uncertainty", "nan"], "--max-uncertainty"),
+    (["--uncertainty", "u.txt"], "--uncertainty"),
+    (["--uncertainty", "u.npy", "--fill-holes"], "--uncertainty"),
+])
+def test_bad_uncertainty_flags_are_one_line_and_exit_2(files, capsys, extra, expect):
+    extra = [str(files / e) if e == "u.txt" or e == "u.npy" else e for e in extra]
+    argv = ["--image", str(files / "rgb.png"), "--depth", str(files / "dense.png"), "--depth-scale", "mm",
+            "--out", str(files / "d.npy"), *extra]
+    before = _listing(files)
+    rc = main(argv)
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert err.count("\n") == 1 and expect in err, err
+    assert _listing(files) == before
+
+
+def test_uncertainty_refused_in_a_batch(files, capsys):
+    rc = main(["--batch", str(files), "--csv", str(files / "m.csv"), "--keep-fraction", "0.1",
+               "--max-uncertainty", "1"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "not a batch" in err and err.count("\n") == 1
+
+
+def test_unwritable_uncertainty_writes_nothing(files, capsys):
+    rc = main([*_base(files), "--out", str(files / "d.npy"), "--uncertainty", str(files / "missing" / "u.npy")])
+    assert rc == 2
+    assert "--uncertainty" in capsys.readouterr().err
+    assert not (files / "d.npy").exists()
