@@ -207,7 +207,11 @@ def _check_uncertainty_arguments(uncertainty, max_uncertainty) -> bool:
 
 
 def _with_uncertainty(result, image, sparse_depth, mask, settings, max_uncertainty) -> CompletionResult:
-    """``result`` with the uncertainty map (two half-sample completions) and, past ``max_uncertainty``, NaN."""
+    """``result`` with the uncertainty map (two half-sample completions) and, past ``max_uncertainty``, NaN.
+
+    The halves start from ``result.depth``: a start near their answer saves iterations, and every solver
+    stops on its own criterion for the half's objective, so the start does not decide where they end.
+    """
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     if np.count_nonzero(observed) < MIN_OBSERVED:
         raise ValueError(f"uncertainty needs at least {MIN_OBSERVED} observed pixels (two halves of at least "
@@ -215,8 +219,8 @@ def _with_uncertainty(result, image, sparse_depth, mask, settings, max_uncertain
     half_a, half_b = split_samples(observed, seed=0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ClampWarning)  # the halves' clamps are not the user's result
-        halves = [_complete(image, np.where(half, depth, np.nan), half, x0=None, callback=None, **settings).depth
-                  for half in (half_a, half_b)]
+        halves = [_complete(image, np.where(half, depth, np.nan), half, x0=result.depth, callback=None,
+                            **settings).depth for half in (half_a, half_b)]
     sigma, calibration = estimate_uncertainty(result.depth, *halves, depth, half_a, half_b)
     dense, removed = result.depth, 0
     if max_uncertainty is not None:

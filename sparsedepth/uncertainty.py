@@ -198,6 +198,16 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b):
     a half; so ``u`` is first mapped monotonically onto the distribution of
     ``c(depth)`` over the unobserved pixels (same order as ``u``, the scale
     of ``c``), then calibrated: ``sigma = slope * map(u) + offset``.
+
+    *Extrapolation.*  Held-out observations are never much farther than the
+    mean spacing ``h`` from the others, so the calibration says nothing about
+    pixels far from every sample (a sensor's border, the sky above a LiDAR).
+    Beyond ``h`` the map grows by ``s90 * (d - h)``, with ``d`` the distance
+    to the nearest sample and ``s90`` the 90th percentile of ``|grad depth|``
+    over the unobserved pixels within ``h`` of a sample: the depth change a
+    steep slope of this scene would make where nothing was seen.  This term
+    is a prior, not calibrated; :func:`sparsedepth.complete_depth`'s
+    ``max_uncertainty`` uses it to leave such regions missing.
     """
     observed = half_a | half_b
     unobserved = ~observed
@@ -220,5 +230,19 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b):
 
     sigma = np.abs(depth - np.where(observed, sparse, depth))
     if unobserved.any():
-        sigma[unobserved] = slope * _quantile_map(cue, cue_full, unobserved)[unobserved] + offset
+        sigma[unobserved] = (slope * _quantile_map(cue, cue_full, unobserved) + offset
+                             + _extrapolation_term(depth, observed))[unobserved]
     return sigma, calibration
+
+
+def _extrapolation_term(depth, observed):
+    """``s90 * max(d - h, 0)``: the depth change a steep slope would make beyond one sample spacing."""
+    distance = ndimage.distance_transform_edt(~observed)
+    spacing = 1.0 / np.sqrt(np.count_nonzero(observed) / observed.size)
+    grad_rows, grad_cols = np.gradient(depth)
+    slope = np.hypot(grad_rows, grad_cols)
+    interpolated = (distance <= spacing) & ~observed
+    if not interpolated.any():
+        return np.zeros(depth.shape)
+    steep = float(np.percentile(slope[interpolated], 90))
+    return steep * np.maximum(distance - spacing, 0.0)

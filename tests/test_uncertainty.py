@@ -137,9 +137,18 @@ def test_estimate_uncertainty_orders_pixels_by_the_cue_and_is_the_residual_at_ob
                            for i in range(mask.shape[0])])
     cue = (error_cues(full, sparse, mask) + np.abs(za - zb) + np.maximum(np.abs(full - za), np.abs(full - zb))
            + local_mean)
+    samples = np.argwhere(mask)
+    distance = np.array([[np.sqrt(((samples - (i, j)) ** 2).sum(axis=1).min()) for j in range(mask.shape[1])]
+                         for i in range(mask.shape[0])])
+    gy, gx = np.gradient(full)
+    steep = np.percentile(np.hypot(gx, gy)[(distance <= spacing) & ~mask], 90)
+    extrapolation = steep * np.maximum(distance - spacing, 0)
+    assert extrapolation.max() > 0
     unobserved = ~mask
     order = np.argsort(cue[unobserved], kind="stable")
-    assert np.all(np.diff(sigma[unobserved][order]) >= -1e-12)
+    calibrated = (sigma - extrapolation)[unobserved][order]
+    assert np.all(np.diff(calibrated) >= -1e-12)
+    assert calibrated[0] >= cal.offset - 1e-12
     assert np.all(np.isfinite(sigma)) and np.all(sigma >= 0)
     assert cal.held_out == mask.sum()
     held = np.concatenate([np.abs(za - sparse)[b], np.abs(zb - sparse)[a]])
