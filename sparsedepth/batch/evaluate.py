@@ -62,6 +62,8 @@ class FrameOutcome:
         Wall-clock seconds of the method and of the baseline.
     result : CompletionResult or None
         The solver result (None for the colorization fill).
+    uncertainty : ndarray or None, (H, W)
+        Uncertainty of ``depth`` in its units (None when not computed).
     """
 
     depth: np.ndarray
@@ -76,6 +78,7 @@ class FrameOutcome:
     runtime: float
     nearest_runtime: float
     result: CompletionResult | None = None
+    uncertainty: np.ndarray | None = None
 
 
 
