@@ -259,7 +259,7 @@ def _add_method_options(parser) -> None:
 
 
 def _add_output_options(parser) -> None:
-    """--out, --json, --figure, --outdir and -q."""
+    """--out, --json, --figure, --depth-vis, --outdir and -q."""
     out = parser.add_argument_group("output")
     out.add_argument("--out", metavar="PATH",
                      help="dense depth: .png (16-bit, in the input's scale or --out-scale), .npy, .npz, .h5 or .pfm.")
@@ -267,10 +267,15 @@ def _add_output_options(parser) -> None:
                      help="scale of a PNG output (default: --depth-scale if given, else mm = 1000).")
     out.add_argument("--json", metavar="PATH", help="metrics, settings and solver history as JSON.")
     out.add_argument("--figure", metavar="PATH",
-                     help="image | sparse input | nearest neighbour | completed | absolute error, colour bar in "
-                          "metres (.png, .pdf, .svg, .jpg; needs matplotlib: pip install 'sparsedepth[plot]').")
+                     help="image | input samples | nearest neighbour | completed, and with ground truth: truth | "
+                          "both absolute errors on one scale; the uncertainty when computed; each panel at about "
+                          "the frame's width (.png, .pdf, .svg, .jpg; needs matplotlib: pip install "
+                          "'sparsedepth[plot]').")
+    out.add_argument("--depth-vis", metavar="PATH",
+                     help="the output depth as a colour picture (.png, 8-bit RGB: near bright yellow, far dark "
+                          "blue, missing grey) for any image viewer; no matplotlib needed.")
     out.add_argument("--outdir", metavar="DIR",
-                     help=f"write depth.npy, depth.png, metrics.json and figure.png (if matplotlib is installed) "
+                     help=f"write depth.npy, depth.png, depth_vis.png, metrics.json and figure.png (if matplotlib is installed) "
                           f"here (an existing folder; the demo creates its default ./{DEMO_DIR}/); batch: one depth file "
                           "per frame.")
     out.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr.")
