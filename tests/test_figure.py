@@ -140,6 +140,7 @@ def test_samples_are_drawn_as_disks(frame):
     picture = _rendered(fig)
     panel = _panels(fig)["input"]
     radius = sample_radius((H, W))
+    assert radius >= 1
     rows, cols = np.nonzero(outcome.observed)
     lone = [(r, c) for r, c in zip(rows, cols)
             if radius + 1 <= r < H - radius - 1 and radius + 1 <= c < W - radius - 1

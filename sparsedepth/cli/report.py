@@ -145,11 +145,9 @@ def _dimmed(image) -> np.ndarray:
     return np.repeat((0.35 + 0.35 * grey)[:, :, None], 3, axis=2)
 
 
-def _colormap(base, name):
-    """A copy of a matplotlib colour map with NaN drawn in neutral grey."""
-    cmap = base.with_extremes(bad=_NEUTRAL_GREY)
-    cmap.name = name
-    return cmap
+def _grey_for_missing(cmap):
+    """A copy of a matplotlib colour map with NaN (masked) pixels drawn in neutral grey."""
+    return cmap.with_extremes(bad=_NEUTRAL_GREY)
 
 
 def _rmse_text(metrics) -> str:
@@ -173,6 +171,85 @@ def _layout(has_truth: bool, has_uncertainty: bool) -> tuple[int, int, dict]:
     return 2, columns, {name: divmod(i, columns) for i, name in enumerate(names)}
 
 
+def _depth_range(outcome) -> tuple[float, float]:
+    """(vmin, vmax) of the depth panels: 1st and 99th percentiles of the truth (or samples) and the output."""
+    truth = outcome.truth
+    reference = outcome.sparse[outcome.observed] if truth is None else truth[np.isfinite(truth) & (truth > 0)]
+    values = np.concatenate([reference, outcome.depth[np.isfinite(outcome.depth)]])
+    vmin, vmax = np.percentile(values, [1, 99])
+    return float(vmin), max(float(vmax), float(vmin) + 1e-6)
+
+
+def _depth_panels(axes, image, outcome, style, font):
+    """image | input samples on the dimmed image | nearest | output; returns the samples' image (for the bar)."""
+    h, w = outcome.depth.shape
+    axes["image"].imshow(image, cmap="gray" if np.ndim(image) == 2 else None, interpolation="nearest")
+    axes["image"].set_title("image", fontsize=font)
+
+    radius = sample_radius((h, w))
+    dots = dilate_samples(outcome.sparse, outcome.observed, radius)
+    axes["input"].imshow(_dimmed(image), interpolation="nearest")
+    samples = axes["input"].imshow(np.ma.masked_invalid(dots),
+                                   **{**style, "cmap": style["cmap"].with_extremes(bad=(0, 0, 0, 0))})
+    n_obs = int(outcome.observed.sum())
+    axes["input"].set_title(f"input: {n_obs} samples ({n_obs / (h * w):.1%}), drawn {2 * radius + 1} px wide",
+                            fontsize=font)
+
+    axes["nearest"].imshow(np.ma.masked_invalid(outcome.nearest), **style)
+    axes["nearest"].set_title("\n".join(filter(None, ("nearest neighbour", _rmse_text(outcome.nearest_metrics)))),
+                              fontsize=font)
+
+    axes["ours"].imshow(np.ma.masked_invalid(outcome.depth), **style)
+    removed = int(np.count_nonzero(~np.isfinite(outcome.depth)))
+    details = ", ".join(filter(None, (_rmse_text(outcome.metrics),
+                                      f"{removed} px without depth (grey)" if removed else "")))
+    axes["ours"].set_title("\n".join(filter(None, (outcome.method, details))), fontsize=font)
+    return samples
+
+
+def _truth_panels(axes, outcome, depth_style, font):
+    """truth | |nearest - truth| | |output - truth| on one error scale; returns the last error image."""
+    truth = outcome.truth
+    known = np.isfinite(truth) & (truth > 0)
+    axes["truth"].imshow(np.ma.masked_invalid(np.where(known, truth, np.nan)), **depth_style)
+    axes["truth"].set_title(f"truth ({known.mean():.0%} of pixels; grey: none)", fontsize=font)
+    errors = [np.where(known, np.abs(data - truth), np.nan) for data in (outcome.nearest, outcome.depth)]
+    scored = known if outcome.scored is None else outcome.scored
+    pooled = np.concatenate([error[scored & np.isfinite(error)] for error in errors])
+    high = float(np.percentile(pooled, 99)) if pooled.size else 1.0
+    style = dict(cmap=_grey_for_missing(_colormaps()["viridis"]), vmin=0.0, vmax=max(high, 1e-6),
+                 interpolation="nearest")
+    for name, error, label, metrics in (("nearest_error", errors[0], "|nearest - truth|", outcome.nearest_metrics),
+                                        ("ours_error", errors[1], "|output - truth|", outcome.metrics)):
+        shown = axes[name].imshow(np.ma.masked_invalid(error), **style)
+        axes[name].set_title("\n".join(filter(None, (label, _rmse_text(metrics)))), fontsize=font)
+    return shown
+
+
+def _uncertainty_panel(ax, uncertainty, font):
+    """The uncertainty map from 0 to its 99th percentile, NaN in grey; returns the image (for its bar)."""
+    values = np.asarray(uncertainty, dtype=np.float64)
+    finite = values[np.isfinite(values)]
+    top = float(np.percentile(finite, 99)) if finite.size else 1.0
+    shown = ax.imshow(np.ma.masked_invalid(values), cmap=_grey_for_missing(_colormaps()["YlGnBu_r"]), vmin=0.0,
+                      vmax=max(top, 1e-6), interpolation="nearest")
+    ax.set_title(f"uncertainty (median {float(np.median(finite)):.3f} m)" if finite.size else "uncertainty (none)",
+                 fontsize=font)
+    return shown
+
+
+def _colour_bar(fig, shown, axes, label, font):
+    bar = fig.colorbar(shown, ax=axes, shrink=0.9, pad=0.01, aspect=15)
+    bar.set_label(label, fontsize=0.8 * font)
+    bar.ax.tick_params(labelsize=0.8 * font)
+
+
+def _colormaps():
+    """matplotlib's registry of colour maps (matplotlib is imported only when a figure is drawn)."""
+    from matplotlib import colormaps as registry
+    return registry
+
+
 def build_figure(image, outcome):
     """The figure of one frame as a matplotlib Figure (with an Agg canvas); None without matplotlib.
 
@@ -190,93 +267,32 @@ def build_figure(image, outcome):
     if classes is None:
         return None
     Figure, FigureCanvasAgg = classes
-    from matplotlib import colormaps
     from matplotlib.colors import ListedColormap
 
-    truth, uncertainty = outcome.truth, outcome.uncertainty
     h, w = outcome.depth.shape
-    rows, columns, cells = _layout(truth is not None, uncertainty is not None)
+    rows, columns, cells = _layout(outcome.truth is not None, outcome.uncertainty is not None)
     panel_width = panel_pixels(w) / _DPI
-    panel_height = panel_width * h / w
-    font = max(10.0, 10.0 * panel_width / 5.0)
-    fig = Figure(figsize=(columns * panel_width + 2.2, rows * (panel_height + 0.9) + 0.2), dpi=_DPI,
+    font = max(10.0, 2.0 * panel_width)
+    fig = Figure(figsize=(columns * panel_width + 2.2, rows * (panel_width * h / w + 0.9) + 0.2), dpi=_DPI,
                  layout="constrained")
     FigureCanvasAgg(fig)
     grid = fig.add_gridspec(rows, columns)
     axes = {name: fig.add_subplot(grid[row, column]) for name, (row, column) in cells.items()}
-    for ax in fig.axes:
+    for ax in axes.values():
         ax.set_axis_off()
 
-    depth_cmap = _colormap(ListedColormap(DEPTH_COLORMAP[::-1] / 255.0), "sparsedepth_depth")
-    observed_values = outcome.sparse[outcome.observed]
-    reference = observed_values if truth is None else truth[np.isfinite(truth) & (truth > 0)]
-    finite_depth = outcome.depth[np.isfinite(outcome.depth)]
-    vmin, vmax = np.percentile(np.concatenate([reference, finite_depth]), [1, 99])
-    vmax = max(float(vmax), float(vmin) + 1e-6)
-    depth_style = dict(cmap=depth_cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
-
-    axes["image"].imshow(image, cmap="gray" if np.ndim(image) == 2 else None, interpolation="nearest")
-    axes["image"].set_title("image", fontsize=font)
-
-    radius = sample_radius((h, w))
-    dots = dilate_samples(outcome.sparse, outcome.observed, radius)
-    axes["input"].imshow(_dimmed(image), interpolation="nearest")
-    depth_im = axes["input"].imshow(np.ma.masked_invalid(dots), **{**depth_style, "cmap": depth_cmap.with_extremes(
-        bad=(0, 0, 0, 0))})
-    n_obs = int(outcome.observed.sum())
-    axes["input"].set_title(f"input: {n_obs} samples ({n_obs / (h * w):.1%}), drawn {2 * radius + 1} px wide",
-                            fontsize=font)
-
-    axes["nearest"].imshow(np.ma.masked_invalid(outcome.nearest), **depth_style)
-    title = "nearest neighbour"
-    if outcome.nearest_metrics is not None:
-        title += f"\n{_rmse_text(outcome.nearest_metrics)}"
-    axes["nearest"].set_title(title, fontsize=font)
-
-    axes["ours"].imshow(np.ma.masked_invalid(outcome.depth), **depth_style)
-    title = outcome.method
-    removed = int(np.count_nonzero(~np.isfinite(outcome.depth)))
-    details = [text for text in (_rmse_text(outcome.metrics),
-                                 f"{removed} px without depth (grey)" if removed else "") if text]
-    if details:
-        title += "\n" + ", ".join(details)
-    axes["ours"].set_title(title, fontsize=font)
-    depth_axes = [axes[name] for name in ("image", "input", "nearest", "ours") if cells[name][0] == 0]
-    if truth is not None:
-        axes["truth"].imshow(np.ma.masked_invalid(np.where(truth > 0, truth, np.nan)), **depth_style)
-        known = np.isfinite(truth) & (truth > 0)
-        axes["truth"].set_title(f"truth ({known.mean():.0%} of pixels; grey: none)", fontsize=font)
-        bar = fig.colorbar(depth_im, ax=depth_axes, label="depth [m]", shrink=0.9, pad=0.01, aspect=15)
-        error_cmap = _colormap(colormaps["viridis"], "sparsedepth_error")
-        errors = [np.where(known, np.abs(data - truth), np.nan) for data in (outcome.nearest, outcome.depth)]
-        scored = known if outcome.scored is None else outcome.scored
-        pooled = np.concatenate([error[scored & np.isfinite(error)] for error in errors])
-        high = float(np.percentile(pooled, 99)) if pooled.size else 1.0
-        error_style = dict(cmap=error_cmap, vmin=0.0, vmax=max(high, 1e-6), interpolation="nearest")
-        for name, error, label, metrics in (("nearest_error", errors[0], "|nearest - truth|",
-                                             outcome.nearest_metrics),
-                                            ("ours_error", errors[1], "|output - truth|", outcome.metrics)):
-            error_im = axes[name].imshow(np.ma.masked_invalid(error), **error_style)
-            axes[name].set_title(f"{label}\n{_rmse_text(metrics)}".rstrip(), fontsize=font)
-        bar_error = fig.colorbar(error_im, ax=[axes["nearest_error"], axes["ours_error"]],
-                                 label="absolute error [m] (same scale)", shrink=0.9, pad=0.01, aspect=15)
-        bars = [bar, bar_error]
-    else:
-        bars = [fig.colorbar(depth_im, ax=depth_axes, label="depth [m]", shrink=0.9, pad=0.01, aspect=15)]
-    if uncertainty is not None:
-        uncertainty_cmap = _colormap(colormaps["YlGnBu_r"], "sparsedepth_uncertainty")
-        values = np.asarray(uncertainty, dtype=np.float64)
-        finite = values[np.isfinite(values)]
-        top = float(np.percentile(finite, 99)) if finite.size else 1.0
-        unc_im = axes["uncertainty"].imshow(np.ma.masked_invalid(values), cmap=uncertainty_cmap, vmin=0.0,
-                                            vmax=max(top, 1e-6), interpolation="nearest")
-        median = f"median {float(np.median(finite)):.3f} m" if finite.size else "no value"
-        axes["uncertainty"].set_title(f"uncertainty ({median})", fontsize=font)
-        bars.append(fig.colorbar(unc_im, ax=axes["uncertainty"], label="uncertainty [m]", shrink=0.9,
-                                 pad=0.01, aspect=15))
-    for bar in bars:
-        bar.ax.tick_params(labelsize=0.8 * font)
-        bar.set_label(bar.ax.get_ylabel(), fontsize=0.8 * font)
+    vmin, vmax = _depth_range(outcome)
+    depth_style = dict(cmap=_grey_for_missing(ListedColormap(DEPTH_COLORMAP[::-1] / 255.0)), vmin=vmin, vmax=vmax,
+                       interpolation="nearest")
+    samples = _depth_panels(axes, image, outcome, depth_style, font)
+    first_row = [axes[name] for name in ("image", "input", "nearest", "ours") if cells[name][0] == 0]
+    _colour_bar(fig, samples, first_row, "depth [m]", font)
+    if outcome.truth is not None:
+        errors = _truth_panels(axes, outcome, depth_style, font)
+        _colour_bar(fig, errors, [axes["nearest_error"], axes["ours_error"]], "absolute error [m] (same scale)", font)
+    if outcome.uncertainty is not None:
+        shown = _uncertainty_panel(axes["uncertainty"], outcome.uncertainty, font)
+        _colour_bar(fig, shown, axes["uncertainty"], "uncertainty [m]", font)
     return fig
 
 
