@@ -31,6 +31,8 @@ the parts listed before it, NumPy, SciPy, pyamg, scikit-image and h5py;
     Sparse input from dense depth, error metrics, and the fills a user would
     otherwise reach for (nearest, linear, biharmonic, colorization;
     ``colorization_baseline`` imports ``holes.colorization`` when called).
+``visualize``
+    :func:`colorize_depth`: a depth map as an RGB picture (NumPy only).
 ``objective/``
     The objective as a sum of named terms (``terms``, ``objective``), their
     :class:`Weights` (``weights``), and the stacked L1 operator (``l1``).
@@ -141,3 +143,6 @@ from . import batch, holes  # noqa: E402
 from .holes.fill import FILL_METHODS, fill_holes  # noqa: E402
 
 __all__ += ["fill_holes", "FILL_METHODS", "holes", "batch"]
+from .visualize import colorize_depth  # noqa: E402
+
+__all__ += ["colorize_depth"]

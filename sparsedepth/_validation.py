@@ -17,7 +17,8 @@ concept is refused with the same exception and message everywhere:
   :func:`argument_label` (how an argument is named in a message: a
   command-line flag as typed, a Python name in backticks);
 - options passed on as keywords: :func:`check_option_names` (a misspelt key
-  is a ``ValueError`` naming it and listing the valid ones).
+  is a ``ValueError`` naming it and listing the valid ones);
+- colours: :func:`check_rgb_colour` (three integers in [0, 255]).
 
 May import NumPy, SciPy and the standard library; nothing of the package (the
 rule for :class:`~sparsedepth.Weights` is :func:`sparsedepth.objective.weights.check_weights`).
@@ -52,6 +53,7 @@ __all__ = [
     "check_folder",
     "check_index",
     "check_option_names",
+    "check_rgb_colour",
 ]
 
 
@@ -338,3 +340,23 @@ def check_option_names(options, valid, *, where: str) -> None:
     unknown = [key for key in options if key not in valid]
     if unknown:
         raise ValueError(f"unknown option {unknown[0]!r} for {where}; valid options: {', '.join(sorted(valid))}")
+
+
+# --- colours
+
+def check_rgb_colour(colour, *, name: str = "colour") -> tuple[int, int, int]:
+    """Return an 8-bit sRGB colour as three Python ints.
+
+    ``TypeError`` unless ``colour`` is a sequence of real numbers;
+    ``ValueError`` unless there are three and each is an integer in [0, 255].
+    """
+    try:
+        values = tuple(colour)
+    except TypeError:
+        raise TypeError(f"{name} must be a sequence of 3 integers in [0, 255] (R, G, B), got "
+                        f"{type(colour).__name__}") from None
+    if not all(is_real(v) for v in values):
+        raise TypeError(f"{name} must be 3 integers in [0, 255] (R, G, B), got {colour!r}")
+    if len(values) != 3 or not all(float(v).is_integer() and 0 <= v <= 255 for v in values):
+        raise ValueError(f"{name} must be 3 integers in [0, 255] (R, G, B), got {colour!r}; e.g. (128, 128, 128)")
+    return int(values[0]), int(values[1]), int(values[2])

@@ -82,8 +82,6 @@ class FrameOutcome:
     uncertainty: np.ndarray | None = None
 
 
-
-
 def _depth_2d(depth, name):
     arr = np.asarray(depth)
     if arr.ndim != 2:

@@ -70,6 +70,8 @@ def _check_combinations(args) -> str:
         if args.out or args.json or args.figure or args.mask or args.truth or args.calib:
             raise UsageError("--out, --json, --figure, --mask, --truth and --calib are for one frame; "
                               "a batch writes --csv (and per-frame depth with --outdir)")
+        if args.depth_vis:
+            raise UsageError("--depth-vis is for one frame; a batch writes --csv (and per-frame depth with --outdir)")
         if args.indices is not None and args.nyu_mat is None:
             raise UsageError("--indices selects frames of --nyu-mat")
         if (args.nyu_mat is not None and not args.fill_holes and args.keep_fraction is None
@@ -88,6 +90,8 @@ def _check_combinations(args) -> str:
             _check_output(args.json, (".json",), "--json")
         if args.figure:
             _check_output(args.figure, _FIGURE_EXTENSIONS, "--figure")
+        if args.depth_vis:
+            _check_output(args.depth_vis, (".png",), "--depth-vis")
         outputs = [target for _, target in plan_outputs(args, mode)]
         check_distinct(outputs, input_files(args))
         check_writable(outputs)

@@ -259,7 +259,7 @@ def _add_method_options(parser) -> None:
 
 
 def _add_output_options(parser) -> None:
-    """--out, --uncertainty, --max-uncertainty, --json, --figure, --outdir and -q."""
+    """--out, --uncertainty, --max-uncertainty, --json, --figure, --depth-vis, --outdir and -q."""
     out = parser.add_argument_group("output")
     out.add_argument("--out", metavar="PATH",
                      help="dense depth: .png (16-bit, in the input's scale or --out-scale), .npy, .npz, .h5 or .pfm.")
@@ -274,11 +274,16 @@ def _add_output_options(parser) -> None:
                           "float formats) instead of extrapolating; the count is reported.")
     out.add_argument("--json", metavar="PATH", help="metrics, settings and solver history as JSON.")
     out.add_argument("--figure", metavar="PATH",
-                     help="image | sparse input | nearest neighbour | completed | absolute error, colour bar in "
-                          "metres (.png, .pdf, .svg, .jpg; needs matplotlib: pip install 'sparsedepth[plot]').")
+                     help="image | input samples | nearest neighbour | completed, and with ground truth: truth | "
+                          "both absolute errors on one scale; the uncertainty when computed; each panel at about "
+                          "the frame's width (.png, .pdf, .svg, .jpg; needs matplotlib: pip install "
+                          "'sparsedepth[plot]').")
+    out.add_argument("--depth-vis", metavar="PATH",
+                     help="the output depth as a colour picture (.png, 8-bit RGB: near bright yellow, far dark "
+                          "blue, missing grey) for any image viewer; no matplotlib needed.")
     out.add_argument("--outdir", metavar="DIR",
-                     help=f"write depth.npy, depth.png, metrics.json, figure.png (if matplotlib is installed) and, with "
-                          "--uncertainty or --max-uncertainty, uncertainty.npy "
+                     help=f"write depth.npy, depth.png, depth_vis.png, metrics.json, figure.png (if matplotlib is "
+                          "installed) and, with --uncertainty or --max-uncertainty, uncertainty.npy "
                           f"here (an existing folder; the demo creates its default ./{DEMO_DIR}/); batch: one depth file "
                           "per frame.")
     out.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr.")

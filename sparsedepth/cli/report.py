@@ -1,7 +1,9 @@
 """What the command line shows of one frame: the table on stdout, the JSON report and the figure.
 
-Imports NumPy, :mod:`sparsedepth` (its version) and, when a figure is
-drawn, matplotlib; it never writes a file (the caller commits the bytes).
+Imports NumPy, :mod:`sparsedepth` (its version, the input checks of
+:mod:`sparsedepth._validation`, the colour map of :mod:`sparsedepth.visualize`)
+and, when a figure is drawn, matplotlib; it never writes a file (the caller
+commits the bytes).
 """
 
 from __future__ import annotations
@@ -15,9 +17,12 @@ import platform
 import numpy as np
 
 from .. import __version__
+from .._validation import as_float_image
+from ..visualize import DEPTH_COLORMAP
 from .parser import PROG
 
-__all__ = ["matplotlib_classes", "build_report", "print_table", "render_figure"]
+__all__ = ["matplotlib_classes", "build_report", "print_table", "build_figure", "render_figure", "panel_pixels",
+           "sample_radius", "dilate_samples"]
 
 
 def matplotlib_classes():
@@ -130,34 +135,202 @@ def print_table(outcome, description, stream) -> None:
         print(f"{name:<28} {m.rmse:9.4f} {m.mae:9.4f} {m.rel:8.4f} {m.delta1:7.4f} {t:9.2f}", file=stream)
 
 
-def render_figure(image, outcome, extension) -> bytes:
-    """image | sparse input | nearest neighbour | completed | |error|, as file bytes."""
-    Figure, FigureCanvasAgg = matplotlib_classes()
+_DPI = 100
+_MAX_PANEL_WIDTH = 1000  # pixels: wider frames are drawn at this width
+_MIN_PANEL_WIDTH = 320  # pixels: narrower frames are enlarged to this width (room for the titles)
+_NEUTRAL_GREY = (0.5, 0.5, 0.5)
+
+
+def sample_radius(shape) -> int:
+    """Radius in pixels of the disks that show the observed samples in the figure.
+
+    ``round(1.5 max(H, W) / 1000)``, at least 1: about a 3-pixel dot once the
+    frame is drawn at :data:`_MAX_PANEL_WIDTH` pixels or less.
+    """
+    return max(1, round(1.5 * max(shape) / _MAX_PANEL_WIDTH))
+
+
+def panel_pixels(width: int) -> int:
+    """Width in pixels at which a frame ``width`` pixels wide is drawn in the figure: itself, within [320, 1000]."""
+    return int(min(max(width, _MIN_PANEL_WIDTH), _MAX_PANEL_WIDTH))
+
+
+def dilate_samples(sparse, observed, radius: int) -> np.ndarray:
+    """The samples spread over disks of ``radius`` pixels (each pixel takes its nearest sample), NaN elsewhere."""
+    out = np.where(observed, sparse, np.nan)
+    filled = np.array(observed, dtype=bool)
+    h, w = filled.shape
+    offsets = sorted((dy * dy + dx * dx, dy, dx) for dy in range(-radius, radius + 1)
+                     for dx in range(-radius, radius + 1) if 0 < dy * dy + dx * dx <= radius * radius + radius)
+    for _, dy, dx in offsets:
+        target = (slice(max(dy, 0), h + min(dy, 0)), slice(max(dx, 0), w + min(dx, 0)))
+        source = (slice(max(-dy, 0), h + min(-dy, 0)), slice(max(-dx, 0), w + min(-dx, 0)))
+        take = ~filled[target] & observed[source]
+        out[target][take] = sparse[source][take]
+        filled[target] |= take
+    return out
+
+
+def _dimmed(image) -> np.ndarray:
+    """The image as a low-contrast grey picture (RGB floats around mid grey), the background of the samples."""
+    grey = as_float_image(image).mean(axis=2)
+    return np.repeat((0.35 + 0.35 * grey)[:, :, None], 3, axis=2)
+
+
+def _grey_for_missing(cmap):
+    """A copy of a matplotlib colour map with NaN (masked) pixels drawn in neutral grey."""
+    return cmap.with_extremes(bad=_NEUTRAL_GREY)
+
+
+def _rmse_text(metrics) -> str:
+    return "" if metrics is None else f"RMSE {metrics.rmse:.3f} m"
+
+
+def _layout(has_truth: bool, has_uncertainty: bool) -> tuple[int, int, dict]:
+    """(rows, columns, {panel: (row, column)}): one row up to 4 panels, two rows beyond."""
+    names = ["image", "input", "nearest", "ours"]
+    if has_truth:
+        cells = {name: (0, i) for i, name in enumerate(names)}
+        cells.update(truth=(1, 0), nearest_error=(1, 2), ours_error=(1, 3))
+        if has_uncertainty:
+            cells["uncertainty"] = (1, 1)
+        return 2, 4, cells
+    if has_uncertainty:
+        names.append("uncertainty")
+    if len(names) <= 4:
+        return 1, len(names), {name: (0, i) for i, name in enumerate(names)}
+    columns = -(-len(names) // 2)
+    return 2, columns, {name: divmod(i, columns) for i, name in enumerate(names)}
+
+
+def _depth_range(outcome) -> tuple[float, float]:
+    """(vmin, vmax) of the depth panels: 1st and 99th percentiles of the truth (or samples) and the output."""
     truth = outcome.truth
-    panels = 5 if truth is not None else 4
-    fig = Figure(figsize=(3.2 * panels + 1.2, 3.0 * image.shape[0] / image.shape[1] + 0.8), layout="constrained")
+    reference = outcome.sparse[outcome.observed] if truth is None else truth[np.isfinite(truth) & (truth > 0)]
+    values = np.concatenate([reference, outcome.depth[np.isfinite(outcome.depth)]])
+    vmin, vmax = np.percentile(values, [1, 99])
+    return float(vmin), max(float(vmax), float(vmin) + 1e-6)
+
+
+def _depth_panels(axes, image, outcome, style, font):
+    """image | input samples on the dimmed image | nearest | output; returns the samples' image (for the bar)."""
+    h, w = outcome.depth.shape
+    axes["image"].imshow(image, cmap="gray" if np.ndim(image) == 2 else None, interpolation="nearest")
+    axes["image"].set_title("image", fontsize=font)
+
+    radius = sample_radius((h, w))
+    dots = dilate_samples(outcome.sparse, outcome.observed, radius)
+    axes["input"].imshow(_dimmed(image), interpolation="nearest")
+    samples = axes["input"].imshow(np.ma.masked_invalid(dots),
+                                   **{**style, "cmap": style["cmap"].with_extremes(bad=(0, 0, 0, 0))})
+    n_obs = int(outcome.observed.sum())
+    axes["input"].set_title(f"input: {n_obs} samples ({n_obs / (h * w):.1%}), drawn {2 * radius + 1} px wide",
+                            fontsize=font)
+
+    axes["nearest"].imshow(np.ma.masked_invalid(outcome.nearest), **style)
+    axes["nearest"].set_title("\n".join(filter(None, ("nearest neighbour", _rmse_text(outcome.nearest_metrics)))),
+                              fontsize=font)
+
+    axes["ours"].imshow(np.ma.masked_invalid(outcome.depth), **style)
+    removed = int(np.count_nonzero(~np.isfinite(outcome.depth)))
+    details = ", ".join(filter(None, (_rmse_text(outcome.metrics),
+                                      f"{removed} px without depth (grey)" if removed else "")))
+    axes["ours"].set_title("\n".join(filter(None, (outcome.method, details))), fontsize=font)
+    return samples
+
+
+def _truth_panels(axes, outcome, depth_style, font):
+    """truth | |nearest - truth| | |output - truth| on one error scale; returns the last error image."""
+    truth = outcome.truth
+    known = np.isfinite(truth) & (truth > 0)
+    axes["truth"].imshow(np.ma.masked_invalid(np.where(known, truth, np.nan)), **depth_style)
+    axes["truth"].set_title(f"truth ({known.mean():.0%} of pixels; grey: none)", fontsize=font)
+    errors = [np.where(known, np.abs(data - truth), np.nan) for data in (outcome.nearest, outcome.depth)]
+    scored = known if outcome.scored is None else outcome.scored
+    pooled = np.concatenate([error[scored & np.isfinite(error)] for error in errors])
+    high = float(np.percentile(pooled, 99)) if pooled.size else 1.0
+    style = dict(cmap=_grey_for_missing(_colormaps()["viridis"]), vmin=0.0, vmax=max(high, 1e-6),
+                 interpolation="nearest")
+    for name, error, label, metrics in (("nearest_error", errors[0], "|nearest - truth|", outcome.nearest_metrics),
+                                        ("ours_error", errors[1], "|output - truth|", outcome.metrics)):
+        shown = axes[name].imshow(np.ma.masked_invalid(error), **style)
+        axes[name].set_title("\n".join(filter(None, (label, _rmse_text(metrics)))), fontsize=font)
+    return shown
+
+
+def _uncertainty_panel(ax, uncertainty, font):
+    """The uncertainty map from 0 to its 99th percentile, NaN in grey; returns the image (for its bar)."""
+    values = np.asarray(uncertainty, dtype=np.float64)
+    finite = values[np.isfinite(values)]
+    top = float(np.percentile(finite, 99)) if finite.size else 1.0
+    shown = ax.imshow(np.ma.masked_invalid(values), cmap=_grey_for_missing(_colormaps()["YlGnBu_r"]), vmin=0.0,
+                      vmax=max(top, 1e-6), interpolation="nearest")
+    ax.set_title(f"uncertainty (median {float(np.median(finite)):.3f} m)" if finite.size else "uncertainty (none)",
+                 fontsize=font)
+    return shown
+
+
+def _colour_bar(fig, shown, axes, label, font):
+    bar = fig.colorbar(shown, ax=axes, shrink=0.9, pad=0.01, aspect=15)
+    bar.set_label(label, fontsize=0.8 * font)
+    bar.ax.tick_params(labelsize=0.8 * font)
+
+
+def _colormaps():
+    """matplotlib's registry of colour maps (matplotlib is imported only when a figure is drawn)."""
+    from matplotlib import colormaps as registry
+    return registry
+
+
+def build_figure(image, outcome):
+    """The figure of one frame as a matplotlib Figure (with an Agg canvas); None without matplotlib.
+
+    Panels: image | input samples (disks of :func:`sample_radius` pixels on the
+    dimmed image) | nearest neighbour | the method's output, on one depth
+    colour scale (:data:`sparsedepth.visualize.DEPTH_COLORMAP`, near bright);
+    with ground truth, a second row: truth | (uncertainty) |
+    |nearest - truth| | |output - truth| on one shared error scale; without
+    truth, the uncertainty panel (``outcome.uncertainty``) follows the output.
+    Pixels without a value (no truth, or NaN in the output) are neutral grey.
+    Each panel is drawn at about :func:`panel_pixels` pixels wide (the
+    frame's width, within [320, 1000]) at 100 dpi.
+    """
+    classes = matplotlib_classes()
+    if classes is None:
+        return None
+    Figure, FigureCanvasAgg = classes
+    from matplotlib.colors import ListedColormap
+
+    h, w = outcome.depth.shape
+    rows, columns, cells = _layout(outcome.truth is not None, outcome.uncertainty is not None)
+    panel_width = panel_pixels(w) / _DPI
+    font = max(10.0, 2.0 * panel_width)
+    fig = Figure(figsize=(columns * panel_width + 2.2, rows * (panel_width * h / w + 0.9) + 0.2), dpi=_DPI,
+                 layout="constrained")
     FigureCanvasAgg(fig)
-    axes = fig.subplots(1, panels)
-    reference = outcome.sparse[outcome.observed] if truth is None else truth[np.isfinite(truth)]
-    vmin, vmax = np.percentile(np.concatenate([reference, outcome.depth.ravel()]), [1, 99])
-    axes[0].imshow(image, cmap="gray" if image.ndim == 2 else None)
-    axes[0].set_title("image")
-    depth_im = None
-    for ax, data, title in ((axes[1], outcome.sparse, f"input ({int(outcome.observed.sum())} px)"),
-                            (axes[2], outcome.nearest, "nearest neighbour"),
-                            (axes[3], outcome.depth, outcome.method)):
-        depth_im = ax.imshow(np.ma.masked_invalid(data), cmap="turbo", vmin=vmin, vmax=vmax,
-                             interpolation="nearest")
-        ax.set_title(title)
-    fig.colorbar(depth_im, ax=axes[1:4], label="depth [m]", shrink=0.9)
-    if truth is not None:
-        error = np.abs(outcome.depth - truth)
-        err_im = axes[4].imshow(np.ma.masked_invalid(error), cmap="magma", vmin=0,
-                                vmax=max(float(np.nanpercentile(error, 99)), 1e-6), interpolation="nearest")
-        axes[4].set_title("|output - truth|")
-        fig.colorbar(err_im, ax=axes[4], label="absolute error [m]", shrink=0.9)
-    for ax in axes:
+    grid = fig.add_gridspec(rows, columns)
+    axes = {name: fig.add_subplot(grid[row, column]) for name, (row, column) in cells.items()}
+    for ax in axes.values():
         ax.set_axis_off()
+
+    vmin, vmax = _depth_range(outcome)
+    depth_style = dict(cmap=_grey_for_missing(ListedColormap(DEPTH_COLORMAP[::-1] / 255.0)), vmin=vmin, vmax=vmax,
+                       interpolation="nearest")
+    samples = _depth_panels(axes, image, outcome, depth_style, font)
+    first_row = [axes[name] for name in ("image", "input", "nearest", "ours") if cells[name][0] == 0]
+    _colour_bar(fig, samples, first_row, "depth [m]", font)
+    if outcome.truth is not None:
+        errors = _truth_panels(axes, outcome, depth_style, font)
+        _colour_bar(fig, errors, [axes["nearest_error"], axes["ours_error"]], "absolute error [m] (same scale)", font)
+    if outcome.uncertainty is not None:
+        shown = _uncertainty_panel(axes["uncertainty"], outcome.uncertainty, font)
+        _colour_bar(fig, shown, axes["uncertainty"], "uncertainty [m]", font)
+    return fig
+
+
+def render_figure(image, outcome, extension) -> bytes:
+    """The figure of :func:`build_figure`, encoded in the format of ``extension`` (".png", ".pdf", ...)."""
+    fig = build_figure(image, outcome)
     buffer = _io.BytesIO()
-    fig.savefig(buffer, format=extension.lstrip(".").replace("jpg", "jpeg"), dpi=100)
+    fig.savefig(buffer, format=extension.lstrip(".").lower().replace("jpg", "jpeg"), dpi=_DPI)
     return buffer.getvalue()

@@ -14,12 +14,14 @@ import json
 import time
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
 
 from ..batch import evaluate_frame
 from ..datasets import load_motorcycle
 from ..io import KINECT_NYU, read_calib, read_depth, read_image, read_mask
 from ..io import depth_writer, resolve_scale
+from ..visualize import colorize_depth
 from .messages import UsageError, one_line, warnings_as_lines
 from .outputs import Named, commit
 from .parser import DEMO_DIR, DEMO_DOWNSAMPLE, DEMO_KEEP_FRACTION, weights_of
@@ -126,18 +128,19 @@ def _read_inputs(args, stream):
 
 _DEPTH_OUTPUTS = ("--out", "depth.npy", "depth.png")
 _UNCERTAINTY_OUTPUTS = ("--uncertainty", "uncertainty.npy")
+_DEPTH_VIS_OUTPUTS = ("--depth-vis", "depth_vis.png")
 
 
 def plan_outputs(args, mode) -> list[tuple[str, Named]]:
     """(kind, file) of every output of one frame; kind is the option or the file name in --outdir."""
     planned = []
     for flag, value in (("--out", args.out), ("--uncertainty", args.uncertainty), ("--json", args.json),
-                        ("--figure", args.figure)):
+                        ("--figure", args.figure), ("--depth-vis", args.depth_vis)):
         if value is not None:
             planned.append((flag, Named(flag, value, Path(value))))
     outdir = DEMO_DIR if mode == "demo" and args.outdir is None else args.outdir
     if outdir is not None:
-        names = ["depth.npy", "depth.png", "metrics.json"]
+        names = ["depth.npy", "depth.png", "depth_vis.png", "metrics.json"]
         if wants_uncertainty(args):
             names.append("uncertainty.npy")
         if matplotlib_classes() is not None:
@@ -243,6 +246,10 @@ def _writers(args, planned, outcome, image, report, png_scale) -> list:
     else:
         outdir_figure = figure_bytes
 
+    depth_vis_bytes = None
+    if kinds & set(_DEPTH_VIS_OUTPUTS):
+        depth_vis_bytes = iio.imwrite("<bytes>", colorize_depth(outcome.depth), plugin="pillow", extension=".png")
+
     items = []
     for kind, target in planned:
         if kind in _DEPTH_OUTPUTS:
@@ -254,6 +261,8 @@ def _writers(args, planned, outcome, image, report, png_scale) -> list:
             writer = _uncertainty_writer(target, outcome.uncertainty, png_scale)
         elif kind in ("--json", "metrics.json"):
             writer = _bytes_writer(report_text)
+        elif kind in _DEPTH_VIS_OUTPUTS:
+            writer = _bytes_writer(depth_vis_bytes)
         else:
             writer = _bytes_writer(figure_bytes if kind == "--figure" else outdir_figure)
         items.append((target, writer))

@@ -1,0 +1,161 @@
+"""Depth as a picture: :func:`colorize_depth` turns a depth map into an RGB image a viewer can show.
+
+A 16-bit metric PNG looks black in an ordinary image viewer (a few metres
+are a few thousand of 65535 grey levels); :func:`colorize_depth` maps depth
+through :data:`DEPTH_COLORMAP`, a colour map whose lightness rises steadily
+from far (dark blue) to near (pale yellow), and draws missing pixels in a
+neutral grey.
+
+Imports NumPy and :mod:`sparsedepth._validation` only (no matplotlib).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._validation import check_rgb_colour, is_real
+
+__all__ = ["DEPTH_COLORMAP", "DEPTH_COLORMAP_ANCHORS", "MISSING_COLOUR", "colorize_depth"]
+
+#: sRGB anchors of the depth colour map, far (first) to near (last).  Each is
+#: the CIE 1976 L*a*b* colour with lightness L* = 8, 22, 36, 50, 64, 78, 92
+#: and hue angle h = 285, 310, 340, 15, 45, 70, 95 degrees (blue, violet,
+#: magenta, red, orange, amber, pale yellow), with the largest chroma (at
+#: most 85) that stays inside the sRGB gamut, rounded to 8 bits.
+DEPTH_COLORMAP_ANCHORS = np.array([
+    (0, 23, 57),
+    (67, 26, 128),
+    (161, 0, 124),
+    (236, 0, 88),
+    (255, 110, 62),
+    (255, 176, 84),
+    (255, 232, 135),
+], dtype=np.float64)
+
+#: The colour map as a (256, 3) uint8 table, index 0 = far, 255 = near: the
+#: anchors interpolated linearly in sRGB at equal spacing.
+DEPTH_COLORMAP = np.stack([
+    np.interp(np.linspace(0.0, 1.0, 256), np.linspace(0.0, 1.0, len(DEPTH_COLORMAP_ANCHORS)),
+              DEPTH_COLORMAP_ANCHORS[:, channel])
+    for channel in range(3)
+], axis=1).round().astype(np.uint8)
+DEPTH_COLORMAP.setflags(write=False)
+
+#: Colour of pixels without depth: mid grey (CIE L* 54, no hue), unlike any
+#: colour of the map at that lightness.
+MISSING_COLOUR = (128, 128, 128)
+
+_LOW_PERCENTILE, _HIGH_PERCENTILE = 2.0, 98.0
+
+
+def _check_depth(depth) -> np.ndarray:
+    array = np.asarray(depth)
+    if not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
+        raise TypeError(f"depth must be a real-valued array (integer or float), got dtype {array.dtype}; "
+                        "convert it with depth.astype(float)")
+    if array.ndim != 2:
+        raise ValueError(f"depth must be a 2-D (H, W) array, got shape {array.shape}; pass one depth map")
+    return array
+
+
+def _check_limit(value, name: str) -> float | None:
+    if value is None:
+        return None
+    if not is_real(value):
+        raise TypeError(f"{name} must be a real number or None, got {type(value).__name__}")
+    number = float(value)
+    if not np.isfinite(number):
+        raise ValueError(f"{name} must be finite, got {value!r}; give a depth in the map's units or None")
+    return number
+
+
+def colorize_depth(depth, *, vmin=None, vmax=None, missing=MISSING_COLOUR) -> np.ndarray:
+    """Depth map to an RGB image: near pixels bright and warm, far pixels dark and blue, missing ones grey.
+
+    Parameters
+    ----------
+    depth : array_like, (H, W)
+        Depth in any unit (integers or floats).  Pixels that are NaN,
+        infinite or ``<= 0`` are missing.
+    vmin, vmax : float, optional
+        Depth drawn in the nearest (``vmin``) and the farthest (``vmax``)
+        colour; depth outside is clipped to them.  Defaults: the 2nd and
+        98th percentiles of the valid pixels, so a few outliers do not
+        flatten the picture.
+    missing : sequence of 3 ints in [0, 255]
+        Colour of the missing pixels (default mid grey, ``(128, 128, 128)``).
+
+    Returns
+    -------
+    ndarray of uint8, (H, W, 3)
+        A new sRGB image; ``depth`` is not modified.
+
+    Raises
+    ------
+    TypeError
+        ``depth`` is not a numeric array, or ``vmin``/``vmax`` is not a
+        real number, or ``missing`` is not a sequence of numbers.
+    ValueError
+        ``depth`` is not 2-D, ``vmin``/``vmax`` is not finite, both are
+        given with ``vmin >= vmax``, or ``missing`` is not three integers in
+        [0, 255].
+
+    Notes
+    -----
+    A valid depth ``d`` becomes the entry ``k = round(255 (1 - t))`` of
+    :data:`DEPTH_COLORMAP` with
+
+    .. math:: t = \\operatorname{clip}\\left(\\frac{d - v_{min}}{v_{max} - v_{min}}, 0, 1\\right),
+
+    so ``vmin`` is entry 255 (pale yellow) and ``vmax`` entry 0 (dark
+    blue).  When the range is empty (a constant map, or a default limit on
+    the wrong side of the given one), ``t`` is 0 below ``vmin``, 1 above it
+    and 1/2 at it.
+
+    The map is built from seven anchors of equally spaced CIE L* (8 to 92)
+    with hues turning from blue through violet, magenta, red and orange to
+    yellow (:data:`DEPTH_COLORMAP_ANCHORS`), interpolated linearly in sRGB:
+    lightness increases monotonically towards the near end, so the order of
+    depths reads in grey-scale print and for colour-blind viewers, and the
+    hue turn separates neighbouring depths better than lightness alone.  It
+    is a map of its own (not matplotlib's), in the convention of the KITTI
+    and NYU depth figures (near bright, far dark).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rgb = colorize_depth(np.array([[1.0, 2.0], [np.nan, 3.0]]), vmin=1.0, vmax=3.0)
+    >>> rgb.shape, rgb.dtype
+    ((2, 2, 3), dtype('uint8'))
+    >>> rgb[0, 0].tolist(), rgb[1, 1].tolist(), rgb[1, 0].tolist()
+    ([255, 232, 135], [0, 23, 57], [128, 128, 128])
+    """
+    array = _check_depth(depth)
+    low, high = _check_limit(vmin, "vmin"), _check_limit(vmax, "vmax")
+    if low is not None and high is not None and low >= high:
+        raise ValueError(f"vmin must be below vmax, got vmin={low!r} and vmax={high!r}; swap them or widen the range")
+    colour = np.asarray(check_rgb_colour(missing, name="missing"), dtype=np.uint8)
+
+    values = array.astype(np.float64)  # a copy: the caller's array is never modified
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(values) & (values > 0)
+    rgb = np.empty(values.shape + (3,), dtype=np.uint8)
+    rgb[...] = colour
+    if not valid.any():
+        return rgb
+    if low is None or high is None:
+        p_low, p_high = np.percentile(values[valid], [_LOW_PERCENTILE, _HIGH_PERCENTILE])
+        if low is None and high is None:
+            low, high = float(p_low), float(p_high)
+        elif low is None:
+            low = min(float(p_low), high)
+        else:
+            high = max(float(p_high), low)
+    d = values[valid]
+    if high > low:
+        t = np.clip((d - low) / (high - low), 0.0, 1.0)
+    else:
+        t = 0.5 + 0.5 * np.sign(d - low)
+    index = np.rint(255.0 * (1.0 - t)).astype(np.intp)
+    rgb[valid] = DEPTH_COLORMAP[index]
+    return rgb
