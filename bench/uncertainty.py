@@ -2,7 +2,7 @@
 
 Run (full, ~15 minutes on 2 cores)::
 
-    python -m bench.uncertainty --out docs/uncertainty_results.md
+    python -m bench.uncertainty --out docs/uncertainty.md
 
 or ``--quick`` for a smoke test on tiny frames.  Frames are
 :data:`frames.REPORT_FRAMES` at full resolution (``--step 1``), never the
@@ -30,6 +30,8 @@ from __future__ import annotations
 import sys
 import time
 import warnings
+from pathlib import Path
+from string import Template
 
 import numpy as np
 from scipy import ndimage
@@ -38,6 +40,7 @@ import sparsedepth as sd
 
 from . import harness as H
 
+TEMPLATE = Path(__file__).resolve().parent / "templates" / "uncertainty.md"
 DEFAULT_STEP = 1
 DEFAULT_SEEDS = (0,)
 #: The target of the ranking ratio (RMSE of the better half / RMSE of all hidden pixels).
@@ -154,8 +157,11 @@ def run(argv=None):
              "|∇z| · d (d the distance to the nearest sample in pixels), distance = d. `rank: X` is the RMSE over the half of the hidden pixels with the lowest X "
              "divided by the RMSE over all hidden pixels; `held-out` columns are the calibration's own coverage "
              "on the observations each half-sample completion did not see.")
-    text = H.section("Uncertainty", command=H.command_line("uncertainty", argv or []), frames_=frames, seeds=seeds,
-                     body=body, notes=notes, elapsed=time.perf_counter() - t0)
+    section = H.section("Measured on the report frames", command=H.command_line("uncertainty", argv or []),
+                        frames_=frames, seeds=seeds, body=body, notes=notes, elapsed=time.perf_counter() - t0)
+    text = Template(TEMPLATE.read_text()).substitute(
+        section=section, cover1=f"{_mean(records, lambda r: r['cover1']):.0%}",
+        cover2=f"{_mean(records, lambda r: r['cover2']):.0%}", cost=f"{_mean(records, lambda r: r['cost']):.1f}")
     return text, records
 
 

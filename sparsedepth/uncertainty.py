@@ -22,8 +22,10 @@ __all__ = ["MIN_OBSERVED", "TARGET_COVERAGE", "split_samples", "error_cues", "fi
 #: Fewest observed pixels for which the uncertainty is estimated (each half keeps at least 8).
 MIN_OBSERVED = 16
 
-#: Coverage the calibration aims at: |error| <= 1 sigma and <= 2 sigma.
-TARGET_COVERAGE = (0.68, 0.94)
+#: Coverage the calibration aims at on the held-out samples: |error| <= 1 sigma and <= 2 sigma.  Below a
+#: Gaussian's 0.68 at 1 sigma because the map of the full completion covers a few percent more there than the
+#: held-out fit (the extrapolation term, the mapping of the full cue); chosen on the tuning frames.
+TARGET_COVERAGE = (0.64, 0.94)
 #: How far each coverage may stray from its target before the other is preferred (the loss weights).
 _COVERAGE_TOLERANCE = (0.08, 0.04)
 #: A calibration loss this small is good enough to prefer a smaller offset (see :func:`fit_calibration`).
@@ -107,8 +109,8 @@ def fit_calibration(errors, cue):
     Notes
     -----
     With ``c1`` and ``c2`` the fractions of ``|errors| <= sigma`` and
-    ``<= 2 sigma``, the loss is ``max(|c1 - 0.68| / 0.08, |c2 - 0.94| /
-    0.04)`` (1 on the edge of the windows 0.60-0.76 and 0.90-0.98).  For each
+    ``<= 2 sigma``, the loss is ``max(|c1 - 0.64| / 0.08, |c2 - 0.94| /
+    0.04)`` (:data:`TARGET_COVERAGE`).  For each
     offset on a grid (0 and quantiles of ``|errors|``) the slope minimising
     the loss is found on a grid; the smallest offset whose loss is at most
     1/2 wins (the plain scale ``sigma = slope * cue`` when it covers well),
