@@ -22,7 +22,7 @@ from .single import input_files, plan_outputs
 __all__ = ["check_options", "cluster_address"]
 
 
-_OUT_EXTENSIONS = (".png", ".npy", ".npz", ".h5", ".hdf5", ".pfm")
+_OUT_EXTENSIONS = (".png", ".tif", ".tiff", ".npy", ".npz", ".h5", ".hdf5", ".pfm")
 
 
 _FIGURE_EXTENSIONS = (".png", ".pdf", ".svg", ".jpg", ".jpeg")

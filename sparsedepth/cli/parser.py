@@ -262,7 +262,8 @@ def _add_output_options(parser) -> None:
     """--out, --json, --figure, --outdir and -q."""
     out = parser.add_argument_group("output")
     out.add_argument("--out", metavar="PATH",
-                     help="dense depth: .png (16-bit, in the input's scale or --out-scale), .npy, .npz, .h5 or .pfm.")
+                     help="dense depth: .png (16-bit, in the input's scale or --out-scale), .tif (float32 metres), "
+                          ".npy, .npz, .h5 or .pfm.")
     out.add_argument("--out-scale", type=_scale, metavar="SCALE",
                      help="scale of a PNG output (default: --depth-scale if given, else mm = 1000).")
     out.add_argument("--json", metavar="PATH", help="metrics, settings and solver history as JSON.")
@@ -301,7 +302,7 @@ def _add_batch_options(parser) -> None:
     bat.add_argument("--workers", type=_positive_int, metavar="N",
                      help=f"worker processes (default {default_workers()} here: half the CPUs, at least 1, "
                           "at most 8).")
-    bat.add_argument("--out-format", choices=["npy", "npz", "h5", "pfm", "png"], default="npy",
+    bat.add_argument("--out-format", choices=["npy", "npz", "h5", "pfm", "png", "tif"], default="npy",
                      help="format of the per-frame outputs in --outdir (default npy).")
     bat.add_argument("--batch-depths", metavar="DIR",
                      help="with --batch DIR: the depth folder, files named like the images (KITTI layout).")
