@@ -14,6 +14,7 @@ from pathlib import Path
 
 from ..io import MAX_PIXELS
 from ..objective import Weights
+from .camera import KINECT_CALIB, intrinsics_source, missing_intrinsics_message
 from .messages import UsageError
 from .outputs import check_distinct, check_writable
 from .report import matplotlib_classes
@@ -59,6 +60,7 @@ def _check_combinations(args) -> str:
         if weight_options or solver_options:
             raise UsageError(f"{', '.join(weight_options + solver_options)} apply to --fill-method complete, "
                               "not colorization")
+    _check_camera_options(args, mode)
     if mode == "batch":
         if args.csv is None:
             raise UsageError("a batch needs --csv PATH for the per-frame metrics")
@@ -79,6 +81,8 @@ def _check_combinations(args) -> str:
             _check_output(args.out, _OUT_EXTENSIONS, "--out")
         if args.json:
             _check_output(args.json, (".json",), "--json")
+        if args.ply:
+            _check_output(args.ply, (".ply",), "--ply")
         if args.figure:
             _check_output(args.figure, _FIGURE_EXTENSIONS, "--figure")
         outputs = [target for _, target in plan_outputs(args, mode)]
@@ -89,6 +93,23 @@ def _check_combinations(args) -> str:
                               "pip install 'sparsedepth[plot]' (or matplotlib)")
     _check_cluster_options(args, mode)
     return mode
+
+
+def _check_camera_options(args, mode) -> None:
+    """--ply, --intrinsics and --camera: one frame only, one source of intrinsics, none missing for --ply."""
+    given = [flag for flag, value in (("--ply", args.ply), ("--intrinsics", args.intrinsics),
+                                      ("--camera", args.camera)) if value is not None]
+    if mode == "batch" and given:
+        raise UsageError(f"{', '.join(given)}: point clouds are written for one frame (--image/--depth or the "
+                          "demo), not for --batch/--nyu-mat")
+    explicit = "--intrinsics" if args.intrinsics is not None else "--camera" if args.camera is not None else None
+    if mode == "demo" and explicit:
+        raise UsageError(f"{explicit} is for --image/--depth; the demo uses the calibration of its own frame "
+                          "(Middlebury 2014 Motorcycle)")
+    if explicit and args.calib is not None and args.calib != KINECT_CALIB:
+        raise UsageError(f"--calib '{args.calib}' gives the intrinsics (cam0) already; drop {explicit}")
+    if args.ply is not None and intrinsics_source(args, mode) is None:
+        raise UsageError(missing_intrinsics_message())
 
 
 def _check_batch_flags(args, mode) -> None:

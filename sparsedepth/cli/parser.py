@@ -3,8 +3,9 @@
 Each argument group has its own small function; the types of the option
 values are checked while parsing (an error is one line on stderr, exit
 code 2).  Imports the standard library, :mod:`sparsedepth.io` (scales, pixel
-limit), the solver and fill-method names, :class:`~sparsedepth.Weights` and
-:func:`~sparsedepth.batch.default_workers`.
+limit), the solver and fill-method names, :class:`~sparsedepth.Weights`,
+:func:`~sparsedepth.batch.default_workers` and the camera presets of
+:mod:`.camera`.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from ..io import DEPTH_SCALES, MAX_PIXELS
 from ..io import resolve_scale
 from ..objective import DEFAULT_WEIGHTS, Weights
 from ..solvers import SOLVERS
+from .camera import CAMERA_PRESETS, parse_intrinsics
 
 __all__ = ["PROG", "DEMO_DIR", "DEMO_KEEP_FRACTION", "DEMO_DOWNSAMPLE", "EPILOG", "build_parser", "weights_of"]
 
@@ -175,6 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     _add_input_options(parser)
+    _add_camera_options(parser)
     _add_simulation_options(parser)
     _add_method_options(parser)
     _add_output_options(parser)
@@ -223,6 +226,18 @@ def _add_input_options(parser) -> None:
 
 
 
+def _add_camera_options(parser) -> None:
+    """--intrinsics / --camera: the pinhole camera of --image, for --ply."""
+    cam = parser.add_argument_group("camera (for --ply; --calib calib.txt gives them too)")
+    which = cam.add_mutually_exclusive_group()
+    which.add_argument("--intrinsics", type=parse_intrinsics, metavar="FX,FY,CX,CY",
+                       help="pinhole intrinsics of --image in pixels (pixel centres at integer coordinates, "
+                            "column u, row v from 0); scaled by --downsample.")
+    which.add_argument("--camera", choices=sorted(CAMERA_PRESETS),
+                       help="intrinsics preset: nyu (NYU Depth V2 RGB camera, 640x480 frames) or kitti (KITTI "
+                            "image_02, P2 of the 1242x375 frames in the shared data); other image sizes are refused.")
+
+
 def _add_simulation_options(parser) -> None:
     """--keep-fraction / --keep-count and --seed: sparse input sampled from a dense map."""
     sim = parser.add_argument_group("simulated sparse input (scores against the dense map)")
@@ -267,11 +282,16 @@ def _add_output_options(parser) -> None:
     out.add_argument("--out-scale", type=_scale, metavar="SCALE",
                      help="scale of a PNG output (default: --depth-scale if given, else mm = 1000).")
     out.add_argument("--json", metavar="PATH", help="metrics, settings and solver history as JSON.")
+    out.add_argument("--ply", metavar="PATH",
+                     help="coloured 3-D point cloud of the completed depth (binary PLY, metres, camera frame; "
+                          "colours of --image); needs --intrinsics, --camera or --calib calib.txt (the demo "
+                          "knows its own).  Pixels without depth are skipped.")
     out.add_argument("--figure", metavar="PATH",
                      help="image | sparse input | nearest neighbour | completed | absolute error, colour bar in "
                           "metres (.png, .pdf, .svg, .jpg; needs matplotlib: pip install 'sparsedepth[plot]').")
     out.add_argument("--outdir", metavar="DIR",
-                     help=f"write depth.npy, depth.png, metrics.json and figure.png (if matplotlib is installed) "
+                     help=f"write depth.npy, depth.png, metrics.json, figure.png (if matplotlib is installed) and "
+                          "points.ply (if the intrinsics are known) "
                           f"here (an existing folder; the demo creates its default ./{DEMO_DIR}/); batch: one depth file "
                           "per frame.")
     out.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr.")
