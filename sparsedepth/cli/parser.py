@@ -4,8 +4,8 @@ Each argument group has its own small function; the types of the option
 values are checked while parsing (an error is one line on stderr, exit
 code 2).  Imports the standard library, :mod:`sparsedepth.io` (scales, pixel
 limit), the solver and fill-method names, :class:`~sparsedepth.Weights`,
-:func:`~sparsedepth.batch.default_workers` and the camera presets of
-:mod:`.camera`.
+:func:`~sparsedepth.batch.default_workers`, ``sparsedepth.__version__`` and
+the camera presets of :mod:`.camera`.
 """
 
 from __future__ import annotations
@@ -176,6 +176,10 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    from .. import __version__
+
+    parser.add_argument("--version", action="version", version=f"sparsedepth {__version__}",
+                        help="print 'sparsedepth <version>' and exit.")
     _add_input_options(parser)
     _add_camera_options(parser)
     _add_simulation_options(parser)
