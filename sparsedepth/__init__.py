@@ -22,7 +22,8 @@ the parts listed before it, NumPy, SciPy, pyamg, scikit-image and h5py;
     (``operators``), the image gradient and edge weights (``edges``).
 ``io/``
     Files: images, depth formats and their units, calibration, NumPy/HDF5
-    arrays, NYU Depth V2 files, atomic writes.  Imports ``_validation`` only.
+    arrays, NYU Depth V2 files, point clouds (pinhole back-projection, PLY),
+    atomic writes.  Imports ``_validation`` only.
 ``linalg/``
     Sparse SPD solves: every Krylov loop (``krylov``: CG, warm-started CG
     steps, GMRES), preconditioners by name, and the geometric multigrid
@@ -95,7 +96,7 @@ from .datasets import (
     load_shared_frame,
     shared_data_dir,
 )
-from .io import DEPTH_SCALES, read_depth, read_image, write_depth
+from .io import DEPTH_SCALES, depth_to_points, read_depth, read_image, read_ply, write_depth, write_ply
 
 __version__ = "0.1.0"
 
@@ -135,6 +136,9 @@ __all__ = [
     "read_image",
     "read_depth",
     "write_depth",
+    "depth_to_points",
+    "write_ply",
+    "read_ply",
     "DEPTH_SCALES",
     "io",
     "datasets",

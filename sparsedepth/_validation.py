@@ -19,6 +19,8 @@ concept is refused with the same exception and message everywhere:
 - options passed on as keywords: :func:`check_option_names` (a misspelt key
   is a ``ValueError`` naming it and listing the valid ones);
 - colours: :func:`check_rgb_colour` (three integers in [0, 255]).
+- camera intrinsics: :func:`check_intrinsics` (``(fx, fy, cx, cy)`` in
+  pixels, positive focal lengths).
 
 May import NumPy, SciPy and the standard library; nothing of the package (the
 rule for :class:`~sparsedepth.Weights` is :func:`sparsedepth.objective.weights.check_weights`).
@@ -54,6 +56,7 @@ __all__ = [
     "check_index",
     "check_option_names",
     "check_rgb_colour",
+    "check_intrinsics",
 ]
 
 
@@ -360,3 +363,33 @@ def check_rgb_colour(colour, *, name: str = "colour") -> tuple[int, int, int]:
     if len(values) != 3 or not all(float(v).is_integer() and 0 <= v <= 255 for v in values):
         raise ValueError(f"{name} must be 3 integers in [0, 255] (R, G, B), got {colour!r}; e.g. (128, 128, 128)")
     return int(values[0]), int(values[1]), int(values[2])
+
+
+# --- camera intrinsics
+
+def check_intrinsics(intrinsics, *, name: str = "intrinsics") -> tuple[float, float, float, float]:
+    """Return pinhole intrinsics ``(fx, fy, cx, cy)`` in pixels as four Python floats.
+
+    ``TypeError`` unless ``intrinsics`` is a sequence of four real numbers
+    (a 3x3 matrix is refused with the fix: pass ``(K[0, 0], K[1, 1], K[0, 2],
+    K[1, 2])``); ``ValueError`` unless the focal lengths ``fx``, ``fy`` are
+    finite and positive and the principal point ``cx``, ``cy`` is finite.
+    """
+    label = argument_label(name)
+    if isinstance(intrinsics, (str, bytes)) or not hasattr(intrinsics, "__len__"):
+        raise TypeError(f"{label} must be a sequence (fx, fy, cx, cy) of four numbers in pixels, "
+                        f"got {type(intrinsics).__name__}.")
+    values = list(intrinsics)
+    if len(values) != 4 or not all(is_real(v) for v in values):
+        raise TypeError(f"{label} must be four real numbers (fx, fy, cx, cy) in pixels, got {len(values)} "
+                        f"item(s) ({intrinsics!r:.80}); from a 3x3 matrix K pass (K[0, 0], K[1, 1], K[0, 2], "
+                        "K[1, 2]).")
+    fx, fy, cx, cy = (float(v) for v in values)
+    for part, value in (("fx", fx), ("fy", fy)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{label}: the focal length {part} must be a finite positive number of pixels, "
+                             f"got {value!r}.")
+    for part, value in (("cx", cx), ("cy", cy)):
+        if not math.isfinite(value):
+            raise ValueError(f"{label}: the principal point {part} must be a finite number of pixels, got {value!r}.")
+    return fx, fy, cx, cy

@@ -645,8 +645,8 @@ def test_write_depth_png_out_of_range(tmp_path, depth, scale, match):
 
 
 def test_write_depth_bad_input(tmp_path):
-    with pytest.raises(ValueError, match=r"unsupported extension '\.tif'.*\.png.*\.pfm.*\.npy"):
-        sio.write_depth(tmp_path / "d.tif", np.ones((2, 2)))
+    with pytest.raises(ValueError, match=r"unsupported extension '\.jpg'.*\.png.*\.pfm.*\.tif.*\.npy"):
+        sio.write_depth(tmp_path / "d.jpg", np.ones((2, 2)))
     with pytest.raises(ValueError, match="negative"):
         sio.write_depth(tmp_path / "d.npy", np.array([[1.0, -1.0]]))
     with pytest.raises(ValueError, match="2-D"):

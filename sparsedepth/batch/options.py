@@ -155,9 +155,9 @@ class BatchOptions:
                 raise _option_error("depth_scale", str(exc), type(exc)) from None
         if not is_int(self.downsample) or self.downsample < 1:
             raise _option_error("downsample", f"downsample must be an integer >= 1, got {self.downsample!r}")
-        if self.out_format not in (".npy", ".npz", ".h5", ".hdf5", ".pfm", ".png"):
+        if self.out_format not in (".npy", ".npz", ".h5", ".hdf5", ".pfm", ".png", ".tif", ".tiff"):
             raise _option_error("out_format", f"unknown out_format {self.out_format!r}; "
-                                "use .npy, .npz, .h5, .hdf5, .pfm or .png")
+                                "use .npy, .npz, .h5, .hdf5, .pfm, .png, .tif or .tiff")
         try:
             resolve_scale(self.out_scale, "out_scale")
         except (TypeError, ValueError) as exc:

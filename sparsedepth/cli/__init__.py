@@ -5,8 +5,9 @@ Modules: :mod:`~sparsedepth.cli.parser` (the options),
 :mod:`~sparsedepth.cli.single` (one frame), :mod:`~sparsedepth.cli.batch_mode`
 (a batch), :mod:`~sparsedepth.cli.report` (table, JSON report, figure),
 :mod:`~sparsedepth.cli.outputs` (every output checked first, written all or
-nothing), :mod:`~sparsedepth.cli.messages` (errors and warnings as lines on
-stderr) and :mod:`~sparsedepth.cli.command` (:func:`main`).
+nothing), :mod:`~sparsedepth.cli.camera` (intrinsics for ``--ply``),
+:mod:`~sparsedepth.cli.messages` (errors and warnings as lines on stderr) and
+:mod:`~sparsedepth.cli.command` (:func:`main`).
 
 May import everything of the library; nothing imports it except :mod:`sparsedepth.complete`.
 """

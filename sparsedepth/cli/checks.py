@@ -14,6 +14,7 @@ from pathlib import Path
 
 from ..io import MAX_PIXELS
 from ..objective import Weights
+from .camera import KINECT_CALIB, intrinsics_source, missing_intrinsics_message
 from .messages import UsageError
 from .outputs import check_distinct, check_writable
 from .report import matplotlib_classes
@@ -22,7 +23,7 @@ from .single import input_files, plan_outputs
 __all__ = ["check_options", "cluster_address"]
 
 
-_OUT_EXTENSIONS = (".png", ".npy", ".npz", ".h5", ".hdf5", ".pfm")
+_OUT_EXTENSIONS = (".png", ".tif", ".tiff", ".npy", ".npz", ".h5", ".hdf5", ".pfm")
 
 
 _FIGURE_EXTENSIONS = (".png", ".pdf", ".svg", ".jpg", ".jpeg")
@@ -62,6 +63,7 @@ def _check_combinations(args) -> str:
     if colorization and (args.uncertainty is not None or args.max_uncertainty is not None):
         raise UsageError("--uncertainty and --max-uncertainty estimate the error of the completion solver: they "
                           "apply to completion and --fill-method complete, not the colorization fill")
+    _check_camera_options(args, mode)
     if mode == "batch":
         if args.uncertainty is not None or args.max_uncertainty is not None:
             raise UsageError("--uncertainty and --max-uncertainty are for one frame, not a batch")
@@ -88,6 +90,8 @@ def _check_combinations(args) -> str:
             _check_output(args.uncertainty, _OUT_EXTENSIONS, "--uncertainty")
         if args.json:
             _check_output(args.json, (".json",), "--json")
+        if args.ply:
+            _check_output(args.ply, (".ply",), "--ply")
         if args.figure:
             _check_output(args.figure, _FIGURE_EXTENSIONS, "--figure")
         if args.depth_vis:
@@ -100,6 +104,23 @@ def _check_combinations(args) -> str:
                               "pip install 'sparsedepth[plot]' (or matplotlib)")
     _check_cluster_options(args, mode)
     return mode
+
+
+def _check_camera_options(args, mode) -> None:
+    """--ply, --intrinsics and --camera: one frame only, one source of intrinsics, none missing for --ply."""
+    given = [flag for flag, value in (("--ply", args.ply), ("--intrinsics", args.intrinsics),
+                                      ("--camera", args.camera)) if value is not None]
+    if mode == "batch" and given:
+        raise UsageError(f"{', '.join(given)}: point clouds are written for one frame (--image/--depth or the "
+                          "demo), not for --batch/--nyu-mat")
+    explicit = "--intrinsics" if args.intrinsics is not None else "--camera" if args.camera is not None else None
+    if mode == "demo" and explicit:
+        raise UsageError(f"{explicit} is for --image/--depth; the demo uses the calibration of its own frame "
+                          "(Middlebury 2014 Motorcycle)")
+    if explicit and args.calib is not None and args.calib != KINECT_CALIB:
+        raise UsageError(f"--calib '{args.calib}' gives the intrinsics (cam0) already; drop {explicit}")
+    if args.ply is not None and intrinsics_source(args, mode) is None:
+        raise UsageError(missing_intrinsics_message())
 
 
 def _check_batch_flags(args, mode) -> None:

@@ -3,8 +3,9 @@
 Each argument group has its own small function; the types of the option
 values are checked while parsing (an error is one line on stderr, exit
 code 2).  Imports the standard library, :mod:`sparsedepth.io` (scales, pixel
-limit), the solver and fill-method names, :class:`~sparsedepth.Weights` and
-:func:`~sparsedepth.batch.default_workers`.
+limit), the solver and fill-method names, :class:`~sparsedepth.Weights`,
+:func:`~sparsedepth.batch.default_workers`, ``sparsedepth.__version__`` and
+the camera presets of :mod:`.camera`.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from ..io import DEPTH_SCALES, MAX_PIXELS
 from ..io import resolve_scale
 from ..objective import DEFAULT_WEIGHTS, Weights
 from ..solvers import SOLVERS
+from .camera import CAMERA_PRESETS, parse_intrinsics
 
 __all__ = ["PROG", "DEMO_DIR", "DEMO_KEEP_FRACTION", "DEMO_DOWNSAMPLE", "EPILOG", "build_parser", "weights_of"]
 
@@ -174,7 +176,12 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    from .. import __version__
+
+    parser.add_argument("--version", action="version", version=f"sparsedepth {__version__}",
+                        help="print 'sparsedepth <version>' and exit.")
     _add_input_options(parser)
+    _add_camera_options(parser)
     _add_simulation_options(parser)
     _add_method_options(parser)
     _add_output_options(parser)
@@ -223,6 +230,18 @@ def _add_input_options(parser) -> None:
 
 
 
+def _add_camera_options(parser) -> None:
+    """--intrinsics / --camera: the pinhole camera of --image, for --ply."""
+    cam = parser.add_argument_group("camera (for --ply; --calib calib.txt gives them too)")
+    which = cam.add_mutually_exclusive_group()
+    which.add_argument("--intrinsics", type=parse_intrinsics, metavar="FX,FY,CX,CY",
+                       help="pinhole intrinsics of --image in pixels (pixel centres at integer coordinates, "
+                            "column u, row v from 0); scaled by --downsample.")
+    which.add_argument("--camera", choices=sorted(CAMERA_PRESETS),
+                       help="intrinsics preset: nyu (NYU Depth V2 RGB camera, 640x480 frames) or kitti (KITTI "
+                            "image_02, P2 of the 1242x375 frames in the shared data); other image sizes are refused.")
+
+
 def _add_simulation_options(parser) -> None:
     """--keep-fraction / --keep-count and --seed: sparse input sampled from a dense map."""
     sim = parser.add_argument_group("simulated sparse input (scores against the dense map)")
@@ -262,7 +281,8 @@ def _add_output_options(parser) -> None:
     """--out, --uncertainty, --max-uncertainty, --json, --figure, --depth-vis, --outdir and -q."""
     out = parser.add_argument_group("output")
     out.add_argument("--out", metavar="PATH",
-                     help="dense depth: .png (16-bit, in the input's scale or --out-scale), .npy, .npz, .h5 or .pfm.")
+                     help="dense depth: .png (16-bit, in the input's scale or --out-scale), .tif (float32 metres), "
+                          ".npy, .npz, .h5 or .pfm.")
     out.add_argument("--out-scale", type=_scale, metavar="SCALE",
                      help="scale of a PNG output (default: --depth-scale if given, else mm = 1000).")
     out.add_argument("--uncertainty", metavar="PATH",
@@ -273,6 +293,10 @@ def _add_output_options(parser) -> None:
                      help="leave the pixels whose uncertainty exceeds M metres missing in --out (0 in PNG, NaN in "
                           "float formats) instead of extrapolating; the count is reported.")
     out.add_argument("--json", metavar="PATH", help="metrics, settings and solver history as JSON.")
+    out.add_argument("--ply", metavar="PATH",
+                     help="coloured 3-D point cloud of the completed depth (binary PLY, metres, camera frame; "
+                          "colours of --image); needs --intrinsics, --camera or --calib calib.txt (the demo "
+                          "knows its own).  Pixels without depth are skipped.")
     out.add_argument("--figure", metavar="PATH",
                      help="image | input samples | nearest neighbour | completed, and with ground truth: truth | "
                           "both absolute errors on one scale; the uncertainty when computed; each panel at about "
@@ -283,7 +307,8 @@ def _add_output_options(parser) -> None:
                           "blue, missing grey) for any image viewer; no matplotlib needed.")
     out.add_argument("--outdir", metavar="DIR",
                      help=f"write depth.npy, depth.png, depth_vis.png, metrics.json, figure.png (if matplotlib is "
-                          "installed) and, with --uncertainty or --max-uncertainty, uncertainty.npy "
+                          "installed), points.ply (if the intrinsics are known) and, with --uncertainty or "
+                          "--max-uncertainty, uncertainty.npy "
                           f"here (an existing folder; the demo creates its default ./{DEMO_DIR}/); batch: one depth file "
                           "per frame.")
     out.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr.")
@@ -314,7 +339,7 @@ def _add_batch_options(parser) -> None:
     bat.add_argument("--workers", type=_positive_int, metavar="N",
                      help=f"worker processes (default {default_workers()} here: half the CPUs, at least 1, "
                           "at most 8).")
-    bat.add_argument("--out-format", choices=["npy", "npz", "h5", "pfm", "png"], default="npy",
+    bat.add_argument("--out-format", choices=["npy", "npz", "h5", "pfm", "png", "tif"], default="npy",
                      help="format of the per-frame outputs in --outdir (default npy).")
     bat.add_argument("--batch-depths", metavar="DIR",
                      help="with --batch DIR: the depth folder, files named like the images (KITTI layout).")

@@ -20,8 +20,9 @@ import numpy as np
 from ..batch import evaluate_frame
 from ..datasets import load_motorcycle
 from ..io import KINECT_NYU, read_calib, read_depth, read_image, read_mask
-from ..io import depth_writer, resolve_scale
+from ..io import depth_to_points, depth_writer, ply_writer, resolve_scale
 from ..visualize import colorize_depth
+from .camera import frame_intrinsics, intrinsics_source
 from .messages import UsageError, one_line, warnings_as_lines
 from .outputs import Named, commit
 from .parser import DEMO_DIR, DEMO_DOWNSAMPLE, DEMO_KEEP_FRACTION, weights_of
@@ -135,7 +136,7 @@ def plan_outputs(args, mode) -> list[tuple[str, Named]]:
     """(kind, file) of every output of one frame; kind is the option or the file name in --outdir."""
     planned = []
     for flag, value in (("--out", args.out), ("--uncertainty", args.uncertainty), ("--json", args.json),
-                        ("--figure", args.figure), ("--depth-vis", args.depth_vis)):
+                        ("--figure", args.figure), ("--depth-vis", args.depth_vis), ("--ply", args.ply)):
         if value is not None:
             planned.append((flag, Named(flag, value, Path(value))))
     outdir = DEMO_DIR if mode == "demo" and args.outdir is None else args.outdir
@@ -145,6 +146,8 @@ def plan_outputs(args, mode) -> list[tuple[str, Named]]:
             names.append("uncertainty.npy")
         if matplotlib_classes() is not None:
             names.append("figure.png")
+        if intrinsics_source(args, mode) is not None:
+            names.append("points.ply")
         planned += [(name, Named("--outdir", outdir, Path(outdir) / name, create_parent=mode == "demo"))
                     for name in names]
     return planned
@@ -186,9 +189,12 @@ def _bytes_writer(data: bytes):
 
 
 def _load_frame(args, mode, stream):
-    """(image, depth, mask, truth, description, keep_fraction) of the demo or the user's files, downsampled."""
+    """(image, depth, mask, truth, description, keep_fraction, intrinsics) of the demo or the user's files,
+    downsampled; intrinsics of the downsampled grid, or None when unknown."""
+    demo_intrinsics = None
     if mode == "demo":
         frame = load_motorcycle()
+        demo_intrinsics = frame.intrinsics
         image, depth, mask, truth = frame.image, np.asarray(frame.depth), None, None
         description = "Middlebury 2014 Motorcycle"
         downsample = DEMO_DOWNSAMPLE if args.downsample is None else args.downsample
@@ -199,12 +205,13 @@ def _load_frame(args, mode, stream):
         image, depth, mask, truth, description = _read_inputs(args, stream)
         downsample = 1 if args.downsample is None else args.downsample
         keep_fraction = args.keep_fraction
+    intrinsics = frame_intrinsics(args, mode, depth.shape, downsample, demo_intrinsics)
     if downsample > 1:
         description += f" (downsampled by {downsample})"
         image, depth = image[::downsample, ::downsample], depth[::downsample, ::downsample]
         mask = None if mask is None else mask[::downsample, ::downsample]
         truth = None if truth is None else truth[::downsample, ::downsample]
-    return image, depth, mask, truth, description, keep_fraction
+    return image, depth, mask, truth, description, keep_fraction, intrinsics
 
 
 def _evaluate(args, image, depth, mask, truth, keep_fraction, weights, stream):
@@ -234,7 +241,7 @@ def _uncertainty_writer(target, uncertainty, png_scale):
         raise UsageError(f"{target.label}: {one_line(exc)}") from None
 
 
-def _writers(args, planned, outcome, image, report, png_scale) -> list:
+def _writers(args, planned, outcome, image, report, png_scale, intrinsics=None) -> list:
     """(file, writer) of every planned output, every one encoded and checked before any file is touched."""
     report_text = (json.dumps(report, indent=2, allow_nan=False) + "\n").encode()
     kinds = {kind for kind, _ in planned}
@@ -245,6 +252,9 @@ def _writers(args, planned, outcome, image, report, png_scale) -> list:
         outdir_figure = render_figure(image, outcome, ".png")
     else:
         outdir_figure = figure_bytes
+    cloud = None
+    if kinds & {"--ply", "points.ply"}:
+        cloud = ply_writer(*depth_to_points(outcome.depth, intrinsics, image=image))
 
     depth_vis_bytes = None
     if kinds & set(_DEPTH_VIS_OUTPUTS):
@@ -263,6 +273,8 @@ def _writers(args, planned, outcome, image, report, png_scale) -> list:
             writer = _bytes_writer(report_text)
         elif kind in _DEPTH_VIS_OUTPUTS:
             writer = _bytes_writer(depth_vis_bytes)
+        elif kind in ("--ply", "points.ply"):
+            writer = cloud
         else:
             writer = _bytes_writer(figure_bytes if kind == "--figure" else outdir_figure)
         items.append((target, writer))
@@ -276,7 +288,7 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
     :class:`~sparsedepth.cli.messages.UsageError` or a library error.
     """
     weights, weights_given = weights_of(args)
-    image, depth, mask, truth, description, keep_fraction = _load_frame(args, mode, stderr)
+    image, depth, mask, truth, description, keep_fraction, intrinsics = _load_frame(args, mode, stderr)
     png_scale = args.out_scale if args.out_scale is not None else (args.depth_scale or 1000.0)
     png_scale = resolve_scale(png_scale)
     planned = plan_outputs(args, mode)
@@ -290,7 +302,7 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
     # every output is encoded and checked before any file is touched; commit writes all or none
     _check_png_range(outcome.depth, png_scale, png_targets, "the completed depth")
     report = build_report(args, argv, outcome, description, weights, weights_given, png_scale)
-    commit(_writers(args, planned, outcome, image, report, png_scale))
+    commit(_writers(args, planned, outcome, image, report, png_scale, intrinsics))
     written = [target.path for _, target in planned]
     kinds = {kind for kind, _ in planned}
     if any(target.flag == "--outdir" for _, target in planned) and "figure.png" not in kinds and not args.quiet:

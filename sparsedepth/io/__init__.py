@@ -10,6 +10,7 @@ One module per responsibility:
 * :mod:`.arrays` - NumPy ``.npy``/``.npz`` and HDF5 arrays;
 * :mod:`.nyu` - the NYU Depth V2 files;
 * :mod:`.depth` - depth scales, :func:`read_depth`, :func:`read_mask`;
+* :mod:`.pointcloud` - :func:`depth_to_points` (pinhole back-projection) and PLY files;
 * :mod:`.writing` - :func:`write_depth` and :func:`depth_writer`.
 
 Conventions shared by every function:
@@ -28,7 +29,7 @@ Conventions shared by every function:
 
 Besides ``__all__``, the package exports :func:`atomic_target`,
 :func:`create_temporary`, :func:`fsync`, :func:`resolve_scale` and
-:func:`depth_writer` for the command line and batch runs.
+:func:`depth_writer` and :func:`ply_writer` for the command line and batch runs.
 
 Imports NumPy, imageio, Pillow, tifffile, h5py and :mod:`sparsedepth._validation`; nothing else of the package.
 """
@@ -40,8 +41,9 @@ from .files import MAX_PIXELS, atomic_target, create_temporary, fsync  # noqa: F
 from .images import read_image
 from .nyu import NYUDepthV2Labeled, read_nyu_h5
 from .pfm import read_pfm, write_pfm
+from .pointcloud import depth_to_points, ply_writer, read_ply, write_ply  # noqa: F401 - ply_writer for the CLI
 from .writing import depth_writer, write_depth  # noqa: F401 - depth_writer for the CLI
 
 __all__ = ["DEPTH_SCALES", "KINECT_NYU", "KinectDisparity", "MAX_PIXELS", "NYUDepthV2Labeled", "StereoCalibration",
-           "disparity_to_depth", "read_calib", "read_depth", "read_depth_array", "read_depth_png", "read_image",
-           "read_mask", "read_nyu_h5", "read_pfm", "write_depth", "write_pfm"]
+           "depth_to_points", "disparity_to_depth", "read_calib", "read_depth", "read_depth_array", "read_depth_png", "read_image",
+           "read_mask", "read_nyu_h5", "read_pfm", "read_ply", "write_depth", "write_pfm", "write_ply"]

@@ -4,7 +4,7 @@ Every write is atomic (see :func:`sparsedepth.io.files.atomic_target`).
 :func:`depth_writer` makes every check and encodes the data before anything is
 written, so that a caller can check several outputs before writing any.
 
-Imports NumPy, imageio, h5py and the format modules of :mod:`sparsedepth.io`
+Imports NumPy, imageio, tifffile, h5py and the format modules of :mod:`sparsedepth.io`
 only.
 """
 
@@ -16,16 +16,18 @@ from typing import Callable
 import h5py
 import imageio.v3 as iio
 import numpy as np
+import tifffile
 
 from .arrays import ARRAY_EXTENSIONS, HDF5_EXTENSIONS
 from .depth import resolve_scale
 from .files import atomic_target, check_extension
+from .images import TIFF_EXTENSIONS
 from .pfm import check_pfm_values, write_pfm_file
 from .stored import check_real_array
 
 __all__ = ["depth_writer", "write_depth"]
 
-_EXTENSIONS = (".png", ".pfm") + ARRAY_EXTENSIONS + HDF5_EXTENSIONS
+_EXTENSIONS = (".png", ".pfm") + TIFF_EXTENSIONS + ARRAY_EXTENSIONS + HDF5_EXTENSIONS
 _UINT16_MAX = np.iinfo(np.uint16).max
 
 
@@ -46,6 +48,10 @@ def _write_npz_file(path: Path, depth: np.ndarray) -> None:
 def _write_hdf5_file(path: Path, depth: np.ndarray) -> None:
     with h5py.File(path, "w") as handle:
         handle.create_dataset("depth", data=depth, compression="gzip")
+
+
+def _write_tiff_file(path: Path, depth: np.ndarray) -> None:
+    tifffile.imwrite(path, depth, photometric="minisblack", metadata=None)
 
 
 def _quantise_png(depth: np.ndarray, scale: float) -> np.ndarray:
@@ -73,14 +79,24 @@ def _quantise_png(depth: np.ndarray, scale: float) -> np.ndarray:
     return stored
 
 
+def _as_float32(depth: np.ndarray) -> np.ndarray:
+    """``depth`` as float32 (NaN kept); ``ValueError`` if a value exceeds the float32 range."""
+    finite = depth[np.isfinite(depth)]
+    if finite.size and finite.max() > np.finfo(np.float32).max:
+        raise ValueError(f"`depth` up to {finite.max():g} exceeds the float32 range of a TIFF; "
+                         "use .npy, .npz or .h5 (float64).")
+    return depth.astype(np.float32)
+
+
 def write_depth(path, depth, *, scale=1000.0) -> None:
     """Write a depth map, choosing the format from the extension (atomically).
 
     Parameters
     ----------
     path : str or os.PathLike
-        Destination; extension ``.png`` (16-bit integer), ``.npy``, ``.npz``
-        (array ``depth``), ``.h5`` / ``.hdf5`` (dataset ``depth``) or ``.pfm``.
+        Destination; extension ``.png`` (16-bit integer), ``.tif`` /
+        ``.tiff`` (single-page float32), ``.npy``, ``.npz`` (array
+        ``depth``), ``.h5`` / ``.hdf5`` (dataset ``depth``) or ``.pfm``.
         Its folder must exist.
     depth : (H, W) array_like of real numbers
         Depth, NaN (or inf, or 0) where invalid.  Must be non-negative.
@@ -88,7 +104,7 @@ def write_depth(path, depth, *, scale=1000.0) -> None:
         PNG only: stored value ``= round(depth * scale)`` (1000 stores
         millimetres from metres, 256 KITTI, 5000 TUM), or a preset name from
         :data:`DEPTH_SCALES`.  Float formats always store ``depth`` itself as
-        float64 (PFM: float32), so read them back without a scale.
+        float64 (PFM and TIFF: float32), so read them back without a scale.
 
     Raises
     ------
@@ -102,8 +118,11 @@ def write_depth(path, depth, *, scale=1000.0) -> None:
 
     Notes
     -----
-    Invalid pixels are written as 0 in PNG, NaN in NPY/NPZ/HDF5 and ``inf``
-    in PFM (the Middlebury convention).  The file appears only once
+    Invalid pixels are written as 0 in PNG, NaN in NPY/NPZ/HDF5/TIFF and
+    ``inf`` in PFM (the Middlebury convention).  A TIFF is one uncompressed
+    page of float32 samples (``minisblack``), depth in the unit given
+    (metres from the library's readers), which :func:`read_depth` reads back
+    as it is and any TIFF reader sees as 32-bit float.  The file appears only once
     complete: data go to a temporary file in the same folder that then
     replaces ``path`` with :func:`os.replace`; on failure the temporary file
     is removed and an existing ``path`` is left untouched.
@@ -153,6 +172,9 @@ def depth_writer(path, depth, *, scale=1000.0) -> Callable[[Path], None]:
         writer = lambda tmp: _write_npz_file(tmp, values)  # noqa: E731
     elif ext in HDF5_EXTENSIONS:
         writer = lambda tmp: _write_hdf5_file(tmp, values)  # noqa: E731
+    elif ext in TIFF_EXTENSIONS:
+        single = _as_float32(values)
+        writer = lambda tmp: _write_tiff_file(tmp, single)  # noqa: E731
     else:  # .pfm
         pfm = check_pfm_values(np.where(np.isnan(values), np.inf, values), "depth")
         writer = lambda tmp: write_pfm_file(tmp, pfm, "little")  # noqa: E731
