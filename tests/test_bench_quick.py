@@ -151,3 +151,24 @@ def test_committed_results_were_made_with_the_current_defaults():
     recorded += re.findall(r"defaults at run time: (.*?)\):", text)
     assert len(recorded) >= 2, "docs/results.md no longer records its default weights"
     assert set(recorded) == {harness.weights_markdown(sd.DEFAULT_WEIGHTS)}
+
+
+def test_uncertainty_quick_ratios_against_a_direct_computation():
+    uncertainty = load("uncertainty")
+    text, records = uncertainty.run(["--quick"])
+    assert "## Measured on the report frames" in text and "$" not in text.split("## Measured")[0]
+    assert len(records) == 6
+    for r in records:
+        assert 0 < r["ranking"]["true error"] <= r["ranking"]["ours"] <= 1.5
+        assert 0 <= r["cover1"] <= r["cover2"] <= 1 and r["cost"] > 0
+    # the ranking ratio by hand: errors 1..8, the score puts 1, 2, 7, 8 in the better half
+    errors = np.arange(1.0, 9.0)
+    score = np.array([0, 1, 9, 9, 9, 9, 2, 3])
+    expected = np.sqrt(np.mean(np.array([1, 2, 7, 8.0]) ** 2)) / np.sqrt(np.mean(errors ** 2))
+    assert uncertainty.ranking_ratio(errors, score) == pytest.approx(expected)
+
+
+def test_committed_uncertainty_doc_is_a_full_run():
+    text = (REPO / "docs" / "uncertainty.md").read_text()
+    assert "Command: `python -m bench.uncertainty`" in text or "Command: `python -m bench.uncertainty --out" in text
+    assert "Quick mode" not in text
