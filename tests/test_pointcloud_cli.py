@@ -205,3 +205,13 @@ def test_help_lists_the_camera_options(capsys):
         assert option in out
     for preset in CAMERA_PRESETS:
         assert preset in out
+
+
+def test_json_report_records_the_intrinsics_of_the_cloud(scene_files):
+    folder, _ = scene_files
+    assert main(["-q", "--image", str(folder / "rgb.png"), "--depth", str(folder / "sparse.png"), "--depth-scale",
+                 "mm", "--intrinsics", "40,41.5,21,14.5", "--downsample", "2", "--ply", str(folder / "c.ply"),
+                 "--json", str(folder / "r.json"), *FAST]) == 0
+    import json
+    report = json.loads((folder / "r.json").read_text())
+    assert report["intrinsics"] == {"fx": 20.0, "fy": 20.75, "cx": 10.5, "cy": 7.25}

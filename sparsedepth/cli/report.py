@@ -47,7 +47,7 @@ def _jsonable(value):
     return value
 
 
-def build_report(args, argv, outcome, description, weights, weights_given, png_scale) -> dict:
+def build_report(args, argv, outcome, description, weights, weights_given, png_scale, intrinsics=None) -> dict:
     """The JSON report of one frame: version, command, machine, input, metrics and the solver's result and history.
 
     Non-finite floats become None, so that the report is strict JSON.
@@ -71,6 +71,7 @@ def build_report(args, argv, outcome, description, weights, weights_given, png_s
             "nearest": outcome.nearest_metrics.as_dict(),
         },
         "output_png_scale": png_scale,
+        "intrinsics": None if intrinsics is None else dict(zip(("fx", "fy", "cx", "cy"), map(float, intrinsics))),
     }
     if result is not None:
         report.update(

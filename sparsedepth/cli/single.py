@@ -301,7 +301,7 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
 
     # every output is encoded and checked before any file is touched; commit writes all or none
     _check_png_range(outcome.depth, png_scale, png_targets, "the completed depth")
-    report = build_report(args, argv, outcome, description, weights, weights_given, png_scale)
+    report = build_report(args, argv, outcome, description, weights, weights_given, png_scale, intrinsics)
     commit(_writers(args, planned, outcome, image, report, png_scale, intrinsics))
     written = [target.path for _, target in planned]
     kinds = {kind for kind, _ in planned}
