@@ -221,7 +221,7 @@ def _with_uncertainty(result, image, sparse_depth, mask, settings, max_uncertain
         warnings.simplefilter("ignore", ClampWarning)  # the halves' clamps are not the user's result
         halves = [_complete(image, np.where(half, depth, np.nan), half, x0=result.depth, callback=None,
                             **settings).depth for half in (half_a, half_b)]
-    sigma, calibration = estimate_uncertainty(result.depth, *halves, depth, half_a, half_b)
+    sigma, calibration = estimate_uncertainty(result.depth, *halves, depth, half_a, half_b, image=image)
     dense, removed = result.depth, 0
     if max_uncertainty is not None:
         too_uncertain = sigma > max_uncertainty

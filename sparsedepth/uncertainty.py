@@ -5,8 +5,9 @@ two halves of the samples into a map of standard-deviation-like errors;
 :func:`error_cues`, :func:`fit_calibration` and :func:`split_samples` are its
 steps.  :func:`sparsedepth.complete_depth` calls it for ``uncertainty=True``.
 
-May import NumPy, SciPy and :mod:`sparsedepth.result`; it never solves (the
-caller passes the completions).
+May import NumPy, SciPy, :mod:`sparsedepth.result` and
+:mod:`sparsedepth._validation`; it never solves (the caller passes the
+completions).
 """
 
 from __future__ import annotations
@@ -14,10 +15,11 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from ._validation import as_float_image
 from .result import UncertaintyCalibration
 
-__all__ = ["MIN_OBSERVED", "TARGET_COVERAGE", "split_samples", "error_cues", "fit_calibration",
-           "estimate_uncertainty"]
+__all__ = ["MIN_OBSERVED", "TARGET_COVERAGE", "COLOUR_STEP", "split_samples", "error_cues", "colour_step",
+           "fit_calibration", "estimate_uncertainty"]
 
 #: Fewest observed pixels for which the uncertainty is estimated (each half keeps at least 8).
 MIN_OBSERVED = 16
@@ -30,6 +32,8 @@ TARGET_COVERAGE = (0.64, 0.94)
 _COVERAGE_TOLERANCE = (0.08, 0.04)
 #: A calibration loss this small is good enough to prefer a smaller offset (see :func:`fit_calibration`).
 _GOOD_LOSS = 0.5
+#: Depth fraction per unit of RGB distance (channels in [0, 1]) of the colour-step cue; chosen on the tuning frames.
+COLOUR_STEP = 0.03
 
 
 def split_samples(observed, seed=0):
@@ -155,7 +159,19 @@ def _quantile_map(values, reference, where):
     return np.interp(values, np.sort(values[where]), np.sort(reference[where]))
 
 
-def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b):
+def colour_step(depth, image, observed):
+    """``COLOUR_STEP * depth * |I(p) - I(q)|``, with ``q`` the nearest sample of ``p`` (same units as ``depth``).
+
+    A pixel whose colour differs from that of its nearest sample may lie on
+    another surface, at another depth, than the sample; :data:`COLOUR_STEP`
+    (3 % of the depth per unit of RGB distance) says how much.
+    """
+    colours = as_float_image(image)
+    _, (rows, cols) = ndimage.distance_transform_edt(~observed, return_indices=True)
+    return COLOUR_STEP * depth * np.linalg.norm(colours - colours[rows, cols], axis=-1)
+
+
+def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=None):
     """Per-pixel uncertainty of ``depth`` from two completions of disjoint halves of its samples.
 
     Parameters
@@ -168,6 +184,8 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b):
         Observed depth (read where observed).
     half_a, half_b : ndarray of bool, (H, W)
         Disjoint halves of the observed pixels (:func:`split_samples`).
+    image : ndarray, (H, W, 3) or (H, W), optional
+        The guide image; adds :func:`colour_step` to the cue.
 
     Returns
     -------
@@ -187,8 +205,8 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b):
     are left out (the split-sample jackknife spread), and ``E`` the local
     held-out error: each observation's error in the completion of the other
     half, nearest-filled and averaged over a window of half-width ``h`` (the
-    mean sample spacing).  Every part uses the depth values, not only where
-    the samples are.
+    mean sample spacing); with ``image``, also :func:`colour_step`.  Every
+    part uses the depth values, not only where the samples are.
 
     *Calibration (on observations only).*  ``depth_a`` predicts each
     observation of ``half_b`` without having seen it, and ``depth_b`` each
@@ -218,6 +236,8 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b):
     cue_full = error_cues(depth, sparse, observed)
     cue = (cue_full + np.abs(depth_a - depth_b) + np.maximum(np.abs(depth - depth_a), np.abs(depth - depth_b))
            + _held_out_error_map(held_out_a, held_out_b, half_a, half_b))
+    if image is not None:
+        cue += colour_step(depth, image, observed)
 
     cue_a, cue_b = error_cues(depth_a, sparse, half_a), error_cues(depth_b, sparse, half_b)
     held_out_errors = np.concatenate([held_out_a, held_out_b])

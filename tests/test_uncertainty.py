@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import sparsedepth as sd
-from sparsedepth.uncertainty import (MIN_OBSERVED, TARGET_COVERAGE, error_cues, estimate_uncertainty,
-                                     fit_calibration, split_samples)
+from sparsedepth.uncertainty import (COLOUR_STEP, MIN_OBSERVED, TARGET_COVERAGE, colour_step, error_cues,
+                                     estimate_uncertainty, fit_calibration, split_samples)
 
 
 def _scene(shape=(40, 56), fraction=0.06, seed=0):
@@ -81,6 +81,18 @@ def _calibration_loss(errors, sigma):
     return max(abs(c1 - TARGET_COVERAGE[0]) / 0.08, abs(c2 - TARGET_COVERAGE[1]) / 0.04)
 
 
+def test_colour_step_by_hand():
+    image = np.zeros((3, 4, 3), np.uint8)
+    image[:, 2:] = (255, 0, 0)          # red right half
+    observed = np.zeros((3, 4), bool)
+    observed[1, 0] = True               # one sample, in the black half
+    depth = np.full((3, 4), 2.0)
+    expected = np.where(np.arange(4) >= 2, COLOUR_STEP * 2.0 * 1.0, 0.0)[None, :].repeat(3, axis=0)
+    np.testing.assert_allclose(colour_step(depth, image, observed), expected)
+    grey = np.array([[0.0, 0.0, 0.5, 0.5]] * 3)
+    np.testing.assert_allclose(colour_step(depth, grey, observed), expected * 0.5)
+
+
 @pytest.mark.parametrize("tail", ["laplace", "student3"])
 def test_fit_calibration_is_as_good_as_a_grid_search(tail):
     rng = np.random.default_rng(11)
@@ -125,7 +137,7 @@ def test_estimate_uncertainty_orders_pixels_by_the_cue_and_is_the_residual_at_ob
     full = sd.complete_depth(image, sparse, mask).depth
     za = sd.complete_depth(image, np.where(a, sparse, np.nan), a).depth
     zb = sd.complete_depth(image, np.where(b, sparse, np.nan), b).depth
-    sigma, cal = estimate_uncertainty(full, za, zb, sparse, a, b)
+    sigma, cal = estimate_uncertainty(full, za, zb, sparse, a, b, image=image)
     np.testing.assert_allclose(sigma[mask], np.abs(full - sparse)[mask])
     held = np.zeros(mask.shape)
     held[b], held[a] = np.abs(za - sparse)[b], np.abs(zb - sparse)[a]
@@ -135,8 +147,9 @@ def test_estimate_uncertainty_orders_pixels_by_the_cue_and_is_the_residual_at_ob
     padded = np.pad(held_filled, r, mode="symmetric")
     local_mean = np.array([[padded[i:i + 2 * r + 1, j:j + 2 * r + 1].mean() for j in range(mask.shape[1])]
                            for i in range(mask.shape[0])])
+    colour = colour_step(full, image, mask)  # checked by hand in test_colour_step_by_hand
     cue = (error_cues(full, sparse, mask) + np.abs(za - zb) + np.maximum(np.abs(full - za), np.abs(full - zb))
-           + local_mean)
+           + local_mean + colour)
     samples = np.argwhere(mask)
     distance = np.array([[np.sqrt(((samples - (i, j)) ** 2).sum(axis=1).min()) for j in range(mask.shape[1])]
                          for i in range(mask.shape[0])])
