@@ -13,27 +13,30 @@ completions).
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
+from scipy import ndimage, spatial
 
 from ._validation import as_float_image
 from .result import UncertaintyCalibration
 
-__all__ = ["MIN_OBSERVED", "TARGET_COVERAGE", "COLOUR_STEP", "split_samples", "error_cues", "colour_step",
+__all__ = ["MIN_OBSERVED", "TARGET_COVERAGE", "NOVELTY_WEIGHT", "NOVELTY_NEIGHBOURS", "split_samples", "error_cues", "colour_novelty",
            "fit_calibration", "estimate_uncertainty"]
 
 #: Fewest observed pixels for which the uncertainty is estimated (each half keeps at least 8).
 MIN_OBSERVED = 16
 
-#: Coverage the calibration aims at on the held-out samples: |error| <= 1 sigma and <= 2 sigma.  Below a
-#: Gaussian's 0.68 at 1 sigma because the map of the full completion covers a few percent more there than the
-#: held-out fit (the extrapolation term, the mapping of the full cue); chosen on the tuning frames.
-TARGET_COVERAGE = (0.64, 0.94)
+#: Coverage the calibration aims at on the held-out samples: |error| <= 1 sigma and <= 2 sigma.  Wider apart
+#: than a Gaussian's 0.68 and 0.95 because the map of the full completion covers more at 1 sigma and less at
+#: 2 sigma than the held-out fit (the extrapolation term, the mapping of the full cue); chosen on the tuning frames.
+TARGET_COVERAGE = (0.62, 0.96)
 #: How far each coverage may stray from its target before the other is preferred (the loss weights).
 _COVERAGE_TOLERANCE = (0.08, 0.04)
 #: A calibration loss this small is good enough to prefer a smaller offset (see :func:`fit_calibration`).
 _GOOD_LOSS = 0.5
-#: Depth fraction per unit of RGB distance (channels in [0, 1]) of the colour-step cue; chosen on the tuning frames.
-COLOUR_STEP = 0.03
+#: Depth fraction per unit of RGB distance (channels in [0, 1]) of the colour-novelty cue, and how many nearest
+#: samples it compares with; chosen on the tuning frames.
+NOVELTY_WEIGHT = 0.3
+NOVELTY_NEIGHBOURS = 8
+_NOVELTY_CHUNK = 1 << 16
 
 
 def split_samples(observed, seed=0):
@@ -113,7 +116,7 @@ def fit_calibration(errors, cue):
     Notes
     -----
     With ``c1`` and ``c2`` the fractions of ``|errors| <= sigma`` and
-    ``<= 2 sigma``, the loss is ``max(|c1 - 0.64| / 0.08, |c2 - 0.94| /
+    ``<= 2 sigma``, the loss is ``max(|c1 - 0.62| / 0.08, |c2 - 0.96| /
     0.04)`` (:data:`TARGET_COVERAGE`).  For each
     offset on a grid (0 and quantiles of ``|errors|``) the slope minimising
     the loss is found on a grid; the smallest offset whose loss is at most
@@ -159,16 +162,29 @@ def _quantile_map(values, reference, where):
     return np.interp(values, np.sort(values[where]), np.sort(reference[where]))
 
 
-def colour_step(depth, image, observed):
-    """``COLOUR_STEP * depth * |I(p) - I(q)|``, with ``q`` the nearest sample of ``p`` (same units as ``depth``).
+def colour_novelty(depth, image, observed, *, neighbours=NOVELTY_NEIGHBOURS):
+    """``NOVELTY_WEIGHT * depth * min_k |I(p) - I(s_k)|`` over the ``neighbours`` nearest samples ``s_k`` of ``p``.
 
-    A pixel whose colour differs from that of its nearest sample may lie on
-    another surface, at another depth, than the sample; :data:`COLOUR_STEP`
-    (3 % of the depth per unit of RGB distance) says how much.
+    A pixel whose colour none of its nearby samples shares may lie on a
+    surface no sample touched (the background seen through a gap), at
+    another depth than all of them.  Same units as ``depth``; colours in
+    [0, 1] (:func:`sparsedepth._validation.as_float_image`), distances in RGB.
     """
     colours = as_float_image(image)
-    _, (rows, cols) = ndimage.distance_transform_edt(~observed, return_indices=True)
-    return COLOUR_STEP * depth * np.linalg.norm(colours - colours[rows, cols], axis=-1)
+    samples = np.argwhere(observed)
+    k = min(int(neighbours), samples.shape[0])
+    tree = spatial.KDTree(samples)
+    sample_colours = colours[samples[:, 0], samples[:, 1]]
+    flat = colours.reshape(-1, colours.shape[-1])
+    novelty = np.empty(flat.shape[0])
+    width = observed.shape[1]
+    for start in range(0, flat.shape[0], _NOVELTY_CHUNK):  # bounded memory: chunk x k x channels floats
+        stop = min(start + _NOVELTY_CHUNK, flat.shape[0])
+        pixels = np.arange(start, stop)
+        _, nearest = tree.query(np.column_stack([pixels // width, pixels % width]), k=k)
+        nearest = nearest.reshape(stop - start, k)
+        novelty[start:stop] = np.linalg.norm(flat[start:stop, None, :] - sample_colours[nearest], axis=-1).min(axis=1)
+    return NOVELTY_WEIGHT * depth * novelty.reshape(observed.shape)
 
 
 def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=None):
@@ -185,7 +201,7 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=
     half_a, half_b : ndarray of bool, (H, W)
         Disjoint halves of the observed pixels (:func:`split_samples`).
     image : ndarray, (H, W, 3) or (H, W), optional
-        The guide image; adds :func:`colour_step` to the cue.
+        The guide image; adds :func:`colour_novelty` to the cue.
 
     Returns
     -------
@@ -205,7 +221,7 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=
     are left out (the split-sample jackknife spread), and ``E`` the local
     held-out error: each observation's error in the completion of the other
     half, nearest-filled and averaged over a window of half-width ``h`` (the
-    mean sample spacing); with ``image``, also :func:`colour_step`.  Every
+    mean sample spacing); with ``image``, also :func:`colour_novelty`.  Every
     part uses the depth values, not only where the samples are.
 
     *Calibration (on observations only).*  ``depth_a`` predicts each
@@ -237,7 +253,7 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=
     cue = (cue_full + np.abs(depth_a - depth_b) + np.maximum(np.abs(depth - depth_a), np.abs(depth - depth_b))
            + _held_out_error_map(held_out_a, held_out_b, half_a, half_b))
     if image is not None:
-        cue += colour_step(depth, image, observed)
+        cue += colour_novelty(depth, image, observed)
 
     cue_a, cue_b = error_cues(depth_a, sparse, half_a), error_cues(depth_b, sparse, half_b)
     held_out_errors = np.concatenate([held_out_a, held_out_b])
