@@ -22,7 +22,7 @@ from ..datasets import load_motorcycle
 from ..io import KINECT_NYU, read_calib, read_depth, read_image, read_mask
 from ..io import depth_to_points, depth_writer, ply_writer, resolve_scale
 from ..visualize import colorize_depth
-from .camera import frame_intrinsics, intrinsics_source
+from .camera import KINECT_CALIB, frame_intrinsics, intrinsics_source
 from .messages import UsageError, one_line, warnings_as_lines
 from .outputs import Named, commit
 from .parser import DEMO_DIR, DEMO_DOWNSAMPLE, DEMO_KEEP_FRACTION, weights_of
@@ -41,9 +41,6 @@ READER_FLAGS = {
     "invalid_values": "--invalid-value", "min_depth": "--min-depth", "max_depth": "--max-depth",
     "max_pixels": "--max-pixels", "calib": "--calib",
 }
-
-
-_KINECT_CALIB = "kinect-nyu"
 
 
 class _Progress:
@@ -98,7 +95,7 @@ def _read_depth_flag(path, flag, args, calib, stream) -> np.ndarray:
     for record in caught:
         if "Kinect v1" in str(record.message) and calib is not KINECT_NYU:
             print(f"warning: raw Kinect v1 disparity (e.g. NYU Depth V2 raw .pgm) is not metres; "
-                  f"--calib {_KINECT_CALIB} converts it", file=stream)
+                  f"--calib {KINECT_CALIB} converts it", file=stream)
     return depth
 
 
@@ -107,7 +104,7 @@ def _read_inputs(args, stream):
     image = read_image(args.image, max_pixels=args.max_pixels, name="--image", option_names=READER_FLAGS)
     calib = None
     if args.calib is not None:
-        calib = KINECT_NYU if args.calib == _KINECT_CALIB else read_calib(args.calib, name="--calib")
+        calib = KINECT_NYU if args.calib == KINECT_CALIB else read_calib(args.calib, name="--calib")
     depth = _read_depth_flag(args.depth, "--depth", args, calib, stream)
     if image.shape[:2] != depth.shape:
         raise ValueError(f"--image '{args.image}' is {image.shape[0]}x{image.shape[1]} but --depth '{args.depth}' is "
