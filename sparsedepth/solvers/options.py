@@ -302,9 +302,17 @@ class AdamOptions(SolverOptions):
     Parameters
     ----------
     learning_rate : float, optional
-        ``η`` (depth units); default ``1e-2`` times the median positive starting value.
+        ``η`` (depth units); default ``3e-2`` (``"cosine"``) or ``1e-2``
+        (``"inverse_sqrt"``) times the median positive starting value.
+    schedule : {"cosine", "inverse_sqrt"}, default "cosine"
+        ``"cosine"``: ``η_k = η (1 + cos(π (k − 1) / K)) / 2`` for
+        ``k = 1 … K``, ``K = min(horizon, max_iter)``, and the solver stops
+        after step ``K``; ``"inverse_sqrt"``: ``η_k = η / sqrt(1 + k /
+        decay_steps)`` until the stopping rule or ``max_iter``.
+    horizon : int, default 300
+        ``K`` of the cosine schedule.
     decay_steps : float, default 200.0
-        ``η_k = η / sqrt(1 + k / decay_steps)``.
+        Of the ``"inverse_sqrt"`` schedule.
     beta1, beta2 : float, default 0.9 and 0.999
         Decay rates of the moment estimates.
     window : int, default 50
@@ -317,6 +325,8 @@ class AdamOptions(SolverOptions):
 
     solver: ClassVar[str] = "adam"
     learning_rate: float | None = _option(None, kind=float, positive=True, depth_unit=True)
+    schedule: str = _option("cosine", kind=str, choices=("cosine", "inverse_sqrt"))
+    horizon: int = _option(300)
     decay_steps: float = _option(200.0, positive=True)
     beta1: float = _option(0.9)
     beta2: float = _option(0.999)
