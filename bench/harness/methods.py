@@ -29,7 +29,8 @@ class Method:
     key: tuple = ()
 
 
-def ours(name="ours", *, weights=None, solver="auto", tol=None, max_iter=None, clip_to_observed=True) -> Method:
+def ours(name="ours", *, weights=None, solver="auto", tol=None, max_iter=None, clip_to_observed=True,
+         options=None) -> Method:
     """``sparsedepth.complete_depth``; ``weights=None`` reads ``sd.DEFAULT_WEIGHTS`` now.
 
     ``clip_to_observed=False`` keeps the solver's minimiser as it is (the solver table compares optimisers, not
@@ -41,9 +42,10 @@ def ours(name="ours", *, weights=None, solver="auto", tol=None, max_iter=None, c
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", sd.ClampWarning)
             return sd.complete_depth(image, sparse, mask, weights=w, solver=solver, tol=tol, max_iter=max_iter,
-                                     clip_to_observed=clip_to_observed)
+                                     clip_to_observed=clip_to_observed, options=options)
 
-    return Method(name, run, ("complete", w, solver, tol, max_iter, clip_to_observed))
+    key_options = None if options is None else tuple(sorted(options.items()))
+    return Method(name, run, ("complete", w, solver, tol, max_iter, clip_to_observed, key_options))
 
 
 NEAREST = Method("nearest", lambda image, sparse, mask: sd.nearest_fill(sparse, mask), ("nearest",))
