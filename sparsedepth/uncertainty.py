@@ -12,6 +12,8 @@ completions).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy import ndimage, spatial
 
@@ -49,10 +51,25 @@ def split_samples(observed, seed=0):
     return half_a, observed & ~half_a
 
 
-def _nearest_and_distance(values, observed):
-    """Nearest-sample fill of ``values`` and the Euclidean distance (pixels) to the nearest sample."""
+@dataclass(frozen=True)
+class _SampleLayout:
+    """Where the samples of a mask are: each pixel's nearest sample, its distance, and the mean spacing ``h``."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    distance: np.ndarray
+    spacing: float
+
+    def nearest(self, values):
+        """The nearest-sample fill of ``values`` (read at the samples)."""
+        return values[self.rows, self.cols]
+
+
+def _layout(observed) -> _SampleLayout:
+    """One distance transform of ``~observed`` gives every pixel's nearest sample and its distance."""
     distance, (rows, cols) = ndimage.distance_transform_edt(~observed, return_indices=True)
-    return values[rows, cols], distance
+    spacing = 1.0 / np.sqrt(np.count_nonzero(observed) / observed.size)
+    return _SampleLayout(rows, cols, distance, spacing)
 
 
 def _local_range(image, radius):
@@ -90,8 +107,13 @@ def error_cues(depth, sparse, observed):
     * ``R d / h`` is the depth step near the pixel (a depth edge among the
       nearby samples), weighted by how far the pixel is from a sample.
     """
-    nearest, distance = _nearest_and_distance(np.where(observed, sparse, 0.0), observed)
-    spacing = 1.0 / np.sqrt(np.count_nonzero(observed) / observed.size)
+    return _error_cues(depth, sparse, observed, _layout(observed))
+
+
+def _error_cues(depth, sparse, observed, layout):
+    """:func:`error_cues` with the sample layout of ``observed`` already computed."""
+    nearest = layout.nearest(np.where(observed, sparse, 0.0))
+    distance, spacing = layout.distance, layout.spacing
     grad_rows, grad_cols = np.gradient(depth)
     cue = np.abs(depth - nearest)
     cue += np.hypot(grad_rows, grad_cols) * distance
@@ -146,15 +168,12 @@ def fit_calibration(errors, cue):
     return slope, offset
 
 
-def _held_out_error_map(held_out_a, held_out_b, half_a, half_b):
+def _held_out_error_map(held_out_a, held_out_b, half_a, half_b, layout):
     """The held-out errors, nearest-filled from the observed pixels and averaged over a window of half-width h."""
-    observed = half_a | half_b
-    errors = np.zeros(observed.shape)
+    errors = np.zeros(half_a.shape)
     errors[half_b] = held_out_a
     errors[half_a] = held_out_b
-    filled, _ = _nearest_and_distance(errors, observed)
-    spacing = 1.0 / np.sqrt(np.count_nonzero(observed) / observed.size)
-    return ndimage.uniform_filter(filled, 2 * int(np.ceil(spacing)) + 1)
+    return ndimage.uniform_filter(layout.nearest(errors), 2 * int(np.ceil(layout.spacing)) + 1)
 
 
 def _quantile_map(values, reference, where):
@@ -249,9 +268,10 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=
     unobserved = ~observed
     held_out_a = np.abs(depth_a - sparse)[half_b]  # half a's errors where half b observed
     held_out_b = np.abs(depth_b - sparse)[half_a]
-    cue_full = error_cues(depth, sparse, observed)
+    layout = _layout(observed)
+    cue_full = _error_cues(depth, sparse, observed, layout)
     cue = (cue_full + np.abs(depth_a - depth_b) + np.maximum(np.abs(depth - depth_a), np.abs(depth - depth_b))
-           + _held_out_error_map(held_out_a, held_out_b, half_a, half_b))
+           + _held_out_error_map(held_out_a, held_out_b, half_a, half_b, layout))
     if image is not None:
         cue += colour_novelty(depth, image, observed)
 
@@ -269,14 +289,13 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=
     sigma = np.abs(depth - np.where(observed, sparse, depth))
     if unobserved.any():
         sigma[unobserved] = (slope * _quantile_map(cue, cue_full, unobserved) + offset
-                             + _extrapolation_term(depth, observed))[unobserved]
+                             + _extrapolation_term(depth, observed, layout))[unobserved]
     return sigma, calibration
 
 
-def _extrapolation_term(depth, observed):
+def _extrapolation_term(depth, observed, layout):
     """``s90 * max(d - h, 0)``: the depth change a steep slope would make beyond one sample spacing."""
-    distance = ndimage.distance_transform_edt(~observed)
-    spacing = 1.0 / np.sqrt(np.count_nonzero(observed) / observed.size)
+    distance, spacing = layout.distance, layout.spacing
     grad_rows, grad_cols = np.gradient(depth)
     slope = np.hypot(grad_rows, grad_cols)
     interpolated = (distance <= spacing) & ~observed
