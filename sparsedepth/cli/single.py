@@ -227,15 +227,19 @@ def _evaluate(args, image, depth, mask, truth, keep_fraction, weights, stream):
         )
 
 
-def _uncertainty_writer(target, uncertainty, png_scale):
-    """The writer of the uncertainty map; a PNG stores at least one unit of its scale (0 means missing)."""
-    values = uncertainty
-    if target.path.suffix.lower() == ".png":
-        values = np.maximum(uncertainty, 1.0 / png_scale)
+def _array_writer(target, values, png_scale):
+    """:func:`~sparsedepth.io.depth_writer` of ``values``; its ``ValueError`` is a one-line UsageError naming the flag."""
     try:
         return depth_writer(target.path, values, scale=png_scale)
     except ValueError as exc:
         raise UsageError(f"{target.label}: {one_line(exc)}") from None
+
+
+def _uncertainty_writer(target, uncertainty, png_scale):
+    """The writer of the uncertainty map; a PNG stores at least one unit of its scale (0 means missing)."""
+    if target.path.suffix.lower() == ".png":
+        uncertainty = np.maximum(uncertainty, 1.0 / png_scale)
+    return _array_writer(target, uncertainty, png_scale)
 
 
 def _writers(args, planned, outcome, image, report, png_scale, intrinsics=None) -> list:
@@ -260,10 +264,7 @@ def _writers(args, planned, outcome, image, report, png_scale, intrinsics=None) 
     items = []
     for kind, target in planned:
         if kind in _DEPTH_OUTPUTS:
-            try:
-                writer = depth_writer(target.path, outcome.depth, scale=png_scale)
-            except ValueError as exc:
-                raise UsageError(f"{target.label}: {one_line(exc)}") from None
+            writer = _array_writer(target, outcome.depth, png_scale)
         elif kind in _UNCERTAINTY_OUTPUTS:
             writer = _uncertainty_writer(target, outcome.uncertainty, png_scale)
         elif kind in ("--json", "metrics.json"):
