@@ -111,7 +111,7 @@ def test_depth_is_nonnegative_l1_solvers(solver, data):
 #: then end at different points. Adam is left out: converging it to an accuracy worth comparing takes seconds per
 #: solve.
 L1_FLIP = {
-    "irls": ({}, 1e-3, 1e-6),
+    "irls": ({"options": {"gap_tol": 1e-8}}, 1e-3, 1e-6),
     "admm": ({"tol": 1e-7, "max_iter": 10000, "options": {"polish": False}}, 1e-4, 1e-6),
     "lbfgsb": ({}, 1e-3, 1e-5),
 }

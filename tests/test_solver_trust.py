@@ -283,7 +283,7 @@ def test_negative_depth_without_mask_is_rejected(problem):
 
 
 # --------------------------------------------------------------------------------------------------
-# 8. IRLS never increases the exact objective
+# 8. IRLS's plain reweighting never increases the exact objective
 # --------------------------------------------------------------------------------------------------
 @settings(max_examples=25, derandomize=True, deadline=None)
 @given(seed=st.integers(0, 10_000), height=st.integers(2, 9), width=st.integers(2, 9),
@@ -294,7 +294,8 @@ def test_irls_never_increases_the_exact_objective(seed, height, width, gamma, be
     obj, _, _ = build_objective(image, sparse, mask, weights=weights)
     values = []
     res = _quiet(complete_depth, image, sparse, mask, weights=weights, solver="irls", max_iter=40,
-                 callback=lambda state: values.append(obj.value(state.depth)), clip_to_observed=False)
+                 callback=lambda state: values.append(obj.value(state.depth)), clip_to_observed=False,
+                 options={"method": "reweighting"})
     values = np.array(values)
     # exact F recomputed independently from each iterate; allow only evaluation rounding
     assert np.all(np.diff(values) <= 1e-12 * values[:-1]), np.diff(values).max()

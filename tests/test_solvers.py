@@ -66,8 +66,14 @@ def test_irls_and_lbfgsb_agree_with_l1(problem):
     assert abs(admm.objective - lbfgsb.objective) / lbfgsb.objective < 1e-4
     # ADMM (exact shrinkage + polish) is at least as good as IRLS's smoothed fixed point
     assert admm.objective <= irls.objective * (1 + 1e-7)
+    # Newton's exact F may rise when eps shrinks: the point returned is the best one recorded
     F = irls.history_array("objective")
+    assert irls.objective == pytest.approx(F.min(), rel=1e-12)
+    # plain reweighting never raises the exact F and ends near the same optimum
+    mm = complete_depth(image, sparse, mask, weights=L1, solver="irls", tol=1e-8, options={"method": "reweighting"})
+    F = mm.history_array("objective")
     assert np.all(np.diff(F) <= 1e-12 * F[0]), "IRLS exact objective increased"
+    assert abs(mm.objective - lbfgsb.objective) / lbfgsb.objective < 1e-4
     # the L1 term changes the solution: it differs from the gamma = 0 one
     quad = complete_depth(image, sparse, mask, weights=L1.replace(gamma=0), solver="direct")
     assert np.abs(quad.depth - irls.depth).max() > 1e-3
@@ -205,3 +211,21 @@ def test_bad_schedule_options(problem, options, error):
     image, sparse, mask, _ = problem
     with pytest.raises(error, match="adam"):
         complete_depth(image, sparse, mask, weights=L1, solver="adam", options=options)
+
+
+def test_newton_system_matches_sparse_products(problem):
+    """IRLS's stencil-filled Newton matrix equals A + ½ Kᵀ diag(d) K formed by sparse products."""
+    import scipy.sparse as sp
+
+    from sparsedepth.objective.l1 import StackedL1
+    from sparsedepth.solvers.irls import _GradientSystem
+
+    image, sparse, mask, _ = problem
+    for weights in (L1, L1.replace(beta_second=0.01, beta_second_image=0.02)):
+        obj, _, _ = build_objective(image, sparse, mask, weights=weights)
+        l1 = StackedL1(obj)
+        d = np.random.default_rng(3).uniform(0.0, 5.0, l1.rows)
+        A, _, _ = obj.normal_equations()
+        K = sp.csr_matrix(l1.matrix)
+        expected = (A + 0.5 * (K.T @ sp.diags(d) @ K)).toarray()
+        np.testing.assert_allclose(_GradientSystem(obj)(d).toarray(), expected, rtol=1e-12, atol=1e-12)

@@ -207,6 +207,26 @@ class IrlsOptions(SolverOptions):
     preconditioner : {"grid", "amg"}, default "grid"
         One geometric multigrid hierarchy updated numerically, or a pyamg
         hierarchy rebuilt every iteration.
+    method : {"newton", "reweighting"}, default "newton"
+        ``"newton"``: primal-dual Newton steps on the reweighted systems
+        with ε continuation (for L1 terms on the pixel grid); ``"reweighting"``:
+        plain majorise–minimise reweighting, whose exact ``F`` never
+        increases.  See :func:`~sparsedepth.solvers.irls.solve_irls`.
+    newton_rtol : float, default 1e-2
+        Relative residual of each Newton system's PCG solve.
+    newton_max_inner : int, default 30
+        PCG steps per Newton system at most.
+    newton_tol : float, default 1e-3
+        ``ε`` shrinks when the smoothed problem's relative gradient is below
+        it (or after ``level_steps`` Newton steps).
+    level_steps : int, default 3
+        Newton steps per ``ε`` at most (at ``eps_min``: unlimited).
+    tie_band : float, optional
+        Rows with ``|(Kz)_k| <=`` it count as tied in the duality gap
+        (depth units); default ``1e-3`` times ``scale``.
+    certify_below : float, optional
+        The gap is computed at the end of each ``ε`` level from ``ε <=``
+        it on (depth units); default ``1e-5`` times ``scale``.
     """
 
     solver: ClassVar[str] = "irls"
@@ -218,6 +238,13 @@ class IrlsOptions(SolverOptions):
     inner_rtol: float = _option(1e-6)
     inner_max_iter: int = _option(500)
     preconditioner: str = _option("grid", choices=_PRECONDITIONERS)
+    method: str = _option("newton", kind=str, choices=("newton", "reweighting"))
+    newton_rtol: float = _option(1e-2)
+    newton_max_inner: int = _option(30)
+    newton_tol: float = _option(1e-3)
+    level_steps: int = _option(3)
+    tie_band: float | None = _option(None, kind=float, positive=True, depth_unit=True)
+    certify_below: float | None = _option(None, kind=float, positive=True, depth_unit=True)
 
 
 @dataclass(frozen=True, kw_only=True)
