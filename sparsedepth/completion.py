@@ -27,7 +27,7 @@ def choose_solver(weights: Weights) -> str:
     """
     if weights.gamma == 0:
         return "amg"
-    return "irls" if weights.edge_penalty != "l1" else "admm"
+    return "irls" if weights.robust_edge else "admm"
 
 
 # the numpydoc docstring (the objective, scaling and clamp in Notes) is long; the code is short

@@ -324,3 +324,17 @@ def test_bench_reports_and_ablation_accept_a_robust_edge_penalty():
     labels = [label for label, _ in ablation.variants(D=robust)]
     assert labels[-1] == "defaults (sd.DEFAULT_WEIGHTS)"
     assert dict(ablation.variants(D=robust))["defaults (sd.DEFAULT_WEIGHTS)"] == robust
+
+
+def test_bench_edge_method_is_complete_depth_with_weights_relative_to_the_median():
+    from bench import robust_penalties as bench
+
+    image, sparse, mask, _ = make_problem((20, 25))
+    m = float(np.median(sparse[mask]))
+    got = bench.edge_method("cauchy", 0.03).run(image, sparse, mask)
+    w = sd.DEFAULT_WEIGHTS.replace(gamma=bench.GAMMA_REL * m, edge_penalty="cauchy", edge_scale=0.03 * m)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sd.ClampWarning)
+        expected = complete_depth(image, sparse, mask, weights=w)
+    assert got.weights == w and got.solver == "irls"
+    np.testing.assert_array_equal(got.depth, expected.depth)
