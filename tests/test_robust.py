@@ -241,7 +241,7 @@ def test_irls_never_increases_the_objective_on_a_real_image(motorcycle_crop, pen
     assert "no duality gap" in res.message and "NOT" not in res.message and "failed" not in res.message
 
 
-@pytest.mark.parametrize("penalty", ["charbonnier", "cauchy", "geman_mcclure"])
+@pytest.mark.parametrize("penalty", NAMES)
 def test_irls_and_lbfgsb_reach_the_same_objective_from_the_l2_solution(penalty):
     image, sparse, mask, _ = make_problem((40, 50))
     base = Weights.paper(alpha=1.0, beta=0.05, gamma=0.0, delta=0.01, kappa=5.0)
@@ -254,7 +254,8 @@ def test_irls_and_lbfgsb_reach_the_same_objective_from_the_l2_solution(penalty):
             res = complete_depth(image, sparse, mask, weights=w, solver=solver, x0=start, clip_to_observed=False)
         F[solver] = res.objective
         assert res.objective < build_objective(image, sparse, mask, weights=w)[0].value(start)
-    assert abs(F["irls"] - F["lbfgsb"]) <= 1e-4 * F["lbfgsb"], F
+    # measured 6e-9 to 3e-8 relative; the bound leaves a factor 30
+    assert abs(F["irls"] - F["lbfgsb"]) <= 1e-6 * F["lbfgsb"], F
 
 
 def test_auto_picks_irls_for_a_robust_edge_penalty():
