@@ -35,6 +35,7 @@ import sys
 import time
 
 import sparsedepth as sd
+from sparsedepth.objective.weights import EDGE_PENALTY_FIELDS
 
 from . import harness as H
 
@@ -55,7 +56,7 @@ def variants(D=None, P=None):
     D = sd.DEFAULT_WEIGHTS if D is None else D
     P = sd.Weights.paper() if P is None else P
     # every weight beyond the paper's alpha, beta, gamma, delta, kappa is an extension term
-    ext = [k for k in D.as_dict() if k not in PAPER_FIELDS]
+    ext = [k for k in D.as_dict() if k not in PAPER_FIELDS and k not in EDGE_PENALTY_FIELDS]
     no_ext = {k: 0.0 for k in ext}
     P = P.replace(**no_ext)
     prior = P.delta if P.delta > 0 else 1e-6 * max(P.alpha, 1.0)
@@ -106,7 +107,8 @@ def run(argv=None):
     table = []
     for (label, w), m in zip(vs, methods):
         r = next(x for x in rows if x["method"] == m.name)
-        nz = ", ".join(f"{k} {v:g}" for k, v in w.as_dict().items() if v > 0 and k != "kappa")
+        nz = ", ".join(f"{k} {v:g}" for k, v in w.as_dict().items()
+                       if k not in EDGE_PENALTY_FIELDS and v > 0 and k != "kappa")
         table.append([label, nz, H.fmt(*r["rmse"]), H.fmt(*r["mae"]), H.fmt(*r["rel"]), H.fmt(*r["delta1"]),
                       H.fmt(*r["rmse_ratio"]), H.fmt(*r["runtime"], digits=2), H.fmt(r["time_ratio"], digits=2)])
     body = H.markdown_table(header, table)

@@ -71,7 +71,7 @@ the parts listed before it, NumPy, SciPy, pyamg, scikit-image and h5py;
 
 Where a change goes: a new solver is a module in ``solvers/`` plus a line in
 ``solvers/registry.py`` and an options class in ``solvers/options.py``; a new
-term is a :class:`QuadraticTerm`/:class:`AbsTerm` built in
+term is a :class:`QuadraticTerm`/:class:`AbsTerm`/:class:`RobustTerm` built in
 ``objective/objective.py`` with its weight in ``objective/weights.py``; a new
 file format is a module in ``io/`` dispatched from ``io/depth.py`` or
 ``io/images.py``; a new command-line flag is an argument group in
@@ -82,7 +82,8 @@ from . import datasets, io
 from .baselines import biharmonic_fill, colorization_baseline, linear_fill, nearest_fill
 from .completion import choose_solver, complete_depth
 from .metrics import DepthMetrics, depth_metrics
-from .objective.objective import AbsTerm, Objective, QuadraticTerm, build_objective, edge_weights
+from .objective.objective import AbsTerm, Objective, QuadraticTerm, RobustTerm, build_objective, edge_weights
+from .objective.robust import PENALTIES, RobustPenalty, robust_penalty
 from .result import ClampWarning, CompletionResult, IterationRecord, SolverState, UncertaintyCalibration
 from .sampling import sample_depth, sample_mask, valid_depth_mask
 from .solvers import SOLVER_OPTIONS, SOLVERS
@@ -113,6 +114,10 @@ __all__ = [
     "Objective",
     "QuadraticTerm",
     "AbsTerm",
+    "RobustTerm",
+    "RobustPenalty",
+    "robust_penalty",
+    "PENALTIES",
     "build_objective",
     "edge_weights",
     "nearest_fill",

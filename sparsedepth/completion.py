@@ -23,8 +23,11 @@ __all__ = ["complete_depth", "choose_solver"]
 
 
 def choose_solver(weights: Weights) -> str:
-    """The solver ``solver="auto"`` picks: ``"amg"`` for γ = 0, else ``"admm"``."""
-    return "amg" if weights.gamma == 0 else "admm"
+    """The solver ``solver="auto"`` picks: ``"amg"`` for γ = 0, ``"irls"`` for a robust edge penalty, else ``"admm"``.
+    """
+    if weights.gamma == 0:
+        return "amg"
+    return "irls" if weights.robust_edge else "admm"
 
 
 # the numpydoc docstring (the objective, scaling and clamp in Notes) is long; the code is short
@@ -67,7 +70,8 @@ def complete_depth(
     weights : Weights
         Term weights; default :data:`~sparsedepth.objective.weights.DEFAULT_WEIGHTS`.
     solver : {"auto", "direct", "cg", "amg", "irls", "admm", "lbfgsb", "adam"}
-        ``"auto"`` is ``"amg"`` for γ = 0 and ``"admm"`` otherwise.  The stopping
+        ``"auto"`` is ``"amg"`` for γ = 0, ``"irls"`` for γ > 0 with a robust
+        ``weights.edge_penalty`` and ``"admm"`` otherwise.  The stopping
         rule of each is in :mod:`sparsedepth.solvers`.
     tol : float, optional
         Solver tolerance (meaning per solver; default per solver).
@@ -122,8 +126,8 @@ def complete_depth(
 
     Notes
     -----
-    The solve runs in normalised units: depth, ``x0``, ``γ`` and
-    ``l1_smoothing`` are divided by ``s``, the power of two nearest the
+    The solve runs in normalised units: depth, ``x0``, ``γ``, ``edge_scale``
+    and ``l1_smoothing`` are divided by ``s``, the power of two nearest the
     median observed depth (:func:`sparsedepth.solvers.depth_scale`); the
     quadratic weights are unchanged, so the objective is ``F / s²``.  The
     result (depth, objective, terms, history, callback states) is in the
@@ -246,8 +250,8 @@ def _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed):
 def _scaled_objective(image, sparse_depth, mask, weights, l1_smoothing, clip_to_observed):
     """``(objective, coarse, scale, depth_range)``: the objective in units of the depth scale ``s``.
 
-    Depth, ``gamma`` and ``l1_smoothing`` are divided by ``s``, so the
-    objective is ``F / s²`` (see :func:`complete_depth`, Notes); ``coarse`` is
+    Depth, ``gamma``, ``edge_scale`` and ``l1_smoothing`` are divided by
+    ``s``, so the objective is ``F / s²`` (see :func:`complete_depth`, Notes); ``coarse`` is
     the nearest fill in those units, ``depth_range`` the clamp range in the
     user's units.
     """
@@ -258,7 +262,8 @@ def _scaled_objective(image, sparse_depth, mask, weights, l1_smoothing, clip_to_
     del observed_values
     depth /= scale
     objective, coarse, _ = build_objective(
-        image, depth, observed, weights=weights.replace(gamma=weights.gamma / scale),
+        image, depth, observed,
+        weights=weights.replace(gamma=weights.gamma / scale, edge_scale=weights.edge_scale / scale),
         l1_smoothing=l1_smoothing / scale)
     return objective, coarse, scale, depth_range
 

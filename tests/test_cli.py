@@ -65,12 +65,46 @@ def test_every_weight_field_is_an_option(files, capsys):
     for i, f in enumerate(dataclasses.fields(sd.Weights)):
         args += [f"--{f.name.replace('_', '-')}", str(0.125 * (i + 1))]
     args[args.index("--gamma") + 1] = "0"
+    args[args.index("--edge-penalty"):args.index("--edge-penalty") + 2] = []  # a name, not a number: below
+    args[args.index("--edge-scale"):args.index("--edge-scale") + 2] = []  # the scale of a robust penalty only
     rc = main(["--image", str(files / "rgb.png"), "--depth", str(files / "sparse.png"), "--depth-scale", "mm",
                "--solver", "direct", "--json", str(files / "m.json"), "-q", *args])
     assert rc == 0, capsys.readouterr().err
     report = json.loads((files / "m.json").read_text())
     for i, f in enumerate(dataclasses.fields(sd.Weights)):
-        assert report["weights"][f.name] == (0.0 if f.name == "gamma" else 0.125 * (i + 1))
+        if f.name in ("edge_penalty", "edge_scale"):
+            assert report["weights"][f.name] == getattr(sd.DEFAULT_WEIGHTS, f.name)
+        else:
+            assert report["weights"][f.name] == (0.0 if f.name == "gamma" else 0.125 * (i + 1))
+
+
+def test_edge_penalty_options_reach_the_weights_and_pick_irls(files, capsys):
+    rc = main(["--image", str(files / "rgb.png"), "--depth", str(files / "sparse.png"), "--depth-scale", "mm",
+               "--gamma", "0.01", "--edge-penalty", "cauchy", "--edge-scale", "0.02",
+               "--json", str(files / "m.json"), "--out", str(files / "out.npy"), "-q"])
+    assert rc == 0, capsys.readouterr().err
+    report = json.loads((files / "m.json").read_text())
+    assert report["weights"]["edge_penalty"] == "cauchy" and report["weights"]["edge_scale"] == 0.02
+    assert report["solver"] == "irls"
+    image = sd.read_image(files / "rgb.png")
+    sparse = sd.read_depth(files / "sparse.png", scale=1000)
+    expected = sd.complete_depth(image, sparse, weights=sd.DEFAULT_WEIGHTS.replace(
+        gamma=0.01, edge_penalty="cauchy", edge_scale=0.02)).depth
+    np.testing.assert_allclose(sd.read_depth(files / "out.npy"), expected, rtol=1e-12)
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--edge-penalty", "huber", "--gamma", "0.01"], "invalid choice"),
+    (["--edge-penalty", "cauchy"], "--gamma > 0"),
+    (["--edge-penalty", "cauchy", "--gamma", "0.01", "--solver", "admm"], "--solver irls"),
+    (["--edge-scale", "0.1", "--gamma", "0.01"], "robust --edge-penalty"),
+    (["--edge-penalty", "cauchy", "--gamma", "0.01", "--edge-scale", "0"], "metres > 0"),
+])
+def test_edge_penalty_options_are_checked(files, capsys, argv, words):
+    rc = main(["--image", str(files / "rgb.png"), "--depth", str(files / "sparse.png"), "--depth-scale", "mm",
+               "-q", *argv])
+    assert rc == 2
+    assert words in capsys.readouterr().err
 
 
 # ----------------------------------------------------------------------------- round trips

@@ -27,8 +27,15 @@ def command_line(module: str, argv=()) -> str:
 
 
 def weights_markdown(w) -> str:
-    """``alpha = 1, beta = ...``: every weight of a :class:`sparsedepth.Weights`."""
-    return ", ".join(f"{k} = {v:g}" for k, v in w.as_dict().items())
+    """``alpha = 1, beta = ...``: every weight of a :class:`sparsedepth.Weights`.
+
+    ``edge_penalty`` and ``edge_scale`` are listed only for a robust edge
+    penalty (with the default ``"l1"`` the scale is unused).
+    """
+    items = w.as_dict()
+    if items["edge_penalty"] == "l1":
+        del items["edge_penalty"], items["edge_scale"]
+    return ", ".join(f"{k} = {v}" if isinstance(v, str) else f"{k} = {v:g}" for k, v in items.items())
 
 
 def frames_markdown(frames_) -> str:

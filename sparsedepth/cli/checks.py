@@ -2,7 +2,8 @@
 
 Every problem is a :class:`~sparsedepth.cli.messages.UsageError` raised
 before any file is read or written.  Imports the standard library, the
-other modules of :mod:`sparsedepth.cli` and :mod:`sparsedepth.io`.
+other modules of :mod:`sparsedepth.cli`, :mod:`sparsedepth.io`, the weights
+of :mod:`sparsedepth.objective` and the solver registry.
 """
 
 from __future__ import annotations
@@ -13,7 +14,8 @@ import os
 from pathlib import Path
 
 from ..io import MAX_PIXELS
-from ..objective import Weights
+from ..objective import DEFAULT_WEIGHTS, Weights
+from ..solvers.registry import REGISTRY
 from .camera import KINECT_CALIB, intrinsics_source, missing_intrinsics_message
 from .messages import UsageError
 from .outputs import check_distinct, check_writable
@@ -64,6 +66,7 @@ def _check_combinations(args) -> str:
         raise UsageError("--uncertainty and --max-uncertainty estimate the error of the completion solver: they "
                           "apply to completion and --fill-method complete, not the colorization fill")
     _check_camera_options(args, mode)
+    _check_edge_penalty(args)
     if mode == "batch":
         if args.uncertainty is not None or args.max_uncertainty is not None:
             raise UsageError("--uncertainty and --max-uncertainty are for one frame, not a batch")
@@ -104,6 +107,21 @@ def _check_combinations(args) -> str:
                               "pip install 'sparsedepth[plot]' (or matplotlib)")
     _check_cluster_options(args, mode)
     return mode
+
+
+def _check_edge_penalty(args) -> None:
+    """--edge-penalty and --edge-scale: a robust penalty needs --gamma > 0 and a solver that handles it."""
+    penalty = args.w_edge_penalty or DEFAULT_WEIGHTS.edge_penalty
+    gamma = DEFAULT_WEIGHTS.gamma if args.w_gamma is None else args.w_gamma
+    if args.w_edge_scale is not None and penalty == "l1":
+        raise UsageError("--edge-scale is the scale of a robust --edge-penalty (charbonnier, cauchy, "
+                          "geman_mcclure, welsch); the l1 edge penalty has none")
+    if penalty != "l1" and gamma == 0:
+        raise UsageError(f"--edge-penalty {penalty} weights the edge term, which --gamma {gamma:g} removes: give "
+                          "--gamma > 0 (e.g. --gamma 0.01)")
+    if penalty != "l1" and args.solver not in (None, "auto") and not REGISTRY[args.solver].robust:
+        raise UsageError(f"--solver {args.solver} cannot minimise the robust --edge-penalty {penalty}; use --solver "
+                          "irls (the default for it), lbfgsb or adam")
 
 
 def _check_camera_options(args, mode) -> None:

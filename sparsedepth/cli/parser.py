@@ -18,7 +18,7 @@ from ..batch import default_workers
 from ..holes import FILL_METHODS
 from ..io import DEPTH_SCALES, MAX_PIXELS
 from ..io import resolve_scale
-from ..objective import DEFAULT_WEIGHTS, Weights
+from ..objective import DEFAULT_WEIGHTS, EDGE_PENALTIES, Weights
 from ..solvers import SOLVERS
 from .camera import CAMERA_PRESETS, parse_intrinsics
 
@@ -44,6 +44,10 @@ _WEIGHT_HELP = {
     "kappa": "edge sensitivity of w = exp(-kappa |grad I|)",
     "beta_image": "image-weighted first-order L2 smoothness",
     "beta_second": "second-order (thin-plate) smoothness",
+    "edge_penalty": "penalty of the edge term: l1 (convex, default) or a robust penalty that lets depth jump at "
+                    "image edges (charbonnier convex; cauchy, geman_mcclure, welsch non-convex, solved by irls)",
+    "edge_scale": "scale s of a robust --edge-penalty in metres: differences well below s are smoothed "
+                  "quadratically, larger ones are allowed to jump",
 }
 
 
@@ -124,6 +128,16 @@ def _finite(text):
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def _positive_metres(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a depth in metres > 0, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a finite depth in metres > 0, got {text!r}")
     return value
 
 
@@ -257,12 +271,21 @@ def _add_method_options(parser) -> None:
     """--solver, one option per term weight, the solver limits and the hole-filling method."""
     method = parser.add_argument_group("method")
     method.add_argument("--solver", choices=["auto", *sorted(SOLVERS)], default=None,
-                        help="solver of complete_depth (default auto: amg for gamma = 0, else admm).")
+                        help="solver of complete_depth (default auto: amg for gamma = 0, irls for a robust "
+                             "--edge-penalty, else admm).")
     for f in dataclasses.fields(Weights):
+        flag, default = f"--{f.name.replace('_', '-')}", getattr(DEFAULT_WEIGHTS, f.name)
+        if f.name == "edge_penalty":
+            method.add_argument(flag, dest=f"w_{f.name}", choices=EDGE_PENALTIES, metavar="NAME",
+                                help=f"{_WEIGHT_HELP[f.name]}; one of {', '.join(EDGE_PENALTIES)} "
+                                     f"(default {default}).")
+            continue
+        kind, metavar = (_positive_metres, "METRES") if f.name == "edge_scale" else (_nonnegative, "W")
+        what = "" if f.name == "edge_scale" else "weight "
         method.add_argument(
-            f"--{f.name.replace('_', '-')}", dest=f"w_{f.name}", type=_nonnegative, metavar="W",
-            help=f"weight {f.name}: {_WEIGHT_HELP.get(f.name, 'a term weight of sparsedepth.Weights')} "
-                 f"(default {getattr(DEFAULT_WEIGHTS, f.name):g}).",
+            flag, dest=f"w_{f.name}", type=kind, metavar=metavar,
+            help=f"{what}{f.name}: {_WEIGHT_HELP.get(f.name, 'a term weight of sparsedepth.Weights')} "
+                 f"(default {default:g}).",
         )
     method.add_argument("--tol", type=float, metavar="TOL", help="solver tolerance (meaning per solver).")
     method.add_argument("--max-iter", type=_positive_int, metavar="N", help="maximum solver iterations.")

@@ -1,10 +1,12 @@
 """The completion objective as a sum of named terms, and its assembly for one frame.
 
 Every term is data (:mod:`sparsedepth.objective.terms`): a weight, a sparse
-linear operator ``K`` and per-row weights ``r``.  Two kinds exist:
+linear operator ``K`` and per-row weights ``r``.  Three kinds exist:
 
 * :class:`~sparsedepth.objective.terms.QuadraticTerm`  ``weight · Σ_k r_k ((K z)_k − d_k)²``
 * :class:`~sparsedepth.objective.terms.AbsTerm`        ``weight · Σ_k r_k |(K z)_k|``
+* :class:`~sparsedepth.objective.terms.RobustTerm`     ``weight · Σ_k r_k φ((K z)_k)``, ``φ`` a robust
+  penalty (:mod:`sparsedepth.objective.robust`); smooth, and non-convex except Charbonnier
 
 :class:`Objective` is their sum.  :func:`build_objective` assembles the terms of the depth-completion problem
 from an image, sparse depth and :class:`~sparsedepth.objective.weights.Weights`; a
@@ -34,12 +36,13 @@ from ..baselines import nearest_fill
 from ..grid.edges import edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights
 from ..grid.operators import StencilOperator, gradient_stencil, hessian_stencil
 from ..grid.stencil import stencil_to_csr
-from .terms import AbsTerm, QuadraticTerm
+from .terms import AbsTerm, QuadraticTerm, RobustTerm
 from .weights import DEFAULT_WEIGHTS, Weights, check_weights
 
 __all__ = [
     "QuadraticTerm",
     "AbsTerm",
+    "RobustTerm",
     "Objective",
     "build_objective",
     "edge_weights",
@@ -53,14 +56,14 @@ DEFAULT_L1_SMOOTHING = 1e-4
 
 
 class Objective:
-    """A sum of named quadratic and L1 terms over a flattened ``(H, W)`` grid.
+    """A sum of named quadratic, L1 and robust terms over a flattened ``(H, W)`` grid.
 
     Parameters
     ----------
     shape : tuple of int
         Grid shape ``(H, W)``; the unknown ``z`` is a vector of ``H*W`` values
         in C order.
-    terms : sequence of QuadraticTerm or AbsTerm
+    terms : sequence of QuadraticTerm, AbsTerm or RobustTerm
         Term names must be unique.
     l1_smoothing : float
         ``ε`` of the smoothed ``|t| ≈ sqrt(t² + ε²)`` used by
@@ -93,6 +96,10 @@ class Objective:
         return tuple(t for t in self.terms if isinstance(t, AbsTerm) and t.weight > 0)
 
     @property
+    def robust_terms(self):
+        return tuple(t for t in self.terms if isinstance(t, RobustTerm) and t.weight > 0)
+
+    @property
     def has_l1(self) -> bool:
         """True when an L1 term has a positive weight (the problem is non-smooth)."""
         return bool(self.abs_terms)
@@ -116,6 +123,8 @@ class Objective:
     def smoothed_value_and_gradient(self, z, eps: float | None = None):
         """Smoothed objective (``|t| → sqrt(t² + ε²)``) and its gradient.
 
+        Quadratic and robust terms enter exactly (they are smooth).
+
         Returns
         -------
         value : float
@@ -131,14 +140,19 @@ class Objective:
         for t in self.abs_terms:
             value += t.smoothed_value(z, eps)
             grad += t.smoothed_gradient(z, eps)
+        for t in self.robust_terms:
+            value += t.value(z)
+            grad += t.gradient(z)
         return value, grad
 
     def l1_subgradient(self, z):
-        """Gradient of the quadratic part plus ``Kᵀ(weight·r·sign(K z))`` (a subgradient of F)."""
+        """Gradient of the quadratic and robust terms plus ``Kᵀ(weight·r·sign(K z))`` (a subgradient of F)."""
         z = self._flat(z)
         grad = self.quadratic_gradient(z)
         for t in self.abs_terms:
             grad += t.operator.T @ (t.scaled_row_weights() * np.sign(t.operator @ z))
+        for t in self.robust_terms:
+            grad += t.gradient(z)
         return grad
 
     def quadratic_gradient(self, z):
@@ -269,7 +283,9 @@ def build_objective(
     -------
     objective : Objective
         Terms ``data``, ``smooth``, ``edge``, ``prior``, ``smooth_image``,
-        ``second_order``, ``second_order_image``.
+        ``second_order``, ``second_order_image``; ``edge`` is an
+        :class:`AbsTerm` for ``weights.edge_penalty = "l1"``, else a
+        :class:`RobustTerm` with that penalty and ``weights.edge_scale``.
     coarse : ndarray, (H, W)
         ``z_c``, the nearest-neighbour fill of the observations.
     mask : ndarray of bool, (H, W)
@@ -296,7 +312,7 @@ def build_objective(
     terms = [
         QuadraticTerm("data", weights.alpha, None, observed.reshape(-1), depth.ravel()),  # bool weights: 1/8 memory
         QuadraticTerm("smooth", weights.beta, G),
-        AbsTerm("edge", weights.gamma, G, w),  # one weight per pixel, shared by its x and y edge
+        _edge_term(weights, G, w),  # one weight per pixel, shared by its x and y edge
         QuadraticTerm("prior", weights.delta, None, None, coarse.ravel()),
         QuadraticTerm("smooth_image", weights.beta_image, G, pair),
         QuadraticTerm("second_order", weights.beta_second, hessian),
@@ -309,3 +325,10 @@ def build_objective(
             f"smoothness weight (beta, gamma, beta_image or beta_second); got {weights}"
         )
     return Objective(shape, terms, l1_smoothing=l1_smoothing), coarse, observed
+
+
+def _edge_term(weights, G, w):
+    """The ``edge`` term: L1 of ``G z`` weighted by ``w``, or the robust penalty of ``weights.edge_penalty``."""
+    if weights.edge_penalty == "l1":
+        return AbsTerm("edge", weights.gamma, G, w)
+    return RobustTerm("edge", weights.gamma, G, w, weights.edge_penalty, weights.edge_scale)

@@ -2,12 +2,13 @@
 
 * :class:`QuadraticTerm`  ``weight · Σ_k r_k ((K z)_k − d_k)²``
 * :class:`AbsTerm`        ``weight · Σ_k r_k |(K z)_k|``
+* :class:`RobustTerm`     ``weight · Σ_k r_k φ((K z)_k)``, ``φ`` a robust penalty (:mod:`.robust`)
 
 A term knows its value, its (smoothed) gradient and, for a quadratic term,
 its contribution ``weight · Kᵀ diag(r) K`` to the normal equations; the sum of
 terms is :class:`~sparsedepth.objective.objective.Objective`.
 
-May import NumPy, SciPy and :mod:`sparsedepth.grid`.
+May import NumPy, SciPy, :mod:`sparsedepth.grid`, :mod:`sparsedepth._validation` and :mod:`.robust`.
 """
 
 from __future__ import annotations
@@ -20,8 +21,10 @@ import scipy.sparse as sp
 
 from ..grid.operators import StencilOperator
 from ..grid.stencil import stencil_to_csr
+from .._validation import check_positive_real
+from .robust import robust_penalty
 
-__all__ = ["QuadraticTerm", "AbsTerm"]
+__all__ = ["QuadraticTerm", "AbsTerm", "RobustTerm"]
 
 
 def _apply(operator, z):
@@ -163,25 +166,15 @@ class AbsTerm:
     row_weights: Optional[np.ndarray] = None
 
     def __post_init__(self):
-        if self.row_weights is not None:
-            m, n = self.operator.shape
-            size = np.shape(self.row_weights)[0] if np.ndim(self.row_weights) == 1 else -1
-            if size != m and not (size == n and n > 0 and m % n == 0):
-                raise ValueError(f"row_weights of term {self.name!r} must have shape ({m},) or ({n},) "
-                                 f"(shared by the {m // max(n, 1)} blocks), got {np.shape(self.row_weights)}")
+        _check_row_weights(self)
 
     def row_weight_blocks(self) -> int:
         """How many times the stored ``row_weights`` repeat along the rows (1 when of shape (m,))."""
-        if self.row_weights is None:
-            return 1
-        return self.operator.shape[0] // np.shape(self.row_weights)[0]
+        return _row_weight_blocks(self)
 
     def scaled_row_weights(self):
         """``weight · r`` as an array of shape (m,)."""
-        m = self.operator.shape[0]
-        if self.row_weights is None:
-            return np.full(m, float(self.weight))
-        return self.weight * np.tile(np.asarray(self.row_weights, dtype=np.float64), self.row_weight_blocks())
+        return _scaled_row_weights(self)
 
     def value(self, z) -> float:
         if self.weight == 0:
@@ -201,3 +194,102 @@ class AbsTerm:
             return np.zeros_like(z)
         t = self.operator @ z
         return self.operator.T @ (self.scaled_row_weights() * t / np.sqrt(t * t + eps * eps))
+
+
+@dataclass(frozen=True, eq=False)
+class RobustTerm:
+    r"""``weight · Σ_k r_k φ((K z)_k)`` with ``φ`` a robust penalty of scale ``s``.
+
+    Parameters
+    ----------
+    name : str
+    weight : float
+    operator : scipy.sparse matrix or StencilOperator of shape (m, N)
+        ``K`` (``build_objective`` passes the gradient, as for the L1 edge term).
+    row_weights : ndarray of shape (m,) or (N,), or None
+        ``r``, stored as for :class:`AbsTerm` (shape ``(N,)``: shared by every
+        block of ``N`` rows).
+    penalty : str, float or RobustPenalty
+        A name in :data:`~sparsedepth.objective.robust.PENALTIES` or Barron's
+        shape ``a <= 2`` (see :class:`~sparsedepth.objective.robust.RobustPenalty`);
+        stored as a :class:`~sparsedepth.objective.robust.RobustPenalty`.
+    scale : float
+        ``s > 0``, in the units of ``K z`` (depth): differences much smaller
+        than ``s`` cost ``t² / (2s)``, larger ones far less than their square.
+
+    Notes
+    -----
+    The term is smooth.  Its gradient is ``weight · Kᵀ (r ⊙ φ'(K z))``, and at
+    ``z₀`` (``t₀ = K z₀``) it is majorised by the quadratic
+
+    .. math::
+
+        \sum_k c_k \left[\varphi(t_{0k}) + \tfrac12 \omega(t_{0k})
+        \bigl((Kz)_k^2 - t_{0k}^2\bigr)\right], \qquad c = \mathrm{weight} \cdot r,
+
+    equal to it at ``z₀`` (:meth:`majorizer_weights` returns ``c ⊙ ω(t₀)``).
+    """
+
+    name: str
+    weight: float
+    operator: object
+    row_weights: Optional[np.ndarray] = None
+    penalty: object = "charbonnier"
+    scale: float = 0.05
+
+    def __post_init__(self):
+        _check_row_weights(self)
+        object.__setattr__(self, "penalty", robust_penalty(self.penalty))
+        object.__setattr__(self, "scale", check_positive_real(self.scale, name=f"scale of term {self.name!r}"))
+
+    def row_weight_blocks(self) -> int:
+        """How many times the stored ``row_weights`` repeat along the rows (1 when of shape (m,))."""
+        return _row_weight_blocks(self)
+
+    def scaled_row_weights(self):
+        """``weight · r`` as an array of shape (m,)."""
+        return _scaled_row_weights(self)
+
+    def value(self, z) -> float:
+        """``weight · Σ r φ(K z)``."""
+        if self.weight == 0:
+            return 0.0
+        t = self.operator @ z
+        return float(np.sum(self.scaled_row_weights() * self.penalty.value(t, self.scale)))
+
+    def gradient(self, z):
+        """``weight · Kᵀ (r ⊙ φ'(K z))``."""
+        if self.weight == 0:
+            return np.zeros_like(z)
+        t = self.operator @ z
+        return self.operator.T @ (self.scaled_row_weights() * self.penalty.derivative(t, self.scale))
+
+    def majorizer_weights(self, z):
+        """``weight · r ⊙ ω(K z)``, shape (m,).
+
+        The quadratic majoriser of the term at ``z`` is ``½ Σ_k (this)_k (K z')_k² + const`` in ``z'``.
+        """
+        return self.scaled_row_weights() * self.penalty.weight(self.operator @ z, self.scale)
+
+
+def _check_row_weights(term):
+    """``ValueError`` unless the term's ``row_weights`` have shape (m,), or (N,) shared by the blocks."""
+    if term.row_weights is not None:
+        m, n = term.operator.shape
+        size = np.shape(term.row_weights)[0] if np.ndim(term.row_weights) == 1 else -1
+        if size != m and not (size == n and n > 0 and m % n == 0):
+            raise ValueError(f"row_weights of term {term.name!r} must have shape ({m},) or ({n},) "
+                             f"(shared by the {m // max(n, 1)} blocks), got {np.shape(term.row_weights)}")
+
+
+def _row_weight_blocks(term) -> int:
+    if term.row_weights is None:
+        return 1
+    return term.operator.shape[0] // np.shape(term.row_weights)[0]
+
+
+def _scaled_row_weights(term):
+    m = term.operator.shape[0]
+    if term.row_weights is None:
+        return np.full(m, float(term.weight))
+    return term.weight * np.tile(np.asarray(term.row_weights, dtype=np.float64), _row_weight_blocks(term))

@@ -1,15 +1,24 @@
 """The weights of the objective terms, as one small immutable object.
 
-May import :mod:`sparsedepth._validation`.
+May import :mod:`sparsedepth._validation` and :mod:`.robust`.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields, replace
 
-from .._validation import check_nonnegative_real
+from .._validation import check_nonnegative_real, check_positive_real
+from .robust import PENALTIES
 
-__all__ = ["Weights", "DEFAULT_WEIGHTS", "check_weights"]
+__all__ = ["Weights", "DEFAULT_WEIGHTS", "check_weights", "EDGE_PENALTIES", "EDGE_PENALTY_FIELDS",
+           "DEFAULT_EDGE_SCALE"]
+
+#: The penalties of the edge term: ``"l1"`` (``|t|``) or a robust penalty of :mod:`sparsedepth.objective.robust`.
+EDGE_PENALTIES = ("l1", *PENALTIES)
+#: The fields of :class:`Weights` that choose the edge term's penalty (not term weights: a str and a scale).
+EDGE_PENALTY_FIELDS = ("edge_penalty", "edge_scale")
+#: Default ``edge_scale`` in depth units (metres): 5 cm.
+DEFAULT_EDGE_SCALE = 0.05
 
 
 @dataclass(frozen=True)
@@ -20,7 +29,7 @@ class Weights:
 
         F(z) = alpha       Σ M (z - z_obs)²                 data
              + beta        Σ (∂x z)² + (∂y z)²              smooth
-             + gamma       Σ w (|∂x z| + |∂y z|)            edge (L1)
+             + gamma       Σ w (|∂x z| + |∂y z|)            edge (L1; or Σ w (φ(∂x z) + φ(∂y z)))
              + delta       Σ (z - z_c)²                     prior (nearest-neighbour fill)
              + beta_image  Σ wx (∂x z)² + wy (∂y z)²        smooth_image (image-weighted L2)
              + beta_second Σ (∂xx z)² + (∂yy z)² + 2 (∂xy z)²   second_order
@@ -32,6 +41,11 @@ class Weights:
     weight a second-difference row spans (see
     :func:`sparsedepth.grid.edges.second_order_edge_weights`).
     A weight of 0 removes its term, so "L2 only" or "data only" is a choice of weights.
+    With ``edge_penalty`` other than ``"l1"`` the edge term penalises each
+    difference by the robust ``φ(t) = s ρ(t/s)`` of that name instead of
+    ``|t|`` (``s = edge_scale``; see
+    :class:`~sparsedepth.objective.robust.RobustPenalty`), which lets depth
+    jump where the image has an edge without the staircase of L1.
 
     Parameters
     ----------
@@ -50,11 +64,25 @@ class Weights:
         Image-weighted second-order smoothness (>= 0): a second difference
         that straddles an image edge costs less, so the surface may bend or
         jump there.  An extension beyond the reference paper.
+    edge_penalty : {"l1", "charbonnier", "cauchy", "geman_mcclure", "welsch"}
+        The penalty of the edge term (weight ``gamma``): ``"l1"`` (default,
+        convex) or a robust penalty, Barron's shape ``a`` = 1, 0, -2, -inf
+        (Charbonnier is convex, the others are not and are solved by
+        ``solver="irls"``, ``"lbfgsb"`` or ``"adam"`` to a stationary point).
+    edge_scale : float
+        ``s > 0`` of a robust edge penalty, in depth units (metres by
+        default 0.05): differences much smaller than ``s`` are smoothed
+        quadratically (cost ``t² / (2s)``), larger ones cost about ``|t|``
+        (Charbonnier) or less (a jump).  Scales with the depth like ``gamma``.
+        Unused with ``"l1"``.
 
     Raises
     ------
     ValueError
-        If a weight is negative, NaN or infinite.
+        If a weight is negative, NaN or infinite, ``edge_penalty`` is not a
+        name of :data:`EDGE_PENALTIES`, or ``edge_scale`` is not finite and > 0.
+    TypeError
+        If ``edge_penalty`` is not a str.
 
     Notes
     -----
@@ -80,11 +108,26 @@ class Weights:
     beta_image: float = 0.00673
     beta_second: float = 0.000286
     beta_second_image: float = 0.039
+    edge_penalty: str = "l1"
+    edge_scale: float = DEFAULT_EDGE_SCALE
 
     def __post_init__(self):
         for f in fields(self):
+            if f.name in EDGE_PENALTY_FIELDS:
+                continue
             value = check_nonnegative_real(getattr(self, f.name), name=f"weight {f.name}")
             object.__setattr__(self, f.name, value)
+        if not isinstance(self.edge_penalty, str):
+            raise TypeError(f"edge_penalty must be a str, one of {list(EDGE_PENALTIES)}; got "
+                            f"{type(self.edge_penalty).__name__} {self.edge_penalty!r}")
+        if self.edge_penalty not in EDGE_PENALTIES:
+            raise ValueError(f"unknown edge_penalty {self.edge_penalty!r}; choose one of {list(EDGE_PENALTIES)}")
+        object.__setattr__(self, "edge_scale", check_positive_real(self.edge_scale, name="edge_scale"))
+
+    @property
+    def robust_edge(self) -> bool:
+        """True when the edge term is present (``gamma > 0``) with a robust penalty (not ``"l1"``)."""
+        return self.gamma > 0 and self.edge_penalty != "l1"
 
     @classmethod
     def paper(cls, alpha=1.0, beta=0.1, gamma=0.01, delta=1e-3, kappa=10.0) -> "Weights":

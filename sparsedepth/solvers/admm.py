@@ -21,7 +21,7 @@ from ..objective.l1 import StackedL1
 from . import active_set
 from .active_set import polish_active_set
 from .certificate import Certificate
-from .common import gap_threshold, objective_floor, output, relative
+from .common import gap_threshold, objective_floor, output, refuse_robust, relative
 
 __all__ = ["solve_admm", "default_rho", "combine"]
 
@@ -155,6 +155,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     Found. Trends Mach. Learn. 3 (2011), §3.4.  Goldstein, Osher, "The split
     Bregman method for L1-regularized problems", SIAM J. Imaging Sci. 2 (2009).
     """
+    refuse_robust(objective, "admm")
     z = np.maximum(np.asarray(x0, dtype=float).copy(), 0.0)
     recorder(0, z, inner=0)
     if not objective.has_l1:

@@ -19,7 +19,7 @@ import numpy as np
 from ..result import IterationRecord, SolverState
 
 __all__ = ["SolverOutput", "CallbackStop", "Recorder", "relative", "objective_floor", "gap_threshold",
-           "require_quadratic", "output"]
+           "require_quadratic", "refuse_robust", "output"]
 
 
 @dataclass(frozen=True)
@@ -141,8 +141,20 @@ def gap_threshold(objective, F, gap_tol):
     return float(gap_tol) * max(float(F), 1e-7 * (abs(c) if c > 0 else float(objective.size)))
 
 
+def refuse_robust(objective, name):
+    """Raise ``ValueError`` when solver ``name`` (convex problems only) gets an objective with robust terms."""
+    robust = [t.name for t in objective.robust_terms]
+    if robust:
+        raise ValueError(
+            f"solver {name!r} cannot minimise the robust term(s) {robust} (penalty "
+            f"{objective.robust_terms[0].penalty.name!r}, not the convex L1 or quadratic it handles); use "
+            "solver='irls' (or 'lbfgsb', 'adam'), or edge_penalty='l1'"
+        )
+
+
 def require_quadratic(objective, name):
-    """Raise ``ValueError`` when solver ``name`` (quadratic problem only) gets an objective with L1 terms."""
+    """Raise ``ValueError`` when solver ``name`` (quadratic problem only) gets an objective with L1 or robust terms."""
+    refuse_robust(objective, name)
     if objective.has_l1:
         raise ValueError(
             f"solver {name!r} solves the quadratic problem only (gamma = 0); use solver='irls', 'lbfgsb' or 'adam' for gamma > 0"

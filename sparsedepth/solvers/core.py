@@ -4,8 +4,9 @@
 ``options``; :func:`solve` divides the depth by :func:`depth_scale`, runs the
 named solver of :data:`~sparsedepth.solvers.registry.REGISTRY` on
 :func:`scaled_objective` and checks its claim of convergence against the
-duality gap (:func:`certify`) and, for a solver that stopped at its start,
-a projected-gradient test.  :data:`SOLVERS` and :data:`SOLVER_OPTIONS` are
+duality gap (:func:`certify`; not for objectives with robust terms, which
+may be non-convex) and, for a solver that stopped at its start, a
+projected-gradient test.  :data:`SOLVERS` and :data:`SOLVER_OPTIONS` are
 the registry's, importable from here too.
 
 May import :mod:`sparsedepth.objective`, :mod:`sparsedepth._validation` and
@@ -17,9 +18,9 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import is_int, is_real
-from ..objective.objective import AbsTerm, Objective, QuadraticTerm
+from ..objective.objective import AbsTerm, Objective, QuadraticTerm, RobustTerm
 from .certificate import Certificate, curvature_lower_bound
-from .common import CallbackStop, Recorder, SolverOutput, gap_threshold, relative
+from .common import CallbackStop, Recorder, SolverOutput, gap_threshold, refuse_robust, relative
 from .registry import DEFAULT_MAX_ITER, DEFAULT_TOL, REGISTRY, SOLVER_OPTIONS, SOLVERS
 
 __all__ = ["solve", "solve_scaled", "check_solver_arguments", "depth_scale", "scaled_objective", "certify",
@@ -101,7 +102,8 @@ def scaled_objective(objective, scale):
     """The objective in depth units of ``scale``: ``F_s(z / s) = F(z) / s²``.
 
     Every quadratic term's target is divided by ``s`` (its weight is
-    unchanged), every L1 weight and the smoothing ``ε`` are divided by ``s``.
+    unchanged), every L1 weight and the smoothing ``ε`` are divided by ``s``,
+    and so are every robust term's weight and scale (``φ_σ(s t) = s φ_{σ/s}(t)``).
     Returns ``objective`` itself for ``s = 1``.
     """
     s = float(scale)
@@ -114,6 +116,8 @@ def scaled_objective(objective, scale):
             terms.append(QuadraticTerm(t.name, t.weight, t.operator, t.row_weights, target))
         elif isinstance(t, AbsTerm):
             terms.append(AbsTerm(t.name, t.weight / s, t.operator, t.row_weights))
+        elif isinstance(t, RobustTerm):
+            terms.append(RobustTerm(t.name, t.weight / s, t.operator, t.row_weights, t.penalty, t.scale / s))
         else:
             raise TypeError(f"objective term {t.name!r} has unknown type {type(t).__name__}")
     return Objective(objective.shape, terms, l1_smoothing=objective.l1_smoothing / s)
@@ -127,7 +131,8 @@ def start_kkt_residual(objective, z, smoothed):
     0``: one element of the subdifferential, so a small value is a
     sufficient, not a necessary, certificate).  Projected: ``g_i`` where
     ``z_i > 0``, ``min(g_i, 0)`` where ``z_i = 0``.  Relative to
-    ``2‖Az‖∞ + 2‖b‖∞ + ‖Kᵀ|c|‖∞`` (the sizes of the gradient's parts).
+    ``2‖Az‖∞ + 2‖b‖∞ + ‖Kᵀ|c|‖∞`` (the sizes of the gradient's parts; ``c``
+    the L1 and robust terms' ``weight · r``, robust gradients entering exactly).
     """
     A, b, _ = objective.normal_equations()
     if smoothed:
@@ -135,7 +140,7 @@ def start_kkt_residual(objective, z, smoothed):
     else:
         g = objective.l1_subgradient(z)
     size = 2.0 * float(np.max(np.abs(A @ z), initial=0.0)) + 2.0 * float(np.max(np.abs(b), initial=0.0))
-    for t in objective.abs_terms:
+    for t in objective.abs_terms + objective.robust_terms:
         size += float(np.max(np.abs(t.operator.T @ t.scaled_row_weights()), initial=0.0))
     pg = np.where(z > 0, g, np.minimum(g, 0.0))
     return float(np.max(np.abs(pg), initial=0.0)) / max(size, np.finfo(float).tiny)
@@ -157,6 +162,12 @@ def solve(objective, x0, *, solver, tol=None, max_iter=None, callback=None, opti
     unchanged start, must pass a projected-gradient check
     (:func:`start_kkt_residual` ``<= 1e-6``); otherwise the output says
     ``converged=False`` and why.
+
+    An objective with robust terms (:class:`~sparsedepth.objective.terms.RobustTerm`)
+    is accepted by the solvers registered ``robust`` only (IRLS, L-BFGS-B,
+    Adam; the others raise ``ValueError``).  It may be non-convex, so there is
+    no duality gap (NaN): ``converged`` is the solver's own stopping rule,
+    which finds a stationary point, not a certified minimum.
     """
     tol, max_iter, options = check_solver_arguments(solver, tol, max_iter, options)
     x0 = np.asarray(x0, dtype=np.float64).ravel()
@@ -172,6 +183,8 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
     options class, in the user's units.
     """
     entry = REGISTRY[solver]
+    if not entry.robust:
+        refuse_robust(objective, solver)
     options = entry.options.from_mapping(options).in_depth_units(scale)
     recorder = Recorder(objective, callback, scale)
     try:
@@ -181,10 +194,15 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
                            tuple(recorder.history))
     converged, message = out.converged, out.message
     gap = out.gap
-    if np.isnan(gap):
+    robust = [t.name for t in objective.robust_terms]
+    if np.isnan(gap) and not robust:
         gap = certify(objective, out.z, solver, options)
     own = converged
-    if np.isnan(gap):
+    if robust:
+        gap = float("nan")
+        message += (f"; no duality gap for the robust term(s) {robust} (F may be non-convex): converged is the "
+                    "solver's own rule, a stationary point")
+    elif np.isnan(gap):
         message += "; duality gap not available (the solve with the quadratic part's matrix failed)"
     elif converged and not gap <= gap_threshold(objective, objective.value(out.z), options.gap_tol):
         converged = False
@@ -208,8 +226,12 @@ def certify(objective, z, solver, options):
     smoothing :attr:`Objective.l1_smoothing` for the solvers registered with
     ``smoothing_ties`` (L-BFGS-B, Adam, IRLS) and exact ties otherwise.  For
     the γ = 0 solvers the one-product bound ``¼ ‖r‖² / λ_min(A)`` is returned
-    when it already meets ``gap_tol``.
+    when it already meets ``gap_tol``.  NaN for an objective with robust
+    terms: the certificate covers quadratic and L1 terms only (and a robust
+    objective may be non-convex).
     """
+    if objective.robust_terms:
+        return float("nan")
     entry = REGISTRY[solver]
     if entry.quadratic and not objective.has_l1:
         # unconstrained quadratic problem: F(z) − F* = ¼ rᵀA⁻¹r <= ¼ ‖r‖² / λ_min(A), r = 2(Az − b); this costs one

@@ -65,6 +65,14 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
     increase the exact ``F`` is halved (along the segment, ``F`` being convex)
     until it does not, so the exact ``F`` never increases.
 
+    A robust term ``c_k φ((Kz)_k)``
+    (:class:`~sparsedepth.objective.terms.RobustTerm`) adds ``½ Kᵀ diag(c ⊙
+    ω(K z)) K`` to the system, ``ω = φ'(t)/t`` its majoriser weight
+    (majorise–minimise: ``φ`` is concave in ``t²``); without L1 terms the
+    solver has converged at the first relative decrease ``<= tol``, a
+    stationary point of a possibly non-convex ``F``.  The step guard keeps
+    ``F`` from increasing there too.
+
     References
     ----------
     Daubechies, DeVore, Fornasier, Güntürk, "Iteratively reweighted least
@@ -76,6 +84,8 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
     l1 = objective.abs_terms
     # the reweighted normal matrices Kᵀ diag(ω) K are sparse products: CSR operators, converted once
     l1_csr = [t.operator if sp.issparse(t.operator) else t.operator.tocsr() for t in l1]
+    robust = objective.robust_terms
+    robust_csr = [t.operator if sp.issparse(t.operator) else t.operator.tocsr() for t in robust]
     eps, eps_min = _smoothing_range(x0, options)
     preconditioner = _ReweightedPreconditioner(options.preconditioner, objective.shape)
     floor = objective_floor(objective)
@@ -87,7 +97,7 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
     k = 0
     while k < max_iter:
         k += 1
-        system = _reweighted_system(A0, l1, l1_csr, z, eps)
+        system = _reweighted_system(A0, l1, l1_csr, z, eps, robust, robust_csr)
         z_new, n_inner, _, _ = pcg(system, b, x0=z, M=preconditioner(system), rtol=options.inner_rtol,
                                    maxiter=options.inner_max_iter)
         inner_total += n_inner
@@ -116,15 +126,19 @@ def _smoothing_range(x0, options):
     return eps, min(eps_min, eps)
 
 
-def _reweighted_system(A0, l1, l1_csr, z, eps):
-    """``A + ½ Σ Kᵀ diag(c / max(|Kz|, ε)) K`` over the L1 terms, as CSR (``A`` itself without L1 terms)."""
-    if not l1:
+def _reweighted_system(A0, l1, l1_csr, z, eps, robust=(), robust_csr=()):
+    """``A + ½ Σ Kᵀ diag(c / max(|Kz|, ε)) K`` over the L1 terms, plus ``½ Kᵀ diag(ω) K`` per robust term
+    (``ω`` its :meth:`~sparsedepth.objective.terms.RobustTerm.majorizer_weights`), as CSR (``A`` itself without
+    either)."""
+    if not l1 and not robust:
         return A0
     parts = [A0]
     for term, K in zip(l1, l1_csr):
         t = K @ z
         omega = term.scaled_row_weights() / np.maximum(np.abs(t), eps)
         parts.append(0.5 * (K.T @ sp.diags(omega) @ K))
+    for term, K in zip(robust, robust_csr):
+        parts.append(0.5 * (K.T @ sp.diags(term.majorizer_weights(z)) @ K))
     return sum(parts[1:], parts[0]).tocsr()
 
 

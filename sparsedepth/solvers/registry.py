@@ -52,6 +52,11 @@ class SolverEntry:
         IRLS, whose iterates leave differences of ~1e-5 on edges that the
         optimum ties, far above its final ``ε``.  Otherwise only exact ties
         count (ADMM's polished points, the γ = 0 solvers).
+    robust : bool
+        True when the solver handles robust (non-convex, smooth) terms
+        (:class:`~sparsedepth.objective.terms.RobustTerm`): IRLS by
+        majorise–minimise, L-BFGS-B and Adam through the exact gradient.
+        The others refuse an objective with one.
     """
 
     solve: Callable
@@ -61,16 +66,19 @@ class SolverEntry:
     quadratic: bool = False
     smoothed: bool = False
     smoothing_ties: bool = False
+    robust: bool = False
 
 
 REGISTRY = {
     "direct": SolverEntry(solve_direct, DirectOptions, 0.0, 1, quadratic=True),
     "cg": SolverEntry(solve_cg, CgOptions, 1e-8, 5000, quadratic=True),
     "amg": SolverEntry(solve_amg, AmgOptions, 1e-8, 500, quadratic=True),
-    "irls": SolverEntry(solve_irls, IrlsOptions, 1e-7, 200, smoothing_ties=True),
+    "irls": SolverEntry(solve_irls, IrlsOptions, 1e-7, 200, smoothing_ties=True, robust=True),
     "admm": SolverEntry(solve_admm, AdmmOptions, 1.5e-3, 1000),
-    "lbfgsb": SolverEntry(solve_lbfgsb, LbfgsbOptions, 1e-12, 15000, smoothed=True, smoothing_ties=True),
-    "adam": SolverEntry(solve_adam, AdamOptions, 1e-7, 20000, smoothed=True, smoothing_ties=True),
+    "lbfgsb": SolverEntry(solve_lbfgsb, LbfgsbOptions, 1e-12, 15000, smoothed=True, smoothing_ties=True,
+                          robust=True),
+    "adam": SolverEntry(solve_adam, AdamOptions, 1e-7, 20000, smoothed=True, smoothing_ties=True,
+                        robust=True),
 }
 
 #: Solver name → solve function, in the order of :data:`REGISTRY` (the public ``sd.SOLVERS``).
