@@ -1,5 +1,6 @@
 """Robust edge penalties: the penalty family, the robust term, IRLS descent and exactness, refusals."""
 
+import dataclasses
 import math
 import warnings
 
@@ -312,6 +313,20 @@ def test_batch_settings_fingerprint_keeps_the_edge_penalty():
     other = BatchOptions(keep_fraction=0.05, weights=robust.weights.replace(edge_penalty="welsch"))
     assert settings_difference(stored, fingerprint([], other)) == "options weights"
     assert settings_difference(stored, fingerprint([], robust)) == ""
+
+
+def test_batch_settings_of_an_l1_batch_match_files_without_the_edge_penalty_fields():
+    """An L1 batch's fingerprint leaves out edge_penalty / edge_scale: a settings file without them still resumes."""
+    from sparsedepth.batch import BatchOptions
+    from sparsedepth.batch.csvlog import fingerprint, settings_difference
+
+    current = fingerprint([], BatchOptions(keep_fraction=0.05, weights=Weights(gamma=0.01)))
+    assert "edge_penalty" not in current["options"]["weights"] and "edge_scale" not in current["options"]["weights"]
+    stored = {**current, "options": {**current["options"], "weights": {
+        k: v for k, v in dataclasses.asdict(Weights(gamma=0.01)).items() if k not in ("edge_penalty", "edge_scale")}}}
+    assert settings_difference(stored, current) == ""
+    changed = fingerprint([], BatchOptions(keep_fraction=0.05, weights=Weights(gamma=0.02)))
+    assert settings_difference(stored, changed) == "options weights"
 
 
 def test_bench_reports_and_ablation_accept_a_robust_edge_penalty():

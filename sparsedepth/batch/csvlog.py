@@ -43,9 +43,16 @@ def settings_path(csv_path) -> Path:
 
 def fingerprint(frames, options) -> dict:
     """The settings of a batch as plain JSON data: the options and the frame list (absolute paths)."""
+    settings = dataclasses.asdict(options)
+    weights = settings.get("weights")
+    if isinstance(weights, dict) and weights.get("edge_penalty", "l1") == "l1":
+        # the L1 edge term has no scale: both fields are left out for it, so that settings files that do not
+        # name them match
+        weights.pop("edge_penalty", None)
+        weights.pop("edge_scale", None)
     data = {
         "format": _SETTINGS_FORMAT,
-        "options": dataclasses.asdict(options),
+        "options": settings,
         "frames": [[type(f).__name__, *dataclasses.astuple(f)] for f in frames],
     }
     return json.loads(json.dumps(data, allow_nan=False))
