@@ -16,8 +16,9 @@ Per frame, in this one process (one BLAS thread), ADMM runs first with its
 defaults; its time ``t_ADMM`` is the unit.  Then:
 
 * ``irls`` with its defaults (``gap_tol = 1e-4``) and with ``gap_tol = 1e-6``;
-* ``adam`` (cosine schedule over 3000 steps) and ``lbfgsb``, each stopped by
-  a callback at ``BUDGET`` × ``t_ADMM``;
+* ``adam`` with its defaults (a cosine schedule over 1000 steps);
+* ``lbfgsb`` stopped by a callback at ``BUDGET`` × ``t_ADMM``, the time the
+  issue allows Adam;
 * ADMM again (its second run gives the spread of the timing).
 
 ``F*`` is the lowest exact objective any run reached on the frame.  The
@@ -52,7 +53,7 @@ FRAMES = ("nyu_metric3d/00050", "nyu_rcnn_depth/demo", "kitti/0000000050")
 WEIGHTS = sd.Weights.paper(alpha=1.0, beta=0.5, gamma=0.2, delta=0.01, kappa=10.0)
 FRACTION = 0.05
 SEED = 5
-#: Adam and L-BFGS-B are stopped at this many ADMM times.
+#: L-BFGS-B is stopped at this many ADMM times (the time issue 20 allows Adam).
 BUDGET = 10.0
 LEVELS = (1e-2, 1e-4, 1e-6)
 OUT = Path("docs/solver_gaps.md")
@@ -85,8 +86,7 @@ def runs(t_admm):
     return [
         ("irls", "irls", None, None, None),
         ("irls, gap_tol 1e-6", "irls", {"gap_tol": 1e-6}, None, None),
-        (f"adam (cosine, 3000 steps), stopped at {BUDGET:g}× ADMM", "adam", {"horizon": 3000}, 3000,
-         _Budget(budget)),
+        ("adam", "adam", None, None, None),
         (f"lbfgsb, stopped at {BUDGET:g}× ADMM", "lbfgsb", None, 100000, _Budget(budget)),
         ("admm (second run)", "admm", None, None, None),
     ]

@@ -336,7 +336,7 @@ class AdamOptions(SolverOptions):
         ``k = 1 … K``, ``K = min(horizon, max_iter)``, and the solver stops
         after step ``K``; ``"inverse_sqrt"``: ``η_k = η / sqrt(1 + k /
         decay_steps)`` until the stopping rule or ``max_iter``.
-    horizon : int, default 300
+    horizon : int, default 1000
         ``K`` of the cosine schedule.
     decay_steps : float, default 200.0
         Of the ``"inverse_sqrt"`` schedule.
@@ -353,7 +353,7 @@ class AdamOptions(SolverOptions):
     solver: ClassVar[str] = "adam"
     learning_rate: float | None = _option(None, kind=float, positive=True, depth_unit=True)
     schedule: str = _option("cosine", kind=str, choices=("cosine", "inverse_sqrt"))
-    horizon: int = _option(300)
+    horizon: int = _option(1000)
     decay_steps: float = _option(200.0, positive=True)
     beta1: float = _option(0.9)
     beta2: float = _option(0.999)
