@@ -25,9 +25,11 @@ defaults; its time ``t_ADMM`` is the unit.  Then:
 table gives each run's time / ``t_ADMM``, ``(F − F*) / F*``, the certified
 relative duality gap ``result.gap / F`` (an upper bound on ``(F − F_opt) /
 F``), ``converged``, and the time (in ``t_ADMM``) at which its history first
-came within ``1e-2``, ``1e-4`` and ``1e-6`` of ``F*``.
+came within ``1e-2``, ``1e-4`` and ``1e-6`` of ``F*``.  For the first frame
+it draws ``(F_k − F*) / F*`` (log axis) of every run against time (in
+``t_ADMM``) and against iterations: :data:`FIGURE` (needs matplotlib).
 
-May import :mod:`sparsedepth`, :mod:`bench.blas`, :mod:`bench.harness` and numpy.
+May import :mod:`sparsedepth`, :mod:`bench.blas`, :mod:`bench.harness`, numpy and (for the figure) matplotlib.
 """
 
 from __future__ import annotations
@@ -57,6 +59,7 @@ SEED = 5
 BUDGET = 10.0
 LEVELS = (1e-2, 1e-4, 1e-6)
 OUT = Path("docs/solver_gaps.md")
+FIGURE = Path("docs/figures/solver_gaps.png")
 
 
 def problem(name):
@@ -121,8 +124,34 @@ def frame_rows(name, *, log=print):
             reached.append(min(times) / t_admm if times else None)
         rows.append(dict(frame=name, label=label, ratio=seconds / t_admm, seconds=seconds, above=(F - best) / best,
                          gap=result.gap / F if np.isfinite(result.gap) else float("nan"),
-                         converged=result.converged, reached=reached, iterations=result.iterations))
+                         converged=result.converged, reached=reached, iterations=result.iterations,
+                         curve=[(h.iteration, h.time / t_admm, (h.objective - best) / best) for h in result.history]))
     return rows
+
+
+def plot(rows, path):
+    """``(F_k − F*) / F*`` against time (in ADMM runs) and against iterations, one curve per run."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (by_time, by_iter) = plt.subplots(1, 2, figsize=(11, 4.2))
+    floor = 1e-12
+    for r in rows:
+        it, t, above = np.array(r["curve"]).T
+        above = np.maximum(above, floor)
+        by_time.plot(t, above, label=r["label"])
+        by_iter.plot(np.maximum(it, 1), above, label=r["label"])
+    by_time.set(xscale="log", yscale="log", xlabel="time / ADMM's time", ylabel="(F − F*) / F*",
+                title=rows[0]["frame"])
+    by_iter.set(xscale="log", yscale="log", xlabel="iteration", ylabel="(F − F*) / F*")
+    by_iter.legend(fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def _cell(value, fmt):
@@ -163,8 +192,12 @@ def main(argv=None):
                f"ratios to the first ADMM run on the same frame in the same process; \"≤ 1e-4 at\" is the time "
                f"(in ADMM runs) at which the run's history first came within 1e-4 × F* of the lowest F any run "
                f"reached; \"gap / F\" is the certified bound `result.gap / result.objective` (— where the solver's "
-               f"run was stopped before the certificate).\n\n{text}\n{machine_markdown()}\n")
+               f"run was stopped before the certificate).\n\n{text}\n![every solver on {frames[0]}](figures/solver_gaps.png)\n\n{machine_markdown()}\n")
         write_text(OUT, doc)
+        try:
+            plot([r for r in rows if r["frame"] == frames[0]], FIGURE)
+        except ImportError:
+            print("matplotlib is not installed: no figure", file=sys.stderr)
     return 0
 
 
