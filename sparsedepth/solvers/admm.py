@@ -23,27 +23,38 @@ from .active_set import polish_active_set
 from .certificate import Certificate
 from .common import gap_threshold, objective_floor, output, relative
 
-__all__ = ["solve_admm", "default_rho", "combine"]
+__all__ = ["solve_admm", "default_rho", "combine", "RHO_REFERENCE_PIXELS"]
+
+
+#: The pixel count at which :func:`default_rho` was tuned (a 640x480 frame); ρ grows with the side length above it.
+RHO_REFERENCE_PIXELS = 640 * 480
 
 
 def default_rho(objective, max_weight, depth_scale):
-    """ADMM penalty ``ρ = 1.5 max(α, 300 max_k c_k / s)``.
+    """ADMM penalty ``ρ = 1.5 max(α, 300 max_k c_k / s) · max(1, √(N / N₀))``.
 
     ``α`` is the weight of the ``data`` term (1 without one), ``c`` the L1
-    row weights and ``s`` a typical depth (the median of the positive
-    starting values).  ρ has the units of the quadratic weights; ``c/s`` has
-    them too, and ``c_k / ρ`` is the shrinkage threshold in depth units.
-    With over-relaxation 1.9 and the polishes of :func:`solve_admm`, on real
-    640x480 frames, ``ρ = 1.5α`` reaches the optimum fastest for small L1
-    weights (smaller ρ stalls after a fast start, larger ρ is slower), while
-    a large L1 weight relative to the depth scale stalls unless ρ grows with
-    it: hence ρ grows with ``c/s``, but not below ``1.5α``.
+    row weights, ``s`` a typical depth (the median of the positive
+    starting values), ``N`` the pixels and ``N₀`` =
+    :data:`RHO_REFERENCE_PIXELS`.  ρ has the units of the quadratic weights;
+    ``c/s`` has them too, and ``c_k / ρ`` is the shrinkage threshold in depth
+    units.  With over-relaxation 1.9 and the polishes of :func:`solve_admm`,
+    on real 640x480 frames, ``ρ = 1.5α`` reaches the optimum fastest for
+    small L1 weights (smaller ρ stalls after a fast start, larger ρ is
+    slower), while a large L1 weight relative to the depth scale stalls
+    unless ρ grows with it: hence ρ grows with ``c/s``, but not below
+    ``1.5α``.  The same scene sampled on a finer grid has depth differences
+    between neighbours smaller in proportion to the pixel spacing, ``1/√N``,
+    so the shrinkage threshold ``c/ρ`` shrinks with them: ρ grows as the side
+    length from ``N₀`` pixels on (iterations and times on frames resized 2x
+    and 4x per side: ``docs/admm_scale.md``, from ``bench/admm_scale.py``).
     """
     alpha = 1.0
     for term in objective.quadratic_terms:
         if term.name == "data":
             alpha = float(term.weight)
-    return 1.5 * max(alpha, 300.0 * float(max_weight) / depth_scale)
+    grid = max(1.0, float(np.sqrt(objective.size / RHO_REFERENCE_PIXELS)))
+    return 1.5 * max(alpha, 300.0 * float(max_weight) / depth_scale) * grid
 
 
 def combine(a, A, b, B):
