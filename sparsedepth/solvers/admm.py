@@ -23,27 +23,38 @@ from .active_set import polish_active_set
 from .certificate import Certificate
 from .common import gap_threshold, objective_floor, output, refuse_robust, relative
 
-__all__ = ["solve_admm", "default_rho", "combine"]
+__all__ = ["solve_admm", "default_rho", "combine", "RHO_REFERENCE_PIXELS"]
+
+
+#: The pixel count at which :func:`default_rho` was tuned (a 640x480 frame); ρ grows with the side length above it.
+RHO_REFERENCE_PIXELS = 640 * 480
 
 
 def default_rho(objective, max_weight, depth_scale):
-    """ADMM penalty ``ρ = 1.5 max(α, 300 max_k c_k / s)``.
+    """ADMM penalty ``ρ = 1.5 max(α, 300 max_k c_k / s) · max(1, √(N / N₀))``.
 
     ``α`` is the weight of the ``data`` term (1 without one), ``c`` the L1
-    row weights and ``s`` a typical depth (the median of the positive
-    starting values).  ρ has the units of the quadratic weights; ``c/s`` has
-    them too, and ``c_k / ρ`` is the shrinkage threshold in depth units.
-    With over-relaxation 1.9 and the polishes of :func:`solve_admm`, on real
-    640x480 frames, ``ρ = 1.5α`` reaches the optimum fastest for small L1
-    weights (smaller ρ stalls after a fast start, larger ρ is slower), while
-    a large L1 weight relative to the depth scale stalls unless ρ grows with
-    it: hence ρ grows with ``c/s``, but not below ``1.5α``.
+    row weights, ``s`` a typical depth (the median of the positive
+    starting values), ``N`` the pixels and ``N₀`` =
+    :data:`RHO_REFERENCE_PIXELS`.  ρ has the units of the quadratic weights;
+    ``c/s`` has them too, and ``c_k / ρ`` is the shrinkage threshold in depth
+    units.  With over-relaxation 1.9 and the polishes of :func:`solve_admm`,
+    on real 640x480 frames, ``ρ = 1.5α`` reaches the optimum fastest for
+    small L1 weights (smaller ρ stalls after a fast start, larger ρ is
+    slower), while a large L1 weight relative to the depth scale stalls
+    unless ρ grows with it: hence ρ grows with ``c/s``, but not below
+    ``1.5α``.  The same scene sampled on a finer grid has depth differences
+    between neighbours smaller in proportion to the pixel spacing, ``1/√N``,
+    so the shrinkage threshold ``c/ρ`` shrinks with them: ρ grows as the side
+    length from ``N₀`` pixels on (iterations and times on frames resized 2x
+    and 4x per side: ``docs/admm_scale.md``, from ``bench/admm_scale.py``).
     """
     alpha = 1.0
     for term in objective.quadratic_terms:
         if term.name == "data":
             alpha = float(term.weight)
-    return 1.5 * max(alpha, 300.0 * float(max_weight) / depth_scale)
+    grid = max(1.0, float(np.sqrt(objective.size / RHO_REFERENCE_PIXELS)))
+    return 1.5 * max(alpha, 300.0 * float(max_weight) / depth_scale) * grid
 
 
 def combine(a, A, b, B):
@@ -284,6 +295,18 @@ class _AdmmRun:
         else:
             recorder(k, np.maximum(z, 0.0), inner=self.inner_total)
 
+    def _new_certificate(self):
+        """The duality-gap certificate of this run (one multigrid hierarchy of ``A`` for all its checks).
+
+        The dual point on the tied rows is ``ρλ`` clipped to ``[−c, c]``; a
+        polished point's is used as it is (``fit_steps=0``: the projected-gradient
+        fit costs as much as the rest of a check and did not change a decision
+        of the checks on the frames of ``bench/admm_scale.py``), an unpolished
+        iterate's is improved by the certificate's default fit.
+        """
+        fit = {"fit_steps": 0} if self.polish else {}
+        return Certificate(self.objective, nonnegative=True, fit_max_iter=0, **fit)
+
     def stop_on_residuals(self, tol):
         """Plain ADMM's stop: converged when the duality gap (tied rows: ``u = 0``) passes ``gap_tol`` too."""
         objective, gap_tol = self.objective, self.options.gap_tol
@@ -291,7 +314,7 @@ class _AdmmRun:
         self.message = (f"primal {self.r_norm:.1e} and dual {self.s_norm:.1e} residuals <= tol {tol:.1e} "
                         f"(rho = {self.rho:.3g})")
         z_stop = np.maximum(self.z, 0.0)
-        self.certificate = Certificate(objective, nonnegative=True, fit_max_iter=0)
+        self.certificate = self._new_certificate()
         gap = self.certificate.gap(z_stop, p=self.rho * self.lam, tied=self.u == 0)
         self.certified = (z_stop, gap)
         if not (np.isnan(gap) or gap <= gap_threshold(objective, objective.value(z_stop), gap_tol)):
@@ -332,7 +355,7 @@ class _AdmmRun:
         objective, options, best = self.objective, self.options, self.best
         gap_tol = options.gap_tol
         if self.certificate is None:
-            self.certificate = Certificate(objective, nonnegative=True, fit_max_iter=0)
+            self.certificate = self._new_certificate()
         gap = self.certificate.gap(best[1], p=self.rho * self.lam)
         self.certified = (best[1], gap)
         if np.isnan(gap) or gap <= gap_threshold(objective, best[0], gap_tol):
@@ -388,6 +411,6 @@ class _AdmmRun:
             gap = self.certified[1]
         else:
             if self.certificate is None:
-                self.certificate = Certificate(objective, nonnegative=True, fit_max_iter=0)
+                self.certificate = self._new_certificate()
             gap = self.certificate.gap(z, p=self.rho * self.lam)
         return output(z, k, self.converged, self.message, recorder, gap=gap)
