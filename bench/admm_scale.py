@@ -16,7 +16,7 @@ Problems (image and dense depth resized 1x, 2x, 4x per side, then sampled):
 
 * ``perf``: the L1 problem of :mod:`bench.perf` (frame ``nyu_metric3d/00000``, depth in metres, 5 % of the valid
   pixels by ``sample_depth(..., fraction=0.05, seed=0)``, :data:`bench.perf.L1_WEIGHTS`);
-* ``issue20``: frame ``nyu_metric3d/00050``, depth in millimetres, the mask ``(depth > 0) & (U < 0.05)`` with ``U``
+* ``issue20``: frame ``nyu_metric3d/00050``, depth in metres (F* = 903.16 at 1x), the mask ``(depth > 0) & (U < 0.05)`` with ``U``
   from ``np.random.default_rng(5)``, ``Weights.paper(alpha=1, beta=0.5, gamma=0.2, delta=0.01, kappa=10)``.
 
 Every run is ``sd.complete_depth(..., solver="admm", clip_to_observed=False)`` (the default run: default options).
@@ -80,9 +80,9 @@ def perf_problem(scale):
 
 
 def issue_problem(scale):
-    """Issue 20's L1 problem at ``scale`` per side (depth in mm): ``(image, sparse, mask, weights)``."""
+    """Issue 20's L1 problem at ``scale`` per side (depth in metres): ``(image, sparse, mask, weights)``."""
     fr = sd.load_shared_frame(ISSUE_FRAME)
-    image, depth = _resize(fr.image, np.array(fr.depth) * 1000.0, scale)
+    image, depth = _resize(fr.image, np.array(fr.depth, dtype=float), scale)
     depth = np.nan_to_num(depth)
     mask = (depth > 0) & (np.random.default_rng(5).random(depth.shape) < 0.05)
     return image, np.where(mask, depth, 0.0), mask, ISSUE_WEIGHTS
