@@ -140,8 +140,34 @@ class QuadraticTerm:
         return float(self.weight * np.sum(d2))
 
 
+class _SharedRowWeights:
+    """The row weights of a non-quadratic term: ``r`` of shape ``(m,)``, or ``(N,)`` shared by the ``m / N`` blocks."""
+
+    def _check_row_weights(self):
+        """``ValueError`` unless ``row_weights`` have shape (m,), or (N,) shared by the blocks."""
+        if self.row_weights is not None:
+            m, n = self.operator.shape
+            size = np.shape(self.row_weights)[0] if np.ndim(self.row_weights) == 1 else -1
+            if size != m and not (size == n and n > 0 and m % n == 0):
+                raise ValueError(f"row_weights of term {self.name!r} must have shape ({m},) or ({n},) "
+                                 f"(shared by the {m // max(n, 1)} blocks), got {np.shape(self.row_weights)}")
+
+    def row_weight_blocks(self) -> int:
+        """How many times the stored ``row_weights`` repeat along the rows (1 when of shape (m,))."""
+        if self.row_weights is None:
+            return 1
+        return self.operator.shape[0] // np.shape(self.row_weights)[0]
+
+    def scaled_row_weights(self):
+        """``weight · r`` as an array of shape (m,)."""
+        m = self.operator.shape[0]
+        if self.row_weights is None:
+            return np.full(m, float(self.weight))
+        return self.weight * np.tile(np.asarray(self.row_weights, dtype=np.float64), self.row_weight_blocks())
+
+
 @dataclass(frozen=True, eq=False)
-class AbsTerm:
+class AbsTerm(_SharedRowWeights):
     """``weight · Σ_k r_k |(K z)_k|`` (weighted L1 of a linear map of ``z``).
 
     Parameters
@@ -166,15 +192,7 @@ class AbsTerm:
     row_weights: Optional[np.ndarray] = None
 
     def __post_init__(self):
-        _check_row_weights(self)
-
-    def row_weight_blocks(self) -> int:
-        """How many times the stored ``row_weights`` repeat along the rows (1 when of shape (m,))."""
-        return _row_weight_blocks(self)
-
-    def scaled_row_weights(self):
-        """``weight · r`` as an array of shape (m,)."""
-        return _scaled_row_weights(self)
+        self._check_row_weights()
 
     def value(self, z) -> float:
         if self.weight == 0:
@@ -197,7 +215,7 @@ class AbsTerm:
 
 
 @dataclass(frozen=True, eq=False)
-class RobustTerm:
+class RobustTerm(_SharedRowWeights):
     r"""``weight · Σ_k r_k φ((K z)_k)`` with ``φ`` a robust penalty of scale ``s``.
 
     Parameters
@@ -238,17 +256,9 @@ class RobustTerm:
     scale: float = 0.05
 
     def __post_init__(self):
-        _check_row_weights(self)
+        self._check_row_weights()
         object.__setattr__(self, "penalty", robust_penalty(self.penalty))
         object.__setattr__(self, "scale", check_positive_real(self.scale, name=f"scale of term {self.name!r}"))
-
-    def row_weight_blocks(self) -> int:
-        """How many times the stored ``row_weights`` repeat along the rows (1 when of shape (m,))."""
-        return _row_weight_blocks(self)
-
-    def scaled_row_weights(self):
-        """``weight · r`` as an array of shape (m,)."""
-        return _scaled_row_weights(self)
 
     def value(self, z) -> float:
         """``weight · Σ r φ(K z)``."""
@@ -270,26 +280,3 @@ class RobustTerm:
         The quadratic majoriser of the term at ``z`` is ``½ Σ_k (this)_k (K z')_k² + const`` in ``z'``.
         """
         return self.scaled_row_weights() * self.penalty.weight(self.operator @ z, self.scale)
-
-
-def _check_row_weights(term):
-    """``ValueError`` unless the term's ``row_weights`` have shape (m,), or (N,) shared by the blocks."""
-    if term.row_weights is not None:
-        m, n = term.operator.shape
-        size = np.shape(term.row_weights)[0] if np.ndim(term.row_weights) == 1 else -1
-        if size != m and not (size == n and n > 0 and m % n == 0):
-            raise ValueError(f"row_weights of term {term.name!r} must have shape ({m},) or ({n},) "
-                             f"(shared by the {m // max(n, 1)} blocks), got {np.shape(term.row_weights)}")
-
-
-def _row_weight_blocks(term) -> int:
-    if term.row_weights is None:
-        return 1
-    return term.operator.shape[0] // np.shape(term.row_weights)[0]
-
-
-def _scaled_row_weights(term):
-    m = term.operator.shape[0]
-    if term.row_weights is None:
-        return np.full(m, float(term.weight))
-    return term.weight * np.tile(np.asarray(term.row_weights, dtype=np.float64), _row_weight_blocks(term))
