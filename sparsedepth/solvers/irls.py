@@ -78,8 +78,9 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
     Daubechies, DeVore, Fornasier, Güntürk, "Iteratively reweighted least
     squares minimization for sparse recovery", CPAM 63 (2010).
     """
-    if options.method == "newton" and _newton_applies(objective):
-        return _solve_newton(objective, x0, tol=tol, max_iter=max_iter, recorder=recorder, options=options)
+    system = _newton_system(objective) if options.method == "newton" else None
+    if system is not None:
+        return _solve_newton(objective, system, x0, max_iter=max_iter, recorder=recorder, options=options)
     A0, b, _ = objective.normal_equations()
     l1 = objective.abs_terms
     # the reweighted normal matrices Kᵀ diag(ω) K are sparse products: CSR operators, converted once
@@ -117,10 +118,7 @@ def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
 
 def _smoothing_range(x0, options):
     """``(eps_start, eps_min)`` of the options, or ``1e-2`` and ``1e-7`` times the typical depth."""
-    scale = options.scale
-    if scale is None:
-        positive = x0[x0 > 0]
-        scale = max(float(np.median(positive)) if positive.size else 1.0, 1e-12)
+    scale = _smoothing_scale(x0, options)
     eps = 1e-2 * scale if options.eps_start is None else float(options.eps_start)
     eps_min = 1e-7 * scale if options.eps_min is None else float(options.eps_min)
     return eps, min(eps_min, eps)
@@ -184,19 +182,22 @@ def _monotone_step(objective, z, F, z_new):
     return z_new, F_new
 
 
-def _newton_applies(objective):
-    """True when the objective has L1 terms, their ``K`` is the grid gradient and ``A`` has a stencil form."""
-    if not objective.has_l1 or getattr(objective, "robust_terms", ()):
-        return False
-    if curvature_lower_bound(objective) <= 0:
-        return False  # no proven duality gap to stop on: the reweighting's own rule decides
+def _newton_system(objective):
+    """The :class:`_GradientSystem` of the Newton steps, or None where they do not apply.
+
+    They apply when the objective has L1 terms and no robust term, the L1
+    operator is the grid gradient, ``A`` has a stencil form and a positive
+    curvature bound (without it the duality gap is not proven, and the
+    reweighting's own stopping rule decides).
+    """
+    if not objective.has_l1 or objective.robust_terms or curvature_lower_bound(objective) <= 0:
+        return None
     if not StackedL1(objective).grid_gradient:
-        return False
+        return None
     try:
-        objective.normal_stencil()
-    except ValueError:
-        return False
-    return True
+        return _GradientSystem(objective)
+    except ValueError:  # a quadratic term with a general sparse operator: no stencil form
+        return None
 
 
 class _GradientSystem:
@@ -209,15 +210,12 @@ class _GradientSystem:
 
     def __init__(self, objective):
         self.shape = objective.shape
-        offsets, stencil = objective.normal_stencil()
-        for needed in ((-1, 0), (0, -1), (0, 1), (1, 0)):
-            if needed not in offsets:
-                offsets = sorted(set(offsets) | {needed})
-                full = np.zeros((len(offsets),) + self.shape)
-                old = objective.normal_stencil()[0]
-                for k, o in enumerate(old):
-                    full[offsets.index(o)] = stencil[k]
-                stencil = full
+        own, stencil = objective.normal_stencil()
+        offsets = sorted(set(own) | {(-1, 0), (0, -1), (0, 0), (0, 1), (1, 0)})
+        if offsets != own:
+            full = np.zeros((len(offsets),) + self.shape)
+            full[[offsets.index(o) for o in own]] = stencil
+            stencil = full
         self.offsets = offsets
         self.stencil = stencil
         self.index = {o: k for k, o in enumerate(offsets)}
@@ -241,7 +239,7 @@ class _GradientSystem:
         return stencil_to_csr(self.offsets, st)
 
 
-def _huber_value(objective, A, b, const, l1, c, z, eps):
+def _huber_value(A, b, const, l1, c, z, eps):
     """The smoothed objective the Newton steps decrease: ``|t|`` replaced by Huber's ``t²/(2ε)`` for ``|t| <= ε``."""
     t = l1.apply(z)
     a = np.abs(t)
@@ -249,7 +247,7 @@ def _huber_value(objective, A, b, const, l1, c, z, eps):
     return dot(z, A @ z) - 2.0 * dot(b, z) + const + dot(c, h)
 
 
-def _solve_newton(objective, x0, *, tol, max_iter, recorder, options):
+def _solve_newton(objective, system, x0, *, max_iter, recorder, options):
     r"""Primal-dual Newton steps on the reweighted systems, with continuation in ``ε``.
 
     Notes
@@ -306,13 +304,13 @@ def _solve_newton(objective, x0, *, tol, max_iter, recorder, options):
     tie_band = 1e-3 * scale if options.tie_band is None else options.tie_band
     certify_below = 1e-5 * scale if options.certify_below is None else options.certify_below
     floor = objective_floor(objective)
-    system = _GradientSystem(objective)
     certificate = Certificate(objective, nonnegative=True)
     b_norm = max(2.0 * float(np.linalg.norm(b)), np.finfo(float).tiny)
     z = np.maximum(np.asarray(x0, dtype=float).copy(), 0.0)
     F = recorder(0, z, inner=0)
     best_F, best_z = F, z.copy()
     t = l1.apply(z)
+    Az = A @ z
     p = c * t / np.maximum(np.abs(t), eps)
     inner_total, level, level_start_F = 0, 0, np.inf
     converged, gap = False, float("nan")
@@ -325,7 +323,7 @@ def _solve_newton(objective, x0, *, tol, max_iter, recorder, options):
         m = np.maximum(a, eps)
         clipped = np.clip(p, -c, c)
         d = np.where(a > eps, (c - clipped * np.sign(t)) / m, c / eps)
-        grad = 2.0 * (A @ z - b) + l1.adjoint(p)
+        grad = 2.0 * (Az - b) + l1.adjoint(p)
         R2_m = p - c * t / m
         S = system(d)
         M = _newton_preconditioner(S, options.preconditioner, objective.shape)
@@ -333,13 +331,14 @@ def _solve_newton(objective, x0, *, tol, max_iter, recorder, options):
         dz, n_inner, _, _ = pcg(S, rhs, M=M, rtol=options.newton_rtol, maxiter=options.newton_max_inner)
         inner_total += n_inner
         dp = d * l1.apply(dz) - R2_m
-        z, p, step = _newton_step(objective, A, b, const, l1, c, z, p, dz, dp, eps)
+        z, p, step = _newton_step(A, b, const, l1, c, z, p, dz, dp, eps)
         F = objective.value(z)
         recorder(k, z, inner=inner_total, value=F)
         if F < best_F:
             best_F, best_z = F, z.copy()
         t = l1.apply(z)
-        smoothed_grad = 2.0 * (A @ z - b) + l1.adjoint(c * t / np.maximum(np.abs(t), eps))
+        Az = A @ z
+        smoothed_grad = 2.0 * (Az - b) + l1.adjoint(c * t / np.maximum(np.abs(t), eps))
         residual = float(np.linalg.norm(smoothed_grad)) / b_norm
         if residual > options.newton_tol and level < options.level_steps and step > 0:
             continue
@@ -372,13 +371,13 @@ def _newton_preconditioner(S, kind, shape):
     return make_preconditioner(S, kind, shape=shape)
 
 
-def _newton_step(objective, A, b, const, l1, c, z, p, dz, dp, eps):
+def _newton_step(A, b, const, l1, c, z, p, dz, dp, eps):
     """``(z, p, step)`` after the longest step in 1, ½, ¼, ... that does not raise the smoothed objective."""
-    value = _huber_value(objective, A, b, const, l1, c, z, eps)
+    value = _huber_value(A, b, const, l1, c, z, eps)
     step = 1.0
     while step >= 2.0 ** -12:
         trial = np.maximum(z + step * dz, 0.0)
-        if _huber_value(objective, A, b, const, l1, c, trial, eps) <= value:
+        if _huber_value(A, b, const, l1, c, trial, eps) <= value:
             return trial, np.clip(p + step * dp, -c, c), step
         step *= 0.5
     return z, p, 0.0
