@@ -32,9 +32,7 @@ def weights_markdown(w) -> str:
     ``edge_penalty`` and ``edge_scale`` are listed only for a robust edge
     penalty (with the default ``"l1"`` the scale is unused).
     """
-    items = w.as_dict()
-    if items["edge_penalty"] == "l1":
-        del items["edge_penalty"], items["edge_scale"]
+    items = w.as_dict(used_only=True)
     return ", ".join(f"{k} = {v}" if isinstance(v, str) else f"{k} = {v:g}" for k, v in items.items())
 
 

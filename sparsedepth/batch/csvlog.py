@@ -44,12 +44,8 @@ def settings_path(csv_path) -> Path:
 def fingerprint(frames, options) -> dict:
     """The settings of a batch as plain JSON data: the options and the frame list (absolute paths)."""
     settings = dataclasses.asdict(options)
-    weights = settings.get("weights")
-    if isinstance(weights, dict) and weights.get("edge_penalty", "l1") == "l1":
-        # the L1 edge term has no scale: both fields are left out for it, so that settings files that do not
-        # name them match
-        weights.pop("edge_penalty", None)
-        weights.pop("edge_scale", None)
+    # the L1 edge term has no scale: its penalty fields are left out, so settings files that do not name them match
+    settings["weights"] = options.weights.as_dict(used_only=True)
     data = {
         "format": _SETTINGS_FORMAT,
         "options": settings,

@@ -149,8 +149,17 @@ class Weights:
         """A copy with some weights changed (``Weights().replace(gamma=0)``)."""
         return replace(self, **changes)
 
-    def as_dict(self) -> dict:
-        return asdict(self)
+    def as_dict(self, *, used_only=False) -> dict:
+        """``{field: value}``; with ``used_only``, without ``edge_penalty`` and ``edge_scale`` for the L1 edge term.
+
+        The L1 edge term has no scale, so those two fields say nothing about
+        an L1 objective; reports and batch fingerprints list only what is used.
+        """
+        items = asdict(self)
+        if used_only and self.edge_penalty == "l1":
+            for name in EDGE_PENALTY_FIELDS:
+                del items[name]
+        return items
 
 
 DEFAULT_WEIGHTS = Weights()
