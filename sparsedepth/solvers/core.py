@@ -176,11 +176,14 @@ def solve(objective, x0, *, solver, tol=None, max_iter=None, callback=None, opti
                         max_iter=max_iter, callback=callback, options=options)
 
 
-def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, options):
+def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, options, certify_result=True):
     """:func:`solve` for an objective and start already in units of ``scale`` (checked ``tol`` and ``max_iter``).
 
     ``options`` is a dict of the solver's options or an instance of its
-    options class, in the user's units.
+    options class, in the user's units.  With ``certify_result=False`` no
+    duality gap is computed where the solver did not produce one (the gap is
+    NaN and ``converged`` is the solver's own rule): the real-time mode's
+    coarse solve, whose answer is an intermediate of a larger computation.
     """
     entry = REGISTRY[solver]
     if not entry.robust:
@@ -195,13 +198,15 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
     converged, message = out.converged, out.message
     gap = out.gap
     robust = [t.name for t in objective.robust_terms]
-    if np.isnan(gap) and not robust:
+    if np.isnan(gap) and not robust and certify_result:
         gap = certify(objective, out.z, solver, options)
     own = converged
     if robust:
         gap = float("nan")
         message += (f"; no duality gap for the robust term(s) {robust} (F may be non-convex): converged is the "
                     "solver's own rule, a stationary point")
+    elif np.isnan(gap) and not certify_result:
+        message += "; duality gap not computed"
     elif np.isnan(gap):
         message += "; duality gap not available (the solve with the quadratic part's matrix failed)"
     elif converged and not gap <= gap_threshold(objective, objective.value(out.z), options.gap_tol):
