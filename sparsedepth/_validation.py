@@ -138,8 +138,8 @@ def check_same_shape(shape_a, shape_b, name_a: str, name_b: str) -> None:
 
 # Images, depth and masks
 
-def as_float_image(image, *, name: str = "image") -> np.ndarray:
-    """Return ``image`` as float64 ``(H, W, C)`` in [0, 1] (a new array).
+def as_float_image(image, *, name: str = "image", dtype=np.float64) -> np.ndarray:
+    """Return ``image`` as ``(H, W, C)`` floats in [0, 1] of ``dtype`` (float64 or float32; a new array).
 
     uint8 is divided by 255, uint16 by 65535; floats must already lie in
     [0, 1].  Grey images ``(H, W)`` get a channel axis.
@@ -158,11 +158,13 @@ def as_float_image(image, *, name: str = "image") -> np.ndarray:
     if arr.size == 0:
         raise ValueError(f"{name} is empty (shape {arr.shape})")
     if arr.dtype == np.uint8:
-        out = arr.astype(np.float64) / 255.0
+        out = arr.astype(dtype)
+        out /= 255.0
     elif arr.dtype == np.uint16:
-        out = arr.astype(np.float64) / 65535.0
+        out = arr.astype(dtype)
+        out /= 65535.0
     elif np.issubdtype(arr.dtype, np.floating):
-        out = arr.astype(np.float64)
+        out = arr.astype(dtype)
         if not np.all(np.isfinite(out)):
             raise ValueError(f"{name} contains NaN or infinite values; fill or mask them before completing")
         lo, hi = float(out.min()), float(out.max())

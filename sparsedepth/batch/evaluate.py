@@ -124,7 +124,8 @@ def _run_method(image, sparse, observed, task, fill_method, solve_options):
         # fill_holes(method="complete") is exactly this call; calling it here keeps the solver result
         result = complete_depth(image, sparse, observed, **solve_options)
         dense = result.depth
-        method = f"{'fill complete' if task == 'fill' else 'complete'} ({result.solver})"
+        mode = ", fast" if solve_options.get("quality") == "fast" else ""
+        method = f"{'fill complete' if task == 'fill' else 'complete'} ({result.solver}{mode})"
     return dense, method, result, time.perf_counter() - start
 
 
@@ -159,6 +160,7 @@ def evaluate_frame(
     clip_to_observed: bool = True,
     uncertainty: bool = False,
     max_uncertainty: float | None = None,
+    quality: str = "default",
 ) -> FrameOutcome:
     """Complete (or hole-fill) one frame and score it and the nearest-neighbour baseline.
 
@@ -184,7 +186,7 @@ def evaluate_frame(
         Seed of the sampling.
     fill_method : {"colorization", "complete"}
         ``"fill"`` only.
-    weights, solver, tol, max_iter, callback, clip_to_observed, uncertainty, max_uncertainty
+    weights, solver, tol, max_iter, callback, clip_to_observed, uncertainty, max_uncertainty, quality
         Passed to :func:`~sparsedepth.complete_depth` (not used by the
         colorization fill, which refuses ``uncertainty`` and
         ``max_uncertainty``).
@@ -225,7 +227,8 @@ def evaluate_frame(
     dense, method, result, runtime = _run_method(
         image, sparse, observed, task, fill_method,
         dict(weights=weights, solver=solver, tol=tol, max_iter=max_iter, callback=callback,
-             clip_to_observed=clip_to_observed, uncertainty=uncertainty, max_uncertainty=max_uncertainty),
+             clip_to_observed=clip_to_observed, uncertainty=uncertainty, max_uncertainty=max_uncertainty,
+             quality=quality),
     )
     start = time.perf_counter()
     nearest = nearest_fill(sparse, observed)

@@ -67,6 +67,7 @@ def _check_combinations(args) -> str:
                           "apply to completion and --fill-method complete, not the colorization fill")
     _check_camera_options(args, mode)
     _check_edge_penalty(args)
+    _check_fast(args, mode, colorization)
     if mode == "batch":
         if args.uncertainty is not None or args.max_uncertainty is not None:
             raise UsageError("--uncertainty and --max-uncertainty are for one frame, not a batch")
@@ -107,6 +108,23 @@ def _check_combinations(args) -> str:
                               "pip install 'sparsedepth[plot]' (or matplotlib)")
     _check_cluster_options(args, mode)
     return mode
+
+
+def _check_fast(args, mode, colorization) -> None:
+    """--fast: the completion solver's real-time mode, one frame, with no solver or uncertainty options."""
+    if not args.fast:
+        return
+    if mode == "batch":
+        raise UsageError("--fast is for one frame; a batch runs the default solve")
+    if colorization:
+        raise UsageError("--fast is a mode of the completion solver: it applies to --fill-method complete, not "
+                          "colorization")
+    given = [flag for flag, value in (("--solver", args.solver not in (None, "auto")), ("--tol", args.tol is not None),
+                                      ("--max-iter", args.max_iter is not None),
+                                      ("--uncertainty", args.uncertainty is not None),
+                                      ("--max-uncertainty", args.max_uncertainty is not None)) if value]
+    if given:
+        raise UsageError(f"--fast picks its own solve and takes no {', '.join(given)}")
 
 
 def _check_edge_penalty(args) -> None:

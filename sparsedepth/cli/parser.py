@@ -286,6 +286,9 @@ def _add_method_options(parser) -> None:
             help=f"{what}{f.name}: {_WEIGHT_HELP.get(f.name, 'a term weight of sparsedepth.Weights')} "
                  f"(default {default:g}).",
         )
+    method.add_argument("--fast", action="store_true",
+                        help="real-time mode: solve on a 2-4x coarser grid, upsample, refine by a few edge-aware "
+                             "sweeps (about 10x faster, somewhat less accurate; python -m bench.fast_mode).")
     method.add_argument("--tol", type=float, metavar="TOL", help="solver tolerance (meaning per solver).")
     method.add_argument("--max-iter", type=_positive_int, metavar="N", help="maximum solver iterations.")
     method.add_argument("--no-clip", dest="clip_to_observed", action="store_false",

@@ -221,9 +221,10 @@ def _evaluate(args, image, depth, mask, truth, keep_fraction, weights, stream):
             keep_fraction=keep_fraction, keep_count=args.keep_count, seed=args.seed,
             fill_method=args.fill_method, weights=weights if use_solver else None,
             solver=args.solver or "auto", tol=args.tol, max_iter=args.max_iter,
-            callback=_Progress(stream, not args.quiet) if use_solver else None,
+            callback=_Progress(stream, not args.quiet) if use_solver and not args.fast else None,
             clip_to_observed=args.clip_to_observed,
             uncertainty=wants_uncertainty(args), max_uncertainty=args.max_uncertainty,
+            quality="fast" if args.fast else "default",
         )
 
 
