@@ -242,3 +242,63 @@ def test_cli_fast_refuses_solver_options_with_one_line_and_exit_2(files, capsys,
     assert rc == 2
     err = capsys.readouterr().err
     assert words in err and len(err.strip().splitlines()) == 1
+
+
+# ----------------------------------------------------------------------------- batches
+def test_batch_fast_rows_equal_the_library_fast_mode(tmp_path):
+    from concurrent.futures import ThreadPoolExecutor
+
+    from sparsedepth.batch import BatchOptions, find_frames, run_batch
+
+    for key, seed in (("a", 0), ("b", 1)):
+        image, depth = make_scene(seed=seed)
+        iio.imwrite(tmp_path / f"rgb_{key}.png", image)
+        sd.write_depth(tmp_path / f"depth_{key}.png", depth, scale=1000)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    options = BatchOptions(keep_fraction=0.05, seed=3, depth_scale="mm", out_dir=str(out_dir), quality="fast")
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        summary = run_batch(find_frames(tmp_path), tmp_path / "m.csv", options=options, executor=pool,
+                            max_workers=1)
+    assert summary.succeeded == 2
+    for position, key in ((0, "a"), (1, "b")):
+        image = sd.read_image(tmp_path / f"rgb_{key}.png")
+        depth = sd.read_depth(tmp_path / f"depth_{key}.png", scale=1000)
+        mask = sd.sample_mask(depth, fraction=0.05, seed=np.random.default_rng([3, position]))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", sd.ClampWarning)
+            expected = sd.complete_depth(image, np.where(mask, depth, np.nan), mask, quality="fast").depth
+        np.testing.assert_allclose(np.load(out_dir / f"{key}.npy"), expected, rtol=1e-12)
+    settings = json.loads((tmp_path / "m.csv.settings.json").read_text())
+    assert settings["options"]["quality"] == "fast"
+
+
+def test_batch_fingerprint_of_the_default_solve_has_no_quality_field():
+    from sparsedepth.batch import BatchOptions, csvlog
+
+    assert "quality" not in csvlog.fingerprint([], BatchOptions())["options"]
+    assert csvlog.fingerprint([], BatchOptions(quality="fast"))["options"]["quality"] == "fast"
+
+
+@pytest.mark.parametrize("kwargs, words", [
+    (dict(quality="draft"), "quality must be one of"),
+    (dict(quality="fast", tol=1e-3), "takes no tol"),
+    (dict(quality="fast", solver="cg", max_iter=3), "takes no solver, max_iter"),
+    (dict(quality="fast", task="fill"), "not the colorization fill"),
+])
+def test_batch_options_check_the_quality(kwargs, words):
+    from sparsedepth.batch import BatchOptions
+
+    with pytest.raises(ValueError, match=words) as info:
+        BatchOptions(**kwargs)
+    assert info.value.option == "quality"
+
+
+def test_cli_batch_fast_refuses_tol_naming_the_flag(tmp_path, capsys):
+    image, depth = make_scene()
+    iio.imwrite(tmp_path / "rgb_a.png", image)
+    sd.write_depth(tmp_path / "depth_a.png", depth, scale=1000)
+    rc = main(["--batch", str(tmp_path), "--keep-fraction", "0.05", "--depth-scale", "mm", "--csv",
+               str(tmp_path / "m.csv"), "--fast", "--tol", "1e-3", "-q"])
+    assert rc == 2
+    assert "--fast picks its own solve and takes no --tol" in capsys.readouterr().err

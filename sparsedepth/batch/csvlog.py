@@ -46,6 +46,8 @@ def fingerprint(frames, options) -> dict:
     settings = dataclasses.asdict(options)
     # the L1 edge term has no scale: its penalty fields are left out, so settings files that do not name them match
     settings["weights"] = options.weights.as_dict(used_only=True)
+    if settings["quality"] == "default":  # batches of the default solve match settings files from before the field
+        del settings["quality"]
     data = {
         "format": _SETTINGS_FORMAT,
         "options": settings,

@@ -6,7 +6,7 @@ attribute names the field, so that the command line can name its flag.
 
 Imports the standard library, :mod:`sparsedepth._validation`,
 :mod:`sparsedepth.io` (scales, pixel limit), the solver and fill-method
-names and :class:`~sparsedepth.Weights`.
+names, the completion qualities and :class:`~sparsedepth.Weights`.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from ..holes import FILL_METHODS
 from ..io import MAX_PIXELS
 from ..io import resolve_scale
 from ..objective import DEFAULT_WEIGHTS, Weights
+from ..completion import QUALITIES
 from ..solvers import SOLVERS
 from .evaluate import TASKS
 
@@ -84,6 +85,10 @@ class BatchOptions:
         Passed to :func:`~sparsedepth.complete_depth`: keep each completed
         map within the range of its observed depths (the CSV's ``clamped``
         column counts the pixels this moved).
+    quality : {"default", "fast"}
+        Passed to :func:`~sparsedepth.complete_depth`: ``"fast"`` is the
+        real-time mode (with ``solver="auto"``, no ``tol`` or ``max_iter``;
+        not with the colorization fill).
 
     Raises
     ------
@@ -114,6 +119,7 @@ class BatchOptions:
     max_depth: float | None = None
     max_pixels: int | None = MAX_PIXELS
     clip_to_observed: bool = True
+    quality: str = "default"
 
     def __post_init__(self):
         if self.task not in TASKS:
@@ -179,6 +185,7 @@ class BatchOptions:
         if not isinstance(self.clip_to_observed, bool):
             raise _option_error("clip_to_observed", f"clip_to_observed must be True or False, got "
                                 f"{self.clip_to_observed!r}", TypeError)
+        self._check_quality()
         if self.out_dir is not None:
             if not isinstance(self.out_dir, (str, os.PathLike)):
                 raise _option_error("out_dir", f"out_dir must be a str or os.PathLike, got "
@@ -186,6 +193,21 @@ class BatchOptions:
             if not Path(self.out_dir).is_dir():
                 raise _option_error("out_dir", f"output folder '{self.out_dir}' does not exist; create it first",
                                     FileNotFoundError)
+
+
+    def _check_quality(self):
+        """``quality`` is a known mode; the fast mode takes no solver settings and no colorization fill."""
+        if not isinstance(self.quality, str) or self.quality not in QUALITIES:
+            raise _option_error("quality", f"quality must be one of {list(QUALITIES)}, got {self.quality!r}")
+        if self.quality != "fast":
+            return
+        if self.task == "fill" and self.fill_method == "colorization":
+            raise _option_error("quality", "quality='fast' is a mode of the completion solver: use it with "
+                                "task='complete' or fill_method='complete', not the colorization fill")
+        given = [name for name, value in (("solver", self.solver != "auto"), ("tol", self.tol is not None),
+                                          ("max_iter", self.max_iter is not None)) if value]
+        if given:
+            raise _option_error("quality", f"quality='fast' picks its own solve and takes no {', '.join(given)}")
 
 
 @dataclass(frozen=True)

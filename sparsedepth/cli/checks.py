@@ -67,7 +67,7 @@ def _check_combinations(args) -> str:
                           "apply to completion and --fill-method complete, not the colorization fill")
     _check_camera_options(args, mode)
     _check_edge_penalty(args)
-    _check_fast(args, mode, colorization)
+    _check_fast(args, colorization)
     if mode == "batch":
         if args.uncertainty is not None or args.max_uncertainty is not None:
             raise UsageError("--uncertainty and --max-uncertainty are for one frame, not a batch")
@@ -110,12 +110,10 @@ def _check_combinations(args) -> str:
     return mode
 
 
-def _check_fast(args, mode, colorization) -> None:
-    """--fast: the completion solver's real-time mode, one frame, with no solver or uncertainty options."""
+def _check_fast(args, colorization) -> None:
+    """--fast: the completion solver's real-time mode, with no solver or uncertainty options."""
     if not args.fast:
         return
-    if mode == "batch":
-        raise UsageError("--fast is for one frame; a batch runs the default solve")
     if colorization:
         raise UsageError("--fast is a mode of the completion solver: it applies to --fill-method complete, not "
                           "colorization")
