@@ -177,7 +177,7 @@ def complete_depth(
 
     ``quality="fast"`` averages the image and the observations over blocks
     of ``f x f`` pixels (:func:`fast_factor`: ``f = 4`` up to one
-    observation per 16 pixels, 2 above), solves the same objective on the
+    observation per 16 pixels, 3 up to one per 9, 2 above), solves the same objective on the
     ``f`` times coarser grid (no duality gap is computed), interpolates the
     solution bilinearly between the block centres and refines it by
     :data:`FAST_SWEEPS` red-black sweeps of
@@ -346,13 +346,16 @@ def _clamp(z, depth_range, clip_to_observed, rounding=1e-9):
 
 
 def fast_factor(observed_fraction: float) -> int:
-    """The fast mode's coarsening ``f``: 4 while ``16 ×`` the observed fraction is at most 1, else 2.
+    """The fast mode's coarsening ``f``: the largest of 4, 3 with ``f² ×`` the observed fraction at most 1, else 2.
 
     A coarse block of ``f x f`` pixels then holds about one observation or
-    fewer, so averaging over it loses little; above that density the
-    4-times coarser grid blurs the detail the samples carry.
+    fewer, so averaging over it loses little; at higher densities a coarser
+    grid blurs the detail the samples carry.
     """
-    return 4 if 16.0 * float(observed_fraction) <= 1.0 else 2
+    for factor in (4, 3):
+        if factor * factor * float(observed_fraction) <= 1.0:
+            return factor
+    return 2
 
 
 def _check_quality(quality, **arguments) -> bool:

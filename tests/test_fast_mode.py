@@ -121,7 +121,8 @@ def test_edge_aware_sweeps_reject_bad_parameters(kwargs, words):
 # ----------------------------------------------------------------------------- complete_depth(quality="fast")
 def test_fast_factor_keeps_about_one_sample_per_coarse_block():
     assert fast_factor(0.01) == 4 and fast_factor(1 / 16) == 4
-    assert fast_factor(0.07) == 2 and fast_factor(0.5) == 2
+    assert fast_factor(0.07) == 3 and fast_factor(1 / 9) == 3
+    assert fast_factor(0.12) == 2 and fast_factor(0.5) == 2
 
 
 @pytest.mark.parametrize("fraction", [0.02, 0.1])
