@@ -188,26 +188,77 @@ def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa
     if sweeps == 0 or smoothness == 0:
         return z
     image = np.asarray(image)
-    wx = _pair_weights(image[:, 1:], image[:, :-1], kappa, smoothness)
-    wy = _pair_weights(image[1:], image[:-1], kappa, smoothness)
-    diagonal = np.ones(z.shape, dtype=np.float32)
-    diagonal[:, 1:] += wx
-    diagonal[:, :-1] += wx
-    diagonal[1:] += wy
-    diagonal[:-1] += wy
+    H, W = z.shape
+    padded = W + W % 2  # an even width: the last column of an odd-width grid is a fixed pixel without links
+    wx = np.zeros((H, padded), dtype=np.float32)  # wx[y, x]: the pair (x, x + 1)
+    wx[:, :W - 1] = _pair_weights(image[:, 1:], image[:, :-1], kappa, smoothness)
+    wy = np.zeros((H, padded), dtype=np.float32)  # wy[y, x]: the pair (y, y + 1)
+    wy[:-1, :W] = _pair_weights(image[1:], image[:-1], kappa, smoothness)
+    diagonal = np.ones((H, padded), dtype=np.float32)
+    diagonal[:, 1:] += wx[:, :-1]
+    diagonal += wx
+    diagonal[1:] += wy[:-1]
+    diagonal += wy
     inverse = np.reciprocal(diagonal, out=diagonal)
-    parity = np.add.outer(np.arange(z.shape[0]), np.arange(z.shape[1])) % 2 == 0
-    halves = (parity & ~observed, ~parity & ~observed)
-    update = np.empty_like(z)
-    across = np.empty_like(wx)  # wx z of the left / right neighbours
-    down = np.empty_like(wy)  # wy z of the neighbours above / below
+    # per pixel, each neighbour's weight and the prior divided by the diagonal:
+    # z_i = s_i / d_i + Σ_j (w_ij / d_i) z_j
+    left = np.zeros_like(inverse)
+    left[:, 1:] = wx[:, :-1] * inverse[:, 1:]
+    right = wx * inverse
+    up = np.zeros_like(inverse)
+    up[1:] = wy[:-1] * inverse[1:]
+    below = wy * inverse
+    base = np.zeros_like(inverse)
+    base[:, :W] = prior
+    base *= inverse
+    free = np.zeros((H, padded), dtype=bool)
+    free[:, :W] = ~observed
+    field = np.zeros((H, padded), dtype=np.float32)
+    field[:, :W] = z
+    # each parity of y + x as an (H, padded / 2) array: the sweeps touch only the pixels they update
+    even, odd = _split_parity(field)
+    even_weights = [_split_parity(a)[0] for a in (base, left, right, up, below)]
+    odd_weights = [_split_parity(a)[1] for a in (base, left, right, up, below)]
+    even_free, odd_free = _split_parity(free)
     for _ in range(int(sweeps)):
-        for half in halves:
-            np.copyto(update, prior)
-            update[:, 1:] += np.multiply(wx, z[:, :-1], out=across)
-            update[:, :-1] += np.multiply(wx, z[:, 1:], out=across)
-            update[1:] += np.multiply(wy, z[:-1], out=down)
-            update[:-1] += np.multiply(wy, z[1:], out=down)
-            update *= inverse
-            np.copyto(z, update, where=half)
-    return z
+        _half_sweep(even, odd, even_weights, even_free, row_offset=0)
+        _half_sweep(odd, even, odd_weights, odd_free, row_offset=1)
+    return _merge_parity(even, odd)[:, :W]
+
+
+def _split_parity(a):
+    """``(even, odd)``: the entries with ``y + x`` even / odd of an even-width ``a``, row by row, ``(H, W / 2)`` each."""
+    even = np.empty((a.shape[0], a.shape[1] // 2), dtype=a.dtype)
+    odd = np.empty_like(even)
+    even[0::2], even[1::2] = a[0::2, 0::2], a[1::2, 1::2]
+    odd[0::2], odd[1::2] = a[0::2, 1::2], a[1::2, 0::2]
+    return even, odd
+
+
+def _merge_parity(even, odd):
+    """The inverse of :func:`_split_parity`."""
+    out = np.empty((even.shape[0], 2 * even.shape[1]), dtype=even.dtype)
+    out[0::2, 0::2], out[1::2, 1::2] = even[0::2], even[1::2]
+    out[0::2, 1::2], out[1::2, 0::2] = odd[0::2], odd[1::2]
+    return out
+
+
+def _half_sweep(target, other, weights, free, *, row_offset):
+    """Update ``target`` (one parity, in place) from its neighbours in ``other`` (the other parity).
+
+    In a row where the target's pixels sit at even ``x`` (rows ``y`` with ``y + row_offset`` even), entry ``k`` is
+    at ``x = 2k``: its left neighbour is ``other[y, k − 1]`` and its right one ``other[y, k]``; in the other rows
+    it is at ``x = 2k + 1``, with neighbours ``other[y, k]`` and ``other[y, k + 1]``; above and below are always
+    ``other[y ∓ 1, k]``.
+    """
+    base, left, right, up, below = weights
+    update = base.copy()
+    at_even = slice(row_offset, None, 2)  # rows whose target pixels have even x
+    at_odd = slice(1 - row_offset, None, 2)
+    update[at_even, 1:] += left[at_even, 1:] * other[at_even, :-1]
+    update[at_even] += right[at_even] * other[at_even]
+    update[at_odd] += left[at_odd] * other[at_odd]
+    update[at_odd, :-1] += right[at_odd, :-1] * other[at_odd, 1:]
+    update[1:] += up[1:] * other[:-1]
+    update[:-1] += below[:-1] * other[1:]
+    np.copyto(target, update, where=free)
