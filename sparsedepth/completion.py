@@ -114,15 +114,16 @@ def complete_depth(
         ``sparse_depth``) missing: NaN in ``result.depth``, counted in
         ``result.removed``.  Implies ``uncertainty=True``.
     quality : {"default", "fast"}
-        ``"fast"``: the real-time mode (see Notes): a solve on a grid 2 or 4
-        times coarser per side, interpolated back and refined by a few
+        ``"fast"``: the real-time mode (see Notes): a solve on a grid 2, 3
+        or 4 times coarser per side, interpolated back and refined by a few
         edge-aware sweeps.  It takes ``weights``, ``clip_to_observed``,
         ``x0`` (its block means start the coarse solve: pass the previous
         frame's depth to reuse it along a video) and the inputs; ``solver``
         must be ``"auto"`` and ``tol``, ``max_iter``, ``callback``,
-        ``options`` and the uncertainty are not available (an error).  Its result has no full-resolution objective:
-        ``objective`` and ``gap`` are NaN and ``terms`` is empty; the
-        iterations and history are those of the coarse solve.
+        ``options`` and the uncertainty are not available (an error).  Its
+        result has no full-resolution objective: ``objective`` and ``gap``
+        are NaN and ``terms`` is empty; the iterations and history are
+        those of the coarse solve.
 
     Returns
     -------
@@ -177,8 +178,10 @@ def complete_depth(
 
     ``quality="fast"`` averages the image and the observations over blocks
     of ``f x f`` pixels (:func:`fast_factor`: ``f = 4`` up to one
-    observation per 16 pixels, 3 up to one per 9, 2 above), solves the same objective on the
-    ``f`` times coarser grid (no duality gap is computed), interpolates the
+    observation per 16 pixels, 3 up to one per 9, 2 above), solves the
+    same objective on the ``f`` times coarser grid (no duality gap is
+    computed; Jacobi-preconditioned CG to a relative residual of
+    :data:`FAST_COARSE_RTOL` for γ = 0), interpolates the
     solution bilinearly between the block centres and refines it by
     :data:`FAST_SWEEPS` red-black sweeps of
     :func:`~sparsedepth.grid.resample.edge_aware_sweeps` with the
@@ -312,12 +315,17 @@ def _starting_point(x0, coarse, shape, scale):
         start = coarse.reshape(-1).view()  # no copy (8-MP memory); every solver copies its start
         start.flags.writeable = False  # ... and the prior's target must stay intact
         return start
+    return np.maximum(_checked_x0(x0, shape).ravel(), 0.0) / scale
+
+
+def _checked_x0(x0, shape):
+    """``x0`` as float64; ``ValueError`` unless it has ``shape`` and finite values."""
     start = np.asarray(x0, dtype=np.float64)
-    if start.shape != shape:
-        raise ValueError(f"x0 has shape {start.shape}, expected {shape}")
+    if start.shape != tuple(shape):
+        raise ValueError(f"x0 has shape {start.shape}, expected {tuple(shape)}")
     if not np.all(np.isfinite(start)):
         raise ValueError("x0 contains NaN or infinite values")
-    return np.maximum(start.ravel(), 0.0) / scale
+    return start
 
 
 def _clamp(z, depth_range, clip_to_observed, rounding=1e-9):
@@ -375,7 +383,6 @@ def _check_quality(quality, **arguments) -> bool:
 def _complete_fast(image, sparse_depth, mask, *, weights, l1_smoothing, clip_to_observed, x0) -> CompletionResult:
     """The real-time mode (:func:`complete_depth`, Notes): coarse solve, bilinear upsampling, edge-aware sweeps."""
     start_time = time.perf_counter()
-    check_weights(weights)
     name = "cg" if weights.gamma == 0 else choose_solver(weights)
     _, tol, max_iter, options = _check_arguments(weights, name, FAST_COARSE_RTOL if name == "cg" else None, None,
                                                  None, clip_to_observed)
@@ -383,6 +390,8 @@ def _complete_fast(image, sparse_depth, mask, *, weights, l1_smoothing, clip_to_
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     check_same_shape(fine_image.shape[:2], depth.shape, "image", "sparse_depth")
     shape = depth.shape
+    if x0 is not None:
+        x0 = _checked_x0(x0, shape)
     factor = fast_factor(np.count_nonzero(observed) / observed.size)
     if min(coarse_shape(shape, factor)) < 2:
         factor = 1
@@ -391,11 +400,6 @@ def _complete_fast(image, sparse_depth, mask, *, weights, l1_smoothing, clip_to_
     objective, coarse, scale, _ = _scaled_objective(coarse_image, coarse_depth, coarse_observed, weights,
                                                     l1_smoothing, False)
     if x0 is not None:
-        x0 = np.asarray(x0, dtype=np.float64)
-        if x0.shape != shape:
-            raise ValueError(f"x0 has shape {x0.shape}, expected {shape}")
-        if not np.all(np.isfinite(x0)):
-            raise ValueError("x0 contains NaN or infinite values")
         x0 = block_mean(np.maximum(x0, 0.0), factor)
     out, _ = solve_scaled(objective, _starting_point(x0, coarse, objective.shape, scale), scale=scale, solver=name,
                           tol=tol, max_iter=max_iter, callback=None, options=options, certify_result=False)
