@@ -2,12 +2,13 @@
 
 ``operators`` (sparse and matrix-free difference operators), ``stencil``
 (stencil images and their CSR form), ``edges`` (the image gradient and the
-edge weights built from it).
+edge weights built from it), ``geodesic`` (the image-aware nearest-sample fill).
 
 May import NumPy, SciPy and :mod:`sparsedepth._validation` only.
 """
 
-from .edges import edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights
+from .edges import edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights, smoothed_image
+from .geodesic import geodesic_fill
 from .operators import (StencilOperator, forward_diff, gradient, gradient_stencil, hessian_operator, hessian_stencil,
                         mixed_diff, second_diff)
 from .stencil import csr_to_stencil, full_pattern_offsets, stencil_to_csr
@@ -15,4 +16,5 @@ from .stencil import csr_to_stencil, full_pattern_offsets, stencil_to_csr
 __all__ = ["forward_diff", "gradient", "second_diff", "mixed_diff", "hessian_operator", "StencilOperator",
            "gradient_stencil", "hessian_stencil",
            "stencil_to_csr", "csr_to_stencil", "full_pattern_offsets",
-           "image_gradient_magnitude", "edge_weights", "pair_edge_weights", "second_order_edge_weights"]
+           "image_gradient_magnitude", "edge_weights", "pair_edge_weights", "second_order_edge_weights",
+           "smoothed_image", "geodesic_fill"]
