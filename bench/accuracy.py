@@ -188,6 +188,12 @@ def main(argv=None) -> int:
         rows.append([label, changes_text(tuned[best][0]), f"{mean_over(tuned[best][1]):.3f}",
                      *(f"{r:.3f}" for r in per_fraction(reported[1], fractions)), f"{mean_over(reported[1]):.3f}",
                      f"{reported[2] / base_report[2]:.2f}"])
+    print("current defaults", file=sys.stderr, flush=True)
+    defaults = run_grid([{k: getattr(sd.DEFAULT_WEIGHTS, k) for k in OFF}], report_frames, fractions, seeds)[0]
+    rows.append(["current defaults (`sd.DEFAULT_WEIGHTS` at run time, not tuned here)",
+                 changes_text({k: v for k, v in defaults[0].items() if v}), "",
+                 *(f"{r:.3f}" for r in per_fraction(defaults[1], fractions)), f"{mean_over(defaults[1]):.3f}",
+                 f"{defaults[2] / base_report[2]:.2f}"])
     chosen = min((label for label in results if label != variants()[0][0]),
                  key=lambda label: mean_over(results[label][3][1]))
     text = report(args, tune_frames, report_frames, fractions, rows, results, chosen, base_report, base_tune,

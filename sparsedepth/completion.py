@@ -58,8 +58,10 @@ def complete_depth(
         F(z) = α Σ M (z − z_obs)² + β Σ (∂x z)² + (∂y z)²
              + γ Σ w (|∂x z| + |∂y z|) + δ Σ (z − z_c)²   (+ optional terms)
 
-    with ``w = exp(−κ ‖∇I‖)`` and ``z_c`` the nearest-neighbour fill of the
-    observations (see :class:`~sparsedepth.objective.weights.Weights`).
+    with ``w = exp(−κ ‖∇I‖)`` (of the image blurred by ``weights.edge_sigma``)
+    and ``z_c`` the image-aware (geodesic) nearest-sample fill of the
+    observations, or with ``weights.fill_contrast = 0`` the Euclidean one
+    (see :class:`~sparsedepth.objective.weights.Weights`).
 
     Parameters
     ----------

@@ -112,7 +112,7 @@ def _frame(seed=0, shape=(24, 32)):
 
 def test_edge_sigma_zero_reproduces_the_unblurred_weights_exactly():
     image, _, sparse, mask = _frame()
-    w = sd.Weights(edge_sigma=0.0)
+    w = sd.Weights(edge_sigma=0.0, fill_contrast=0.0)
     objective, coarse, _ = build_objective(image, sparse, mask, weights=w)
     np.testing.assert_array_equal(objective.term("smooth_image").row_weights, pair_edge_weights(image, w.kappa))
     np.testing.assert_array_equal(coarse, sd.nearest_fill(sparse, mask))
@@ -121,7 +121,7 @@ def test_edge_sigma_zero_reproduces_the_unblurred_weights_exactly():
 
 def test_edge_sigma_weights_are_those_of_the_gaussian_blurred_image():
     image, _, sparse, mask = _frame()
-    w = sd.Weights(edge_sigma=1.5)
+    w = sd.Weights(edge_sigma=1.5, fill_contrast=0.0)
     objective, _, _ = build_objective(image, sparse, mask, weights=w)
     blurred = np.stack([ndimage.gaussian_filter(image[..., c] / 255.0, 1.5, mode="reflect") for c in range(3)], -1)
     np.testing.assert_allclose(objective.term("smooth_image").row_weights, pair_edge_weights(blurred, w.kappa),
@@ -284,3 +284,15 @@ def test_accuracy_dataset_families():
     assert [dataset_of(n) for n in ("nyu_metric3d/00050", "nyu_rcnn_depth/demo", "kitti/0000000050",
                                     "middlebury2003/teddy", "eth3d/terrace", "tum/0")] == [
         "NYU", "NYU", "KITTI", "Middlebury", "ETH3D", "TUM"]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_first_order_solution_with_the_geodesic_prior_stays_in_the_observed_range(seed):
+    # z_c is still made of observations, so the M-matrix argument holds: z is a convex combination of them
+    rng = np.random.default_rng(seed)
+    image = rng.random((9, 12, 3))
+    sparse, mask = sd.sample_depth(rng.uniform(0.5, 10.0, (9, 12)), fraction=0.15, seed=seed)
+    w = sd.Weights(beta=0.1, beta_second=0.0, beta_second_image=0.0, edge_sigma=0.8, fill_contrast=30.0)
+    depth = sd.complete_depth(image, sparse, mask, weights=w, solver="direct", clip_to_observed=False).depth
+    lo, hi = sparse[mask].min(), sparse[mask].max()
+    assert lo - 1e-12 * hi <= depth.min() and depth.max() <= hi + 1e-12 * hi

@@ -122,7 +122,11 @@ class Weights:
     non-smooth solve; set ``gamma > 0`` (in units of depth: it scales linearly
     with depth, unlike the quadratic terms) to use it.  With ``gamma = 0``
     multiplying every weight by one number leaves the solution unchanged
-    (the :data:`MODEL_FIELDS` are not weights and stay as they are).
+    (the :data:`MODEL_FIELDS` are not weights and stay as they are).  The
+    default ``edge_sigma = 1`` and ``fill_contrast = 20`` (blurred-image edge
+    weights, geodesic ``z_c``) were chosen on the tuning frames by
+    ``python -m bench.accuracy``; ``docs/accuracy.md`` has their scores on the
+    report frames and leave-one-dataset-out.
     """
 
     # Defaults: the weight set chosen by ``python bench/tune.py`` (docs/tuning.md), rounded to
@@ -138,8 +142,10 @@ class Weights:
     beta_second_image: float = 0.039
     edge_penalty: str = "l1"
     edge_scale: float = DEFAULT_EDGE_SCALE
-    edge_sigma: float = 0.0
-    fill_contrast: float = 0.0
+    # edge_sigma and fill_contrast: the grid point of ``python -m bench.accuracy`` best on TUNE_FRAMES
+    # (docs/accuracy.md), which also wins on every dataset of REPORT_FRAMES and leave-one-dataset-out
+    edge_sigma: float = 1.0
+    fill_contrast: float = 20.0
     depth_jump: float = 0.0
 
     def __post_init__(self):
