@@ -19,7 +19,8 @@ the parts listed before it, NumPy, SciPy, pyamg, scikit-image and h5py;
     return.
 ``grid/``
     The pixel grid: stencils (``stencil``), finite-difference operators
-    (``operators``), the image gradient and edge weights (``edges``).
+    (``operators``), the image gradient and edge weights (``edges``), the
+    image-aware nearest-sample fill (``geodesic``).
 ``io/``
     Files: images, depth formats and their units, calibration, NumPy/HDF5
     arrays, NYU Depth V2 files, point clouds (pinhole back-projection, PLY),
@@ -32,6 +33,9 @@ the parts listed before it, NumPy, SciPy, pyamg, scikit-image and h5py;
     Sparse input from dense depth, error metrics, and the fills a user would
     otherwise reach for (nearest, linear, biharmonic, colorization;
     ``colorization_baseline`` imports ``holes.colorization`` when called).
+``priors``
+    A dense depth map the user brings (``complete_depth(..., prior=)``):
+    checks and the least-squares scale/shift alignment to the samples.
 ``visualize``
     :func:`colorize_depth`: a depth map as an RGB picture (NumPy only).
 ``objective/``
@@ -81,6 +85,8 @@ file format is a module in ``io/`` dispatched from ``io/depth.py`` or
 from . import datasets, io
 from .baselines import biharmonic_fill, colorization_baseline, linear_fill, nearest_fill
 from .completion import choose_solver, complete_depth
+from .grid.geodesic import geodesic_fill
+from .priors import PRIOR_ALIGNMENTS, align_prior
 from .metrics import DepthMetrics, depth_metrics
 from .objective.objective import AbsTerm, Objective, QuadraticTerm, RobustTerm, build_objective, edge_weights
 from .objective.robust import PENALTIES, RobustPenalty, robust_penalty
@@ -121,6 +127,9 @@ __all__ = [
     "build_objective",
     "edge_weights",
     "nearest_fill",
+    "geodesic_fill",
+    "align_prior",
+    "PRIOR_ALIGNMENTS",
     "linear_fill",
     "biharmonic_fill",
     "colorization_baseline",

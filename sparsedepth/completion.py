@@ -15,13 +15,14 @@ import numpy as np
 
 from ._validation import as_depth_and_mask, as_float_image, check_nonnegative_real, check_same_shape
 from .grid.resample import block_mean, block_sample_mean, coarse_shape, edge_aware_sweeps, upsample_bilinear
+from .priors import align_prior
 from .objective.objective import DEFAULT_L1_SMOOTHING, build_objective
 from .result import ClampWarning, CompletionResult
 from .solvers import SOLVERS, solve_scaled, check_solver_arguments, depth_scale
 from .objective.weights import DEFAULT_WEIGHTS, Weights, check_weights
 from .uncertainty import MIN_OBSERVED, estimate_uncertainty, split_samples
 
-__all__ = ["complete_depth", "choose_solver", "QUALITIES", "fast_factor"]
+__all__ = ["complete_depth", "choose_solver", "depth_jump_factor", "QUALITIES", "fast_factor"]
 
 #: The values of ``complete_depth``'s ``quality``.
 QUALITIES = ("default", "fast")
@@ -60,6 +61,8 @@ def complete_depth(
     clip_to_observed: bool = True,
     uncertainty: bool = False,
     max_uncertainty: float | None = None,
+    prior=None,
+    prior_alignment: str = "scale_shift",
     quality: str = "default",
 ) -> CompletionResult:
     """Complete a sparse depth map into a dense one, guided by an image.
@@ -69,8 +72,10 @@ def complete_depth(
         F(z) = α Σ M (z − z_obs)² + β Σ (∂x z)² + (∂y z)²
              + γ Σ w (|∂x z| + |∂y z|) + δ Σ (z − z_c)²   (+ optional terms)
 
-    with ``w = exp(−κ ‖∇I‖)`` and ``z_c`` the nearest-neighbour fill of the
-    observations (see :class:`~sparsedepth.objective.weights.Weights`).
+    with ``w = exp(−κ ‖∇I‖)`` (of the image blurred by ``weights.edge_sigma``)
+    and ``z_c`` the image-aware (geodesic) nearest-sample fill of the
+    observations, or with ``weights.fill_contrast = 0`` the Euclidean one
+    (see :class:`~sparsedepth.objective.weights.Weights`).
 
     Parameters
     ----------
@@ -113,6 +118,16 @@ def complete_depth(
         Leave the pixels whose uncertainty exceeds this (units of
         ``sparse_depth``) missing: NaN in ``result.depth``, counted in
         ``result.removed``.  Implies ``uncertainty=True``.
+    prior : ndarray, (H, W), optional
+        A dense, finite depth map the caller brings (e.g. a monocular
+        network's prediction; metric or relative).  It is aligned to the
+        samples (``prior_alignment``), the residual ``z_obs − prior`` is
+        completed by the objective, and the aligned prior is added back
+        (Notes).  Not combined with ``uncertainty``.
+    prior_alignment : {"scale_shift", "scale", "none"}
+        Least-squares fit of ``s · prior + t`` to the samples
+        (:func:`sparsedepth.priors.align_prior`): both (relative depth, the
+        default), ``s`` only, or neither (a metric prior used as it is).
     quality : {"default", "fast"}
         ``"fast"``: the real-time mode (see Notes): a solve on a grid 2, 3
         or 4 times coarser per side, interpolated back and refined by a few
@@ -120,7 +135,8 @@ def complete_depth(
         ``x0`` (its block means start the coarse solve: pass the previous
         frame's depth to reuse it along a video) and the inputs; ``solver``
         must be ``"auto"`` and ``tol``, ``max_iter``, ``callback``,
-        ``options`` and the uncertainty are not available (an error).  Its
+        ``options``, ``prior`` and the uncertainty are not available (an
+        error).  Its
         result has no full-resolution objective: ``objective`` and ``gap``
         are NaN and ``terms`` is empty; the iterations and history are
         those of the coarse solve.
@@ -176,6 +192,16 @@ def complete_depth(
     counts those pixels.  Remove outliers (or leave them out of ``mask``)
     before completing.
 
+    With ``prior``, let ``P = s · prior + t`` be the aligned prior.  The
+    objective completes the residual ``r = z − P`` from ``r_obs = z_obs −
+    P`` (shifted by a constant ``c`` so that every residual sample is
+    positive, for the bound ``>= 0``), so between the samples the result
+    follows the prior's shape and the smoothness terms act on its error:
+    ``z = P + r``.  The range clamp then applies to ``z``.  ``objective``,
+    ``terms`` and ``history`` are those of the residual problem; ``x0`` is
+    a starting depth ``z`` as usual.  A prior equal to the truth up to scale
+    and shift gives back the truth (a zero residual).
+
     ``quality="fast"`` averages the image and the observations over blocks
     of ``f x f`` pixels (:func:`fast_factor`: ``f = 4`` up to one
     observation per 16 pixels, 3 up to one per 9, 2 above), solves the
@@ -200,13 +226,19 @@ def complete_depth(
     (40, 50)
     """
     if _check_quality(quality, solver=solver, tol=tol, max_iter=max_iter, callback=callback, options=options,
-                      uncertainty=uncertainty, max_uncertainty=max_uncertainty):
+                      uncertainty=uncertainty, max_uncertainty=max_uncertainty, prior=prior):
         return _complete_fast(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
                               clip_to_observed=clip_to_observed, x0=x0)
     name, tol, max_iter, options = _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed)
     want_uncertainty = _check_uncertainty_arguments(uncertainty, max_uncertainty)
     settings = dict(weights=weights, solver=name, tol=tol, max_iter=max_iter, options=options,
                     l1_smoothing=l1_smoothing, clip_to_observed=clip_to_observed)
+    if prior is not None:
+        if want_uncertainty:
+            raise ValueError("prior= cannot be combined with uncertainty= or max_uncertainty= (the half-sample "
+                             "estimate does not model the prior); leave one of them out")
+        return _complete_with_prior(image, sparse_depth, mask, prior, prior_alignment, x0=x0, callback=callback,
+                                    settings=settings)
     result = _complete(image, sparse_depth, mask, x0=x0, callback=callback, **settings)
     if not want_uncertainty:
         return result
@@ -215,12 +247,27 @@ def complete_depth(
 
 def _complete(image, sparse_depth, mask, *, weights, solver, tol, max_iter, callback, x0, l1_smoothing,
               options, clip_to_observed) -> CompletionResult:
-    """One completion with checked arguments (``solver`` a name of :data:`SOLVERS`)."""
+    """One completion with checked arguments (``solver`` a name of :data:`SOLVERS`).
+
+    With ``weights.depth_jump > 0`` (and an image-weighted smoothness term) it solves twice: the second objective's
+    pair weights are relaxed where the first solution jumps (:func:`depth_jump_factor`) and its solve starts from
+    the first solution; iterations and runtime are those of both solves, the history that of the second.
+    """
     objective, coarse, scale, depth_range = _scaled_objective(image, sparse_depth, mask, weights, l1_smoothing,
                                                               clip_to_observed)
     start = _starting_point(x0, coarse, objective.shape, scale)
     out, runtime = solve_scaled(objective, start, scale=scale, solver=solver, tol=tol, max_iter=max_iter,
                                  callback=callback, options=options)
+    iterations = out.iterations
+    if weights.depth_jump > 0 and (weights.beta_image > 0 or weights.beta_second_image > 0):
+        first = np.clip(out.z, *depth_range)
+        factor = depth_jump_factor(first.reshape(objective.shape), weights.depth_jump)
+        objective, _, scale, _ = _scaled_objective(image, sparse_depth, mask, weights, l1_smoothing,
+                                                   clip_to_observed, pair_factor=factor)
+        out, second = solve_scaled(objective, np.maximum(out.z, 0.0) / scale, scale=scale, solver=solver, tol=tol,
+                                   max_iter=max_iter, callback=callback, options=options)
+        runtime += second
+        iterations += out.iterations
     z, clamped = _clamp(out.z, depth_range, clip_to_observed)  # in the user's units
     scale2 = scale * scale
     terms = {key: value * scale2 for key, value in objective.term_values(z / scale).items()}
@@ -228,7 +275,7 @@ def _complete(image, sparse_depth, mask, *, weights, solver, tol, max_iter, call
         depth=z.reshape(objective.shape),
         objective=float(sum(terms.values())),
         terms=terms,
-        iterations=out.iterations,
+        iterations=iterations,
         converged=out.converged,
         message=out.message,
         clamped=clamped,
@@ -239,6 +286,73 @@ def _complete(image, sparse_depth, mask, *, weights, solver, tol, max_iter, call
         depth_range=depth_range,
         gap=out.gap,
     )
+
+
+def _complete_with_prior(image, sparse_depth, mask, prior, alignment, *, x0, callback, settings):
+    """:func:`complete_depth` with ``prior``: complete the shifted residual ``z − P + c``, add ``P − c`` back, clamp."""
+    depth, observed = as_depth_and_mask(sparse_depth, mask)
+    aligned, _, _ = align_prior(prior, depth, observed, alignment=alignment)
+    residual = depth[observed] - aligned[observed]
+    values = depth[observed]
+    depth_range = ((float(values.min()), float(values.max())) if settings["clip_to_observed"] else (0.0, np.inf))
+    # c keeps every residual sample >= the median depth: positive, and of the depth's magnitude for the scaling
+    shift = float(np.median(values)) + max(0.0, -float(residual.min()))
+    shifted = np.zeros_like(depth)
+    shifted[observed] = residual + shift
+    start = None if x0 is None else _prior_start(x0, aligned, shift)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ClampWarning)  # the residual's clamp is not the user's result
+        result = _complete(image, shifted, observed, x0=start, callback=callback, **settings)
+    z, clamped = _clamp((result.depth + aligned - shift).ravel(), depth_range, settings["clip_to_observed"])
+    return dataclasses.replace(result, depth=z.reshape(depth.shape), clamped=clamped, depth_range=depth_range)
+
+
+def _prior_start(x0, aligned, shift):
+    """The residual problem's start ``x0 − P + c`` (``x0`` checked like a depth start)."""
+    start = np.asarray(x0, dtype=np.float64)
+    if start.shape != aligned.shape:
+        raise ValueError(f"x0 has shape {start.shape}, expected {aligned.shape}")
+    if not np.all(np.isfinite(start)):
+        raise ValueError("x0 contains NaN or infinite values")
+    return np.maximum(start - aligned + shift, 0.0)
+
+
+def depth_jump_factor(depth, tau: float) -> np.ndarray:
+    """Per-pair factors ``1 / (1 + (Δz / (τ z̄))²)`` in the row order of :func:`~sparsedepth.grid.pair_edge_weights`.
+
+    Parameters
+    ----------
+    depth : ndarray, (H, W)
+        A completed depth map (> 0 where used; the pair mean is floored at
+        the smallest positive value of ``depth`` times 1e-6).
+    tau : float
+        ``τ > 0``, the relative depth change at which the factor is 1/2.
+
+    Returns
+    -------
+    ndarray, (2*H*W,)
+        Horizontal pairs ``(i, j)–(i, j+1)`` first, then vertical pairs
+        ``(i, j)–(i+1, j)``; the rows of the last column / row (no pair) are 1.
+
+    Notes
+    -----
+    ``Δz / z̄`` is the pair's depth difference relative to its mean depth, so
+    the factor does not depend on the depth unit; it is the Cauchy
+    (Lorentzian) IRLS weight of the relative difference with scale ``τ``.
+    """
+    z = np.asarray(depth, dtype=np.float64)
+    tau = check_nonnegative_real(tau, name="depth_jump")
+    if tau == 0:
+        return np.ones(2 * z.size)
+    positive = z[z > 0]
+    floor = 1e-6 * float(positive.min()) if positive.size else 1e-300
+    fx = np.ones_like(z)
+    fy = np.ones_like(z)
+    mean_x = np.maximum(0.5 * (z[:, 1:] + z[:, :-1]), floor)
+    mean_y = np.maximum(0.5 * (z[1:, :] + z[:-1, :]), floor)
+    fx[:, :-1] = 1.0 / (1.0 + ((z[:, 1:] - z[:, :-1]) / (tau * mean_x)) ** 2)
+    fy[:-1, :] = 1.0 / (1.0 + ((z[1:, :] - z[:-1, :]) / (tau * mean_y)) ** 2)
+    return np.concatenate([fx.ravel(), fy.ravel()])
 
 
 def _check_uncertainty_arguments(uncertainty, max_uncertainty) -> bool:
@@ -288,7 +402,7 @@ def _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed):
     return name, tol, max_iter, options
 
 
-def _scaled_objective(image, sparse_depth, mask, weights, l1_smoothing, clip_to_observed):
+def _scaled_objective(image, sparse_depth, mask, weights, l1_smoothing, clip_to_observed, pair_factor=None):
     """``(objective, coarse, scale, depth_range)``: the objective in units of the depth scale ``s``.
 
     Depth, ``gamma``, ``edge_scale`` and ``l1_smoothing`` are divided by
@@ -305,7 +419,7 @@ def _scaled_objective(image, sparse_depth, mask, weights, l1_smoothing, clip_to_
     objective, coarse, _ = build_objective(
         image, depth, observed,
         weights=weights.replace(gamma=weights.gamma / scale, edge_scale=weights.edge_scale / scale),
-        l1_smoothing=l1_smoothing / scale)
+        l1_smoothing=l1_smoothing / scale, pair_factor=pair_factor)
     return objective, coarse, scale, depth_range
 
 

@@ -187,6 +187,7 @@ def test_fast_mode_on_a_grid_smaller_than_two_blocks_solves_at_full_resolution()
     (dict(quality="fast", x0=np.ones((40, 50))), "x0 has shape"),
     (dict(quality="fast", x0=np.full((40, 60), np.nan)), "x0 contains NaN"),
     (dict(quality="fast", uncertainty=True), "takes no uncertainty"),
+    (dict(quality="fast", prior=np.ones((40, 60))), "takes no prior"),
     (dict(quality="fast", max_iter=3, callback=print), "takes no max_iter, callback"),
 ])
 def test_fast_mode_rejects_what_it_does_not_take(kwargs, words):

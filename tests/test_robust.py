@@ -12,6 +12,7 @@ import sparsedepth as sd
 from sparsedepth import Weights, build_objective, complete_depth
 from sparsedepth.objective import Objective, QuadraticTerm, RobustPenalty, RobustTerm, robust_penalty
 from sparsedepth.grid.operators import gradient_stencil
+from sparsedepth.objective.weights import MODEL_FIELDS
 from sparsedepth.solvers import scaled_objective, solve
 
 from conftest import make_problem
@@ -320,12 +321,14 @@ def test_batch_settings_of_an_l1_batch_match_files_without_the_edge_penalty_fiel
     from sparsedepth.batch import BatchOptions
     from sparsedepth.batch.csvlog import fingerprint, settings_difference
 
-    current = fingerprint([], BatchOptions(keep_fraction=0.05, weights=Weights(gamma=0.01)))
+    off = dict.fromkeys(MODEL_FIELDS, 0.0)  # the objective of the files written before the modelling fields
+    current = fingerprint([], BatchOptions(keep_fraction=0.05, weights=Weights(gamma=0.01, **off)))
     assert "edge_penalty" not in current["options"]["weights"] and "edge_scale" not in current["options"]["weights"]
     stored = {**current, "options": {**current["options"], "weights": {
-        k: v for k, v in dataclasses.asdict(Weights(gamma=0.01)).items() if k not in ("edge_penalty", "edge_scale")}}}
+        k: v for k, v in dataclasses.asdict(Weights(gamma=0.01)).items()
+        if k not in ("edge_penalty", "edge_scale", *MODEL_FIELDS)}}}
     assert settings_difference(stored, current) == ""
-    changed = fingerprint([], BatchOptions(keep_fraction=0.05, weights=Weights(gamma=0.02)))
+    changed = fingerprint([], BatchOptions(keep_fraction=0.05, weights=Weights(gamma=0.02, **off)))
     assert settings_difference(stored, changed) == "options weights"
 
 
@@ -336,7 +339,8 @@ def test_bench_reports_and_ablation_accept_a_robust_edge_penalty():
     robust = Weights(gamma=0.01, edge_penalty="welsch", edge_scale=0.1)
     text = weights_markdown(robust)
     assert "edge_penalty = welsch" in text and "edge_scale = 0.1" in text and "gamma = 0.01" in text
-    assert "edge_" not in weights_markdown(sd.DEFAULT_WEIGHTS)  # the l1 default reads as before
+    default_text = weights_markdown(sd.DEFAULT_WEIGHTS)  # the l1 default reads as before
+    assert "edge_penalty" not in default_text and "edge_scale" not in default_text
     labels = [label for label, _ in ablation.variants(D=robust)]
     assert labels[-1] == "defaults (sd.DEFAULT_WEIGHTS)"
     assert dict(ablation.variants(D=robust))["defaults (sd.DEFAULT_WEIGHTS)"] == robust

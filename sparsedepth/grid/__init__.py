@@ -2,13 +2,15 @@
 
 ``operators`` (sparse and matrix-free difference operators), ``stencil``
 (stencil images and their CSR form), ``edges`` (the image gradient and the
-edge weights built from it), ``resample`` (block means onto a coarser grid,
-bilinear upsampling back, edge-aware smoothing sweeps: the real-time mode).
+edge weights built from it), ``geodesic`` (the image-aware nearest-sample fill), ``resample``
+(block means onto a coarser grid, bilinear upsampling back, edge-aware smoothing sweeps: the
+real-time mode).
 
 May import NumPy, SciPy and :mod:`sparsedepth._validation` only.
 """
 
-from .edges import edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights
+from .edges import edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights, smoothed_image
+from .geodesic import geodesic_fill
 from .operators import (StencilOperator, forward_diff, gradient, gradient_stencil, hessian_operator, hessian_stencil,
                         mixed_diff, second_diff)
 from .resample import block_mean, block_sample_mean, coarse_shape, edge_aware_sweeps, upsample_bilinear
@@ -18,4 +20,5 @@ __all__ = ["forward_diff", "gradient", "second_diff", "mixed_diff", "hessian_ope
            "gradient_stencil", "hessian_stencil",
            "stencil_to_csr", "csr_to_stencil", "full_pattern_offsets",
            "image_gradient_magnitude", "edge_weights", "pair_edge_weights", "second_order_edge_weights",
+           "smoothed_image", "geodesic_fill",
            "coarse_shape", "block_mean", "block_sample_mean", "upsample_bilinear", "edge_aware_sweeps"]

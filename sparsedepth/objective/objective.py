@@ -33,7 +33,9 @@ import scipy.sparse as sp
 
 from .._validation import as_depth_and_mask, as_float_image, check_positive_real, check_same_shape
 from ..baselines import nearest_fill
-from ..grid.edges import edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights
+from ..grid.edges import (edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights,
+                          smoothed_image)
+from ..grid.geodesic import geodesic_fill
 from ..grid.operators import StencilOperator, gradient_stencil, hessian_stencil
 from ..grid.stencil import stencil_to_csr
 from .terms import AbsTerm, QuadraticTerm, RobustTerm
@@ -264,6 +266,7 @@ def build_objective(
     *,
     weights: Weights = DEFAULT_WEIGHTS,
     l1_smoothing: float = DEFAULT_L1_SMOOTHING,
+    pair_factor=None,
 ):
     """Assemble the completion objective for one frame.
 
@@ -278,6 +281,11 @@ def build_objective(
     weights : Weights
     l1_smoothing : float
         ``ε`` of the smoothed L1 (see module notes).
+    pair_factor : ndarray, (2*H*W,), optional
+        Factors in [0, 1] multiplying the image pair weights ``wx``, ``wy``
+        (rows of :func:`~sparsedepth.grid.edges.pair_edge_weights`) before
+        the ``smooth_image`` and ``second_order_image`` terms use them (the
+        second solve of ``weights.depth_jump``); default 1.
 
     Returns
     -------
@@ -287,7 +295,9 @@ def build_objective(
         :class:`AbsTerm` for ``weights.edge_penalty = "l1"``, else a
         :class:`RobustTerm` with that penalty and ``weights.edge_scale``.
     coarse : ndarray, (H, W)
-        ``z_c``, the nearest-neighbour fill of the observations.
+        ``z_c``: the nearest-neighbour fill of the observations, or with
+        ``weights.fill_contrast > 0`` their geodesic fill on the image
+        blurred by ``weights.edge_sigma``.
     mask : ndarray of bool, (H, W)
 
     Raises
@@ -299,13 +309,22 @@ def build_objective(
         If ``weights`` is not a :class:`~sparsedepth.objective.weights.Weights`.
     """
     check_weights(weights)
-    img = as_float_image(image)
+    img = smoothed_image(image, weights.edge_sigma)
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     check_same_shape(img.shape[:2], depth.shape, "image", "sparse_depth")
     shape = depth.shape
-    coarse = nearest_fill(depth, observed)
+    if weights.fill_contrast > 0:
+        coarse = geodesic_fill(img, depth, observed, contrast=weights.fill_contrast)
+    else:
+        coarse = nearest_fill(depth, observed)
     w = edge_weights(img, weights.kappa).ravel() if weights.gamma > 0 else None
     pair = pair_edge_weights(img, weights.kappa) if (weights.beta_image > 0 or weights.beta_second_image > 0) else None
+    if pair is not None and pair_factor is not None:
+        factor = np.asarray(pair_factor, dtype=np.float64)
+        if factor.shape != pair.shape or not np.all((factor >= 0) & (factor <= 1)):
+            raise ValueError(f"pair_factor must be {pair.shape[0]} values in [0, 1] (one per pixel pair); got shape "
+                             f"{factor.shape}")
+        pair = pair * factor
     G = gradient_stencil(shape)
     hessian = hessian_stencil(shape) if (weights.beta_second > 0 or weights.beta_second_image > 0) else None
     w2 = None if weights.beta_second_image == 0 else second_order_edge_weights(pair, shape)

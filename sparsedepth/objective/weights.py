@@ -11,12 +11,14 @@ from .._validation import check_nonnegative_real, check_positive_real
 from .robust import PENALTIES
 
 __all__ = ["Weights", "DEFAULT_WEIGHTS", "check_weights", "EDGE_PENALTIES", "EDGE_PENALTY_FIELDS",
-           "DEFAULT_EDGE_SCALE"]
+           "DEFAULT_EDGE_SCALE", "MODEL_FIELDS"]
 
 #: The penalties of the edge term: ``"l1"`` (``|t|``) or a robust penalty of :mod:`sparsedepth.objective.robust`.
 EDGE_PENALTIES = ("l1", *PENALTIES)
 #: The fields of :class:`Weights` that choose the edge term's penalty (not term weights: a str and a scale).
 EDGE_PENALTY_FIELDS = ("edge_penalty", "edge_scale")
+#: The fields of :class:`Weights` that shape the terms instead of weighting them (numbers >= 0, 0 = off).
+MODEL_FIELDS = ("edge_sigma", "fill_contrast", "depth_jump")
 #: Default ``edge_scale`` in depth units (metres): 5 cm.
 DEFAULT_EDGE_SCALE = 0.05
 
@@ -30,7 +32,7 @@ class Weights:
         F(z) = alpha       Σ M (z - z_obs)²                 data
              + beta        Σ (∂x z)² + (∂y z)²              smooth
              + gamma       Σ w (|∂x z| + |∂y z|)            edge (L1; or Σ w (φ(∂x z) + φ(∂y z)))
-             + delta       Σ (z - z_c)²                     prior (nearest-neighbour fill)
+             + delta       Σ (z - z_c)²                     prior (nearest or geodesic fill)
              + beta_image  Σ wx (∂x z)² + wy (∂y z)²        smooth_image (image-weighted L2)
              + beta_second Σ (∂xx z)² + (∂yy z)² + 2 (∂xy z)²   second_order
              + beta_second_image  Σ w2 ⊙ (same rows)        second_order_image
@@ -46,6 +48,12 @@ class Weights:
     ``|t|`` (``s = edge_scale``; see
     :class:`~sparsedepth.objective.robust.RobustPenalty`), which lets depth
     jump where the image has an edge without the staircase of L1.
+
+    Three fields shape the terms rather than weight them (:data:`MODEL_FIELDS`;
+    0 switches each off): ``edge_sigma`` blurs the image before every edge
+    weight, ``fill_contrast`` makes ``z_c`` the image-aware (geodesic) fill,
+    and ``depth_jump`` re-solves once with the smoothness relaxed where the
+    first solution jumps.
 
     Parameters
     ----------
@@ -75,6 +83,25 @@ class Weights:
         quadratically (cost ``t² / (2s)``), larger ones cost about ``|t|``
         (Charbonnier) or less (a jump).  Scales with the depth like ``gamma``.
         Unused with ``"l1"``.
+    edge_sigma : float
+        Standard deviation in pixels (>= 0) of the Gaussian blur applied to
+        the image before the edge weights ``w``, ``wx``, ``wy``, ``w2`` and
+        the geodesic fill's step costs
+        (:func:`~sparsedepth.grid.edges.smoothed_image`); 0 uses the image as
+        it is.
+    fill_contrast : float
+        ``λ >= 0`` of the prior's target ``z_c``: 0 makes it the Euclidean
+        nearest-neighbour fill; ``λ > 0`` the geodesic fill
+        (:func:`~sparsedepth.grid.geodesic.geodesic_fill`), the observation
+        reached at the least path cost, a step between neighbours costing
+        ``1 + λ ‖I_p − I_q‖``, so ``z_c`` does not leak across image edges.
+    depth_jump : float
+        ``τ >= 0``, relative depth change at which the image-weighted
+        smoothness is halved in a second solve: 0 solves once; ``τ > 0``
+        solves, multiplies the pair weights ``wx``, ``wy`` (and so ``w2``) by
+        ``1 / (1 + (Δz / (τ z̄))²)`` with ``Δz`` the pair's depth difference
+        and ``z̄`` its mean depth in the first solution, and solves again
+        from it (about twice the time).  Scale-free (a relative change).
 
     Raises
     ------
@@ -94,7 +121,12 @@ class Weights:
     edge-aware L1 term does not lower the error measurably there and costs a
     non-smooth solve; set ``gamma > 0`` (in units of depth: it scales linearly
     with depth, unlike the quadratic terms) to use it.  With ``gamma = 0``
-    multiplying every weight by one number leaves the solution unchanged.
+    multiplying every weight by one number leaves the solution unchanged
+    (the :data:`MODEL_FIELDS` are not weights and stay as they are).  The
+    default ``edge_sigma = 1`` and ``fill_contrast = 20`` (blurred-image edge
+    weights, geodesic ``z_c``) were chosen on the tuning frames by
+    ``python -m bench.accuracy``; ``docs/accuracy.md`` has their scores on the
+    report frames and leave-one-dataset-out.
     """
 
     # Defaults: the weight set chosen by ``python bench/tune.py`` (docs/tuning.md), rounded to
@@ -110,12 +142,18 @@ class Weights:
     beta_second_image: float = 0.039
     edge_penalty: str = "l1"
     edge_scale: float = DEFAULT_EDGE_SCALE
+    # edge_sigma and fill_contrast: the grid point of ``python -m bench.accuracy`` best on TUNE_FRAMES
+    # (docs/accuracy.md), which also wins on every dataset of REPORT_FRAMES and leave-one-dataset-out
+    edge_sigma: float = 1.0
+    fill_contrast: float = 20.0
+    depth_jump: float = 0.0
 
     def __post_init__(self):
         for f in fields(self):
             if f.name in EDGE_PENALTY_FIELDS:
                 continue
-            value = check_nonnegative_real(getattr(self, f.name), name=f"weight {f.name}")
+            label = f.name if f.name in MODEL_FIELDS else f"weight {f.name}"
+            value = check_nonnegative_real(getattr(self, f.name), name=label)
             object.__setattr__(self, f.name, value)
         if not isinstance(self.edge_penalty, str):
             raise TypeError(f"edge_penalty must be a str, one of {list(EDGE_PENALTIES)}; got "
@@ -134,7 +172,8 @@ class Weights:
         """The reference paper's objective: its four terms only, every extension term 0.
 
         ``Weights(alpha=..., beta=...)`` keeps the *default* extension weights
-        for the fields it does not name; this constructor sets them to 0.  Its
+        for the fields it does not name; this constructor sets them, and the
+        :data:`MODEL_FIELDS`, to 0 (the paper's edge weights and nearest fill).  Its
         own defaults are untuned weights for the paper's four terms.
 
         Examples
@@ -143,22 +182,30 @@ class Weights:
         0.0
         """
         return cls(alpha=alpha, beta=beta, gamma=gamma, delta=delta, kappa=kappa,
-                   beta_image=0.0, beta_second=0.0, beta_second_image=0.0)
+                   beta_image=0.0, beta_second=0.0, beta_second_image=0.0,
+                   edge_sigma=0.0, fill_contrast=0.0, depth_jump=0.0)
 
     def replace(self, **changes) -> "Weights":
         """A copy with some weights changed (``Weights().replace(gamma=0)``)."""
         return replace(self, **changes)
 
     def as_dict(self, *, used_only=False) -> dict:
-        """``{field: value}``; with ``used_only``, without ``edge_penalty`` and ``edge_scale`` for the L1 edge term.
+        """``{field: value}``; with ``used_only``, without the fields that do not act on this objective.
 
-        The L1 edge term has no scale, so those two fields say nothing about
-        an L1 objective; reports and batch fingerprints list only what is used.
+        Those are ``edge_penalty`` and ``edge_scale`` for the L1 edge term (it
+        has no scale) and every :data:`MODEL_FIELDS` entry at 0 (switched
+        off); reports and batch fingerprints list only what is used, so an
+        objective without a modelling option reads as it did before those
+        fields existed.
         """
         items = asdict(self)
         if used_only and self.edge_penalty == "l1":
             for name in EDGE_PENALTY_FIELDS:
                 del items[name]
+        if used_only:
+            for name in MODEL_FIELDS:
+                if items[name] == 0:
+                    del items[name]
         return items
 
 
