@@ -511,7 +511,11 @@ def _complete_fast(image, sparse_depth, mask, *, weights, l1_smoothing, clip_to_
         factor = 1
     coarse_depth, coarse_observed = block_sample_mean(depth, observed, factor)
     coarse_image = np.clip(block_mean(fine_image, factor), 0.0, 1.0)  # float32 means may round past 1
-    objective, coarse, scale, _ = _scaled_objective(coarse_image, coarse_depth, coarse_observed, weights,
+    # lengths in the user's pixels: a blur of edge_sigma pixels is edge_sigma / f coarse pixels, and a coarse step
+    # is f pixels long, so the geodesic fill's cost per unit of image contrast is fill_contrast / f in its steps
+    coarse_weights = weights.replace(edge_sigma=weights.edge_sigma / factor,
+                                     fill_contrast=weights.fill_contrast / factor)
+    objective, coarse, scale, _ = _scaled_objective(coarse_image, coarse_depth, coarse_observed, coarse_weights,
                                                     l1_smoothing, False)
     if x0 is not None:
         x0 = block_mean(np.maximum(x0, 0.0), factor)
