@@ -200,30 +200,24 @@ def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa
     diagonal[1:] += wy[:-1]
     diagonal += wy
     inverse = np.reciprocal(diagonal, out=diagonal)
-    # per pixel, each neighbour's weight and the prior divided by the diagonal:
-    # z_i = s_i / d_i + Σ_j (w_ij / d_i) z_j
-    left = np.zeros_like(inverse)
-    left[:, 1:] = wx[:, :-1] * inverse[:, 1:]
-    right = wx * inverse
-    up = np.zeros_like(inverse)
-    up[1:] = wy[:-1] * inverse[1:]
-    below = wy * inverse
-    base = np.zeros_like(inverse)
-    base[:, :W] = prior
-    base *= inverse
+    full = np.zeros((H, padded), dtype=np.float32)
+    full[:, :W] = prior
+    priors = _split_parity(full)
+    full[:, :W] = z
+    fields = _split_parity(full)
     free = np.zeros((H, padded), dtype=bool)
     free[:, :W] = ~observed
-    field = np.zeros((H, padded), dtype=np.float32)
-    field[:, :W] = z
-    # each parity of y + x as an (H, padded / 2) array: the sweeps touch only the pixels they update
-    even, odd = _split_parity(field)
-    even_weights = [_split_parity(a)[0] for a in (base, left, right, up, below)]
-    odd_weights = [_split_parity(a)[1] for a in (base, left, right, up, below)]
-    even_free, odd_free = _split_parity(free)
+    frees = _split_parity(free)
+    inverses = _split_parity(inverse)
+    vertical = _split_parity(wy)
+    # each parity of y + x as an (H, padded / 2) array: a half sweep touches only the pixels it updates; the
+    # horizontal pair weights are read as views: wx[:, 0::2] (pairs (2k, 2k + 1)) and wx[:, 1::2] ((2k + 1, 2k + 2))
+    horizontal = (wx[:, 0::2], wx[:, 1::2])
     for _ in range(int(sweeps)):
-        _half_sweep(even, odd, even_weights, even_free, row_offset=0)
-        _half_sweep(odd, even, odd_weights, odd_free, row_offset=1)
-    return _merge_parity(even, odd)[:, :W]
+        for target in (0, 1):
+            _half_sweep(fields[target], fields[1 - target], priors[target], inverses[target], frees[target],
+                        horizontal, vertical[1 - target], vertical[target], row_offset=target)
+    return _merge_parity(*fields)[:, :W]
 
 
 def _split_parity(a):
@@ -243,22 +237,25 @@ def _merge_parity(even, odd):
     return out
 
 
-def _half_sweep(target, other, weights, free, *, row_offset):
+def _half_sweep(target, other, prior, inverse, free, horizontal, weight_above, weight_below, *, row_offset):
     """Update ``target`` (one parity, in place) from its neighbours in ``other`` (the other parity).
 
-    In a row where the target's pixels sit at even ``x`` (rows ``y`` with ``y + row_offset`` even), entry ``k`` is
-    at ``x = 2k``: its left neighbour is ``other[y, k − 1]`` and its right one ``other[y, k]``; in the other rows
-    it is at ``x = 2k + 1``, with neighbours ``other[y, k]`` and ``other[y, k + 1]``; above and below are always
-    ``other[y ∓ 1, k]``.
+    In the rows where the target's pixels sit at even ``x`` (``y + row_offset`` even), entry ``k`` is at ``x =
+    2k``: its left neighbour is ``other[y, k − 1]`` (pair weight ``wx[y, 2k − 1]``) and its right one ``other[y,
+    k]`` (``wx[y, 2k]``); in the other rows it is at ``x = 2k + 1``, with neighbours ``other[y, k]`` (``wx[y,
+    2k]``) and ``other[y, k + 1]`` (``wx[y, 2k + 1]``).  Above and below are ``other[y ∓ 1, k]``, whose pair
+    weights are the vertical weights of the pixel above (``weight_above``, the other parity's) and of the pixel
+    itself (``weight_below``).
     """
-    base, left, right, up, below = weights
-    update = base.copy()
+    pairs_even, pairs_odd = horizontal  # wx[:, 2k] and wx[:, 2k + 1]
+    update = prior.copy()
     at_even = slice(row_offset, None, 2)  # rows whose target pixels have even x
     at_odd = slice(1 - row_offset, None, 2)
-    update[at_even, 1:] += left[at_even, 1:] * other[at_even, :-1]
-    update[at_even] += right[at_even] * other[at_even]
-    update[at_odd] += left[at_odd] * other[at_odd]
-    update[at_odd, :-1] += right[at_odd, :-1] * other[at_odd, 1:]
-    update[1:] += up[1:] * other[:-1]
-    update[:-1] += below[:-1] * other[1:]
+    update[at_even, 1:] += pairs_odd[at_even, :-1] * other[at_even, :-1]
+    update[at_even] += pairs_even[at_even] * other[at_even]
+    update[at_odd] += pairs_even[at_odd] * other[at_odd]
+    update[at_odd, :-1] += pairs_odd[at_odd, :-1] * other[at_odd, 1:]
+    update[1:] += weight_above[:-1] * other[:-1]
+    update[:-1] += weight_below[:-1] * other[1:]
+    update *= inverse
     np.copyto(target, update, where=free)
