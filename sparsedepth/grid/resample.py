@@ -122,11 +122,12 @@ def upsample_bilinear(coarse, shape, factor: int) -> np.ndarray:
 
 
 def _pair_weights(first, second, kappa, smoothness):
-    """``smoothness · exp(−κ ‖first − second‖)`` over the channel axis, in float32 (a sum over the few channels)."""
-    total = np.zeros(first.shape[:2], dtype=np.float32)
-    for channel in range(first.shape[2]):
-        difference = np.subtract(first[..., channel], second[..., channel], dtype=np.float32)
-        total += difference * difference
+    """``smoothness · exp(−κ ‖first − second‖)`` over the channel axis, in float32."""
+    difference = np.subtract(first, second, dtype=np.float32)
+    difference *= difference
+    total = difference[..., 0].copy()
+    for channel in range(1, difference.shape[2]):
+        total += difference[..., channel]
     np.sqrt(total, out=total)
     total *= -kappa
     np.exp(total, out=total)
