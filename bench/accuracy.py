@@ -21,7 +21,7 @@ alignment and the residual completion work, never what accuracy a real prior giv
 
 Run from the repository root::
 
-    python -m bench.accuracy            # ~20 min on 2 cores: writes docs/accuracy.md
+    python -m bench.accuracy --seeds 0 1   # ~10 min on 2 cores: writes docs/accuracy.md
     python -m bench.accuracy --quick    # a smoke run on the tiny quick frames
 
 May import :mod:`sparsedepth`, numpy, scipy.ndimage, :mod:`bench.frames`, :mod:`bench.harness` and
@@ -168,7 +168,9 @@ def load(args):
 
 
 def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = parse_args(argv)
+    args.argv = [a for a in argv if not a.startswith("--out") and a != str(args.out)]
     start = time.perf_counter()
     tune_frames, report_frames = load(args)
     if not tune_frames or not report_frames:
@@ -225,7 +227,7 @@ def report(args, tune_frames, report_frames, fractions, rows, results, chosen, b
         keep = lambda frame, d=dataset: dataset_of(frame) == d  # noqa: E731
         per_dataset.append([dataset, f"{mean_over(base_report[1], keep):.3f}", f"{mean_over(reported[1], keep):.3f}"])
     prior_rows = prior_check(report_frames, fractions, args.seeds)
-    command = harness.command_line("accuracy", ["--quick"] if args.quick else [])
+    command = harness.command_line("accuracy", args.argv)
     lines = [
         "# Accuracy on unseen frames: modelling variants",
         "",

@@ -296,3 +296,14 @@ def test_first_order_solution_with_the_geodesic_prior_stays_in_the_observed_rang
     depth = sd.complete_depth(image, sparse, mask, weights=w, solver="direct", clip_to_observed=False).depth
     lo, hi = sparse[mask].min(), sparse[mask].max()
     assert lo - 1e-12 * hi <= depth.min() and depth.max() <= hi + 1e-12 * hi
+
+
+def test_prior_with_a_starting_depth_reaches_the_same_minimiser():
+    image, truth, sparse, mask = _frame()
+    prior = 2.0 * truth + np.sin(np.arange(truth.shape[1]) / 5.0)[None, :]
+    settings = dict(prior=prior, solver="direct", clip_to_observed=False)
+    plain = sd.complete_depth(image, sparse, mask, **settings).depth
+    started = sd.complete_depth(image, sparse, mask, x0=np.full(truth.shape, 2.0), **settings).depth
+    np.testing.assert_allclose(started, plain, rtol=1e-10)
+    with pytest.raises(ValueError, match="x0 has shape"):
+        sd.complete_depth(image, sparse, mask, x0=np.ones((2, 2)), prior=prior)
