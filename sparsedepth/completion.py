@@ -16,6 +16,7 @@ from ._validation import as_depth_and_mask, check_nonnegative_real
 from .objective.objective import DEFAULT_L1_SMOOTHING, build_objective
 from .result import ClampWarning, CompletionResult
 from .solvers import SOLVERS, solve_scaled, check_solver_arguments, depth_scale
+from .solvers.quadratic import DEFAULT_DEPTH_RTOL
 from .objective.weights import DEFAULT_WEIGHTS, Weights, check_weights
 from .uncertainty import MIN_OBSERVED, estimate_uncertainty, split_samples
 
@@ -74,7 +75,12 @@ def complete_depth(
         ``weights.edge_penalty`` and ``"admm"`` otherwise.  The stopping
         rule of each is in :mod:`sparsedepth.solvers`.
     tol : float, optional
-        Solver tolerance (meaning per solver; default per solver).
+        Solver tolerance (meaning per solver; default per solver).  Without
+        it (and without a depth tolerance in ``options``) the default
+        ``"amg"`` solve stops when its estimated RMS remaining change of the
+        depth is at most ``options["depth_rtol"] = 3e-4`` of the depth scale
+        (see :class:`~sparsedepth.solvers.options.AmgOptions`); with it, at
+        the relative residual ``tol`` as before.
     max_iter : int, optional
         Maximum number of (outer) iterations.
     callback : callable, optional
@@ -241,7 +247,10 @@ def _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed):
     name = choose_solver(weights) if solver == "auto" else solver
     if name not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose one of {['auto', *sorted(SOLVERS)]}")
+    explicit_tol = tol is not None
     tol, max_iter, options = check_solver_arguments(name, tol, max_iter, options)
+    if name == "amg" and not explicit_tol and options["depth_rtol"] is None and options["depth_atol"] is None:
+        options["depth_rtol"] = DEFAULT_DEPTH_RTOL
     if not isinstance(clip_to_observed, (bool, np.bool_)):
         raise TypeError(f"clip_to_observed must be True or False; got {type(clip_to_observed).__name__}")
     return name, tol, max_iter, options
