@@ -67,9 +67,10 @@ class RemainingChange:
     largest ratio ``s_j / s_{j−1}`` over the last ``window`` steps (the
     largest, so a transient fast step does not end the solve).  It is an
     estimate, not a bound: a later phase of slower convergence is not
-    foreseen.  On the report frames at full size (multigrid-preconditioned
-    CG, ``ρ`` 0.5-0.9) it was 1.2 to 3 times the true remaining change
-    at the stop (``bench/speed.py``).  Each call costs one dot product.
+    foreseen.  At the default stop on the report frames at full size
+    (multigrid-preconditioned CG, ``ρ`` 0.5-0.9) it was 1.3 to 3.1 times
+    the true remaining change (``python -m bench.speed``, ``docs/speed.md``).
+    Each call costs one dot product.
     """
 
     def __init__(self, size, tol, *, window=3, max_rate=0.95):
