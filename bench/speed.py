@@ -17,7 +17,8 @@ Two sections:
   compared with the estimate.
 * **Fast peers** (:mod:`bench.fast_peers`): OpenCV's fast global smoother and an IP-Basic-style morphological fill,
   tuned on the tuning frames, timed and scored on the report frames beside the nearest fill and ours, with the
-  speed/accuracy figure ``docs/figures/speed_accuracy.png``.  Needs ``opencv-contrib-python-headless`` (the
+  speed/accuracy figure ``docs/figures/speed_accuracy.png``, and ``complete_depth(quality="fast")`` against FGS
+  frame by frame, at full size and at 640x480.  Needs ``opencv-contrib-python-headless`` (the
   ``bench`` extra); without it those rows are left out and the report says so.
 
 May import :mod:`sparsedepth`, numpy, :mod:`bench.blas`, :mod:`bench.frames`, :mod:`bench.harness` and

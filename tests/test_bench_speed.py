@@ -19,7 +19,8 @@ def test_speed_quick_run(tmp_path):
         assert r["true_rms"] <= 3 * r["tol"]  # the stated factor of tests/test_depth_stop.py
         assert abs(r["rmse_change"]) < 1e-2
     if fast_peers.available():
-        assert "FGS (" in text and "IP-Basic (" in text
+        assert "FGS (" in text and "IP-Basic (" in text and "sparsedepth (fast)" in text
+        assert "### The fast mode against FGS, frame by frame" in text and "@640x480" in text
         assert (tmp_path / "speed.png").stat().st_size > 1000
     else:
         assert "is not installed" in text
