@@ -113,3 +113,18 @@ def test_a_uint8_image_and_the_same_image_as_floats_give_the_same_depth():
         a = sd.complete_depth(image, sparse, mask, quality="fast")
         b = sd.complete_depth(image / 255.0, sparse, mask, quality="fast")
     np.testing.assert_allclose(a.depth, b.depth, rtol=1e-5)
+
+
+def test_the_coarse_solve_stops_at_its_own_depth_tolerance_unless_told_otherwise():
+    image, sparse, mask, _ = make_problem((130, 140), fraction=0.05, seed=8)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sd.ClampWarning)
+        default = sd.complete_depth(image, sparse, mask, quality="fast")
+        told = sd.complete_depth(image, sparse, mask, quality="fast", options={"depth_rtol": 1e-6})
+        tight = sd.complete_depth(image, sparse, mask, quality="fast", tol=1e-10)
+    scale = sd.solvers.depth_scale(sparse[mask])
+    assert "depth tolerance %.1e" % (1e-3 * scale) in default.message
+    assert "depth tolerance %.1e" % (1e-6 * scale) in told.message
+    assert "remaining change" not in tight.message
+    # the coarse solution moves by at most a few times its tolerance: the results agree to that
+    assert np.sqrt(np.mean((default.depth - tight.depth) ** 2)) <= 3 * 1e-3 * scale
