@@ -83,8 +83,9 @@ def complete_depth(
         it (and without a depth tolerance in ``options``) the default
         ``"amg"`` solve stops when its estimated RMS remaining change of the
         depth is at most ``options["depth_rtol"] = 3e-4`` of the depth scale
-        (see :class:`~sparsedepth.solvers.options.AmgOptions`); with it, at
-        the relative residual ``tol`` as before.
+        (see :class:`~sparsedepth.solvers.options.AmgOptions`); with it
+        alone, at the relative residual ``tol``; a depth tolerance given in
+        ``options`` stops the solve too, whichever rule is met first.
     max_iter : int, optional
         Maximum number of (outer) iterations.
     callback : callable, optional

@@ -205,3 +205,18 @@ def test_depth_options_are_checked(cls):
 def test_other_solvers_have_no_depth_rule():
     with pytest.raises(ValueError, match="unknown option 'depth_rtol' for solver 'direct'"):
         check_solver_arguments("direct", options={"depth_rtol": 1e-3})
+
+
+def test_an_explicit_tol_and_a_depth_tolerance_stop_at_whichever_comes_first(frame):
+    image, sparse, mask, _ = frame
+    z_star, scale = _exact(image, sparse, mask)
+    depth_first = sd.complete_depth(image, sparse, mask, clip_to_observed=False, tol=1e-14,
+                                    options={"depth_rtol": 1e-2})
+    assert depth_first.converged and "remaining change" in depth_first.message
+    assert _rms(depth_first.depth - z_star) <= K * 1e-2 * scale
+    residual_first = sd.complete_depth(image, sparse, mask, clip_to_observed=False, tol=1e-5,
+                                       options={"depth_rtol": 1e-12})
+    assert residual_first.converged and "remaining change" not in residual_first.message.split(";")[0]
+    obj = sd.build_objective(image, sparse, mask)[0]
+    A, b, _ = obj.normal_equations()
+    assert np.linalg.norm(b - A @ residual_first.depth.ravel()) <= 1e-5 * np.linalg.norm(b) * (1 + 1e-6)

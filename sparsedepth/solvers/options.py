@@ -205,8 +205,9 @@ class AmgOptions(SolverOptions):
         s``, ``s`` the depth scale of the solve (the power of two nearest the
         median observed depth, :func:`~sparsedepth.solvers.depth_scale`).
         :func:`sparsedepth.complete_depth` sets it to
-        :data:`~sparsedepth.solvers.quadratic.DEFAULT_DEPTH_RTOL` when
-        neither ``tol`` nor a depth tolerance is given.
+        :data:`~sparsedepth.solvers.quadratic.DEFAULT_DEPTH_RTOL` (3e-4;
+        1e-3 for the coarse solve of ``quality="fast"``) when neither
+        ``tol`` nor a depth tolerance is given.
     depth_atol : float, optional
         The same stop at an estimated remaining change of at most
         ``depth_atol`` (depth units).  With both, the larger tolerance
