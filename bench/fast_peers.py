@@ -7,8 +7,9 @@
   processing"), re-implemented here with OpenCV after its ``fill_in_fast``: depth inverted (``d_max − d``, so
   dilation keeps the nearest surface), a dilation with a custom kernel, a closing with a 5x5 kernel, empty pixels
   filled from a 7x7 dilation, then from a 31x31 one, a 5x5 median blur and a 5x5 Gaussian (or bilateral)
-  blur of the valid pixels, inverted back; any pixel still empty gets the nearest fill.  Settings: the
-  dilation kernel and the final blur.
+  blur of the valid pixels, inverted back; any pixel still empty gets the nearest fill (in place of the
+  original's extension of the top row of values upwards, a LiDAR-specific step).  Settings: the dilation kernel
+  and the final blur.
 
 Each is tuned on :data:`bench.frames.TUNE_FRAMES` only (every ``TUNE_STEP``-th row and column, like
 ``bench.tune``, 5 % observed, seed 0): the setting of lowest mean RMSE / nearest-fill RMSE of a small grid
