@@ -17,10 +17,12 @@ Methods, on the same seeded samples (``sample_depth(..., fraction, seed)``) of e
 
 Accuracy is the RMSE on the valid pixels that were not observed divided by the nearest fill's on the same input
 (mean over frames × seeds).  Times are the best of ``--repeat`` calls of each method on each input, every method
-timed in this one process with one BLAS thread and one OpenCV thread; ``fast / FGS`` is the mean over inputs of the
-per-input ratio of the two times, the number to compare across machines.
+timed in this one process with one BLAS thread and one OpenCV thread (FGS's time is that of its two filter calls
+and the division, without the nearest fill it gives the pixels no sample reaches); ``fast / FGS`` is the mean
+over inputs of the per-input ratio of the two times, the number to compare across machines.
 
-May import :mod:`sparsedepth`, numpy, scikit-image, :mod:`bench.frames`, :mod:`bench.blas` and :mod:`bench.harness`.
+May import :mod:`sparsedepth`, numpy, scikit-image, :mod:`bench.frames`, :mod:`bench.blas`, :mod:`bench.fast_peers`
+and :mod:`bench.harness`.
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ import numpy as np  # noqa: E402
 
 import sparsedepth as sd  # noqa: E402
 
+from . import fast_peers  # noqa: E402
 from . import frames as frame_list  # noqa: E402
 from . import harness as H  # noqa: E402
 
@@ -52,27 +55,16 @@ VGA = (480, 640)
 
 
 def _cv2():
-    """``cv2`` with ``ximgproc`` and one thread, or None."""
-    try:
-        import cv2
-    except ImportError:
+    """``cv2`` (with ``ximgproc``) set to one thread, or None."""
+    if not fast_peers.available():
         return None
-    if not hasattr(cv2, "ximgproc"):
-        return None
-    cv2.setNumThreads(1)
-    return cv2
+    fast_peers.cv2.setNumThreads(1)
+    return fast_peers.cv2
 
 
 def fgs_fill(image, sparse, mask, *, lam, sigma):
-    """OpenCV's fast global smoother as normalized convolution of the samples (NaN where no sample reaches)."""
-    cv2 = _cv2()
-    guide = np.ascontiguousarray(image)
-    smoother = cv2.ximgproc.createFastGlobalSmootherFilter(guide, lam, sigma)
-    numerator = smoother.filter(np.where(mask, sparse, 0.0).astype(np.float32))
-    denominator = smoother.filter(mask.astype(np.float32))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        out = numerator / denominator
-    return np.where(denominator > 1e-6, out, np.nan).astype(np.float64)
+    """:func:`bench.fast_peers.fgs_fill` (the nearest fill where no sample reaches)."""
+    return fast_peers.fgs_fill(image, sparse, mask, lam=lam, sigma_color=sigma)
 
 
 def _resize(frame: H.FrameData, shape) -> H.FrameData:
@@ -113,7 +105,6 @@ def tune_fgs(frames_, seeds=(0,)):
         ratios = []
         for frame, _, _, sparse, mask, nearest, nearest_rmse in inputs:
             dense = fgs_fill(frame.image, sparse, mask, lam=lam, sigma=sigma)
-            dense = np.where(np.isfinite(dense), dense, nearest)
             ratios.append(_ratio(dense, frame, mask, nearest_rmse))
         score = float(np.mean(ratios))
         if best is None or score < best[2]:
@@ -144,9 +135,10 @@ def measure(frames_, fractions, seeds, repeat, fgs_setting):
         rec["t_nearest"] = H.best_of(repeat, sd.nearest_fill, sparse, mask)
         if fgs_setting is not None:
             lam, sigma = fgs_setting
-            dense = fgs_fill(frame.image, sparse, mask, lam=lam, sigma=sigma)
-            rec["fgs"] = _ratio(np.where(np.isfinite(dense), dense, nearest), frame, mask, nearest_rmse)
-            rec["t_fgs"] = H.best_of(repeat, fgs_fill, frame.image, sparse, mask, lam=lam, sigma=sigma)
+            rec["fgs"] = _ratio(fgs_fill(frame.image, sparse, mask, lam=lam, sigma=sigma), frame, mask, nearest_rmse)
+            # timed without the nearest fill of the pixels no sample reaches: the two filter calls and the division
+            rec["t_fgs"] = H.best_of(repeat, fast_peers.fgs_fill, frame.image, sparse, mask, lam=lam, sigma_color=sigma,
+                                     fill=False)
         records.append(rec)
         print(f"  {frame.name} {fraction:.0%} seed {seed}: default {rec['default']:.3f}, fast {rec['fast']:.3f}"
               + (f", FGS {rec['fgs']:.3f}" if "fgs" in rec else "")

@@ -95,8 +95,12 @@ def test_solvers_quick_gaps_and_plots(tmp_path):
         assert r["gap"][0] >= 0 and finite(r["objective"]) and finite(r["rmse"])
         if r["solver"] == "lbfgsb":
             assert r["time_ratio"] == pytest.approx(1.0)
-        if r["solver"] in ("direct", "amg"):
-            assert r["gap_max"] < 1e-8  # exact / tightly converged on the quadratic problem
+        if r["solver"] == "direct":
+            assert r["gap_max"] < 1e-8  # exact on the quadratic problem
+        if r["solver"] == "amg":
+            # its default stop is an RMS remaining depth change of 3e-4 of the depth scale, not a residual of 1e-8:
+            # F − F* = ‖z − z*‖²_A, measured 1.2e-5 of F here
+            assert r["gap_max"] < 1e-4
     assert (tmp_path / "solver_objective_vs_iter.png").stat().st_size > 1000
     assert (tmp_path / "solver_objective_vs_time.png").stat().st_size > 1000
 

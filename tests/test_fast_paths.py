@@ -47,8 +47,8 @@ def test_grid_pcg_reaches_direct_solution_on_13_point_problem(problem):
 
 def test_pyamg_option_still_available(problem):
     image, sparse, mask, _ = problem
-    grid = complete_depth(image, sparse, mask, weights=QUAD13, solver="amg")
-    amg = complete_depth(image, sparse, mask, weights=QUAD13, solver="amg", options={"preconditioner": "amg"})
+    grid = complete_depth(image, sparse, mask, weights=QUAD13, solver="amg", tol=1e-8)
+    amg = complete_depth(image, sparse, mask, weights=QUAD13, solver="amg", tol=1e-8, options={"preconditioner": "amg"})
     assert amg.converged
     assert amg.objective == pytest.approx(grid.objective, rel=1e-9)
 

@@ -59,6 +59,8 @@ class PCGResult:
         The callback raised ``StopIteration``.
     message : str
         Why the iteration ended.
+    rule_met : bool
+        The caller's stopping rule (``stop=`` of :func:`pcg_info`) ended the solve.
     """
 
     x: np.ndarray
@@ -69,13 +71,19 @@ class PCGResult:
     breakdown: bool
     stopped: bool
     message: str
+    rule_met: bool = False
 
 
 #: CG cycles (each restarted from the recomputed true residual) before rounding drift ends the solve
 _MAX_CYCLES = 6
 
 
-def pcg_info(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=None, callback_residual=False):
+class _RuleMet(Exception):
+    """Raised inside a CG cycle when the caller's stopping rule is met."""
+
+
+def pcg_info(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=None, callback_residual=False,
+             stop=None):
     r"""Preconditioned CG for ``A x = b`` stopping at ``‖b − A x‖ ≤ max(rtol·‖b‖, atol)``, with its history.
 
     Parameters
@@ -96,12 +104,18 @@ def pcg_info(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callba
         residual ``r ≈ b − A x`` when ``callback_residual`` is true.  It may
         raise ``StopIteration`` to stop: the result then has ``stopped`` set
         and holds the iterate it was called with.
+    stop : callable, optional
+        A stopping rule of the caller: ``stop(step, direction)`` after every
+        iteration (after ``callback``), where the iterate has just moved by
+        ``step * direction`` (``direction`` is live: read it, do not keep
+        it).  Returning True ends the solve at that iterate with
+        ``rule_met`` set; ``converged`` still reports the residual test.
 
     Returns
     -------
     PCGResult
         The iterate, the iteration count, convergence on the true residual,
-        the residual history, breakdown and stop flags and a message.
+        the residual history, breakdown, stop and rule flags and a message.
 
     Notes
     -----
@@ -133,30 +147,34 @@ def pcg_info(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callba
         def notify(x, r):
             callback(x)
     converged = rr <= target2
-    breakdown = stopped = False
+    breakdown = stopped = rule_met = False
     cycles = 0
     while not converged and len(norms) - 1 < maxiter:
         try:
-            ok = _cg_cycle(A, x, r, prec, target2, maxiter, norms, notify)
+            ok = _cg_cycle(A, x, r, prec, target2, maxiter, norms, notify, stop)
         except StopIteration:
             ok, stopped = True, True
+        except _RuleMet:
+            ok, rule_met = True, True
         r = b - A @ x
         rr = dot(r, r)
         norms[-1] = math.sqrt(rr)
         converged = rr <= target2
         breakdown = not ok and not converged
         cycles += 1
-        if stopped or breakdown or (not converged and cycles >= _MAX_CYCLES):
+        if stopped or rule_met or breakdown or (not converged and cycles >= _MAX_CYCLES):
             break
     iterations = len(norms) - 1
-    message = _pcg_message(converged, stopped, breakdown, iterations, maxiter)
+    message = _pcg_message(converged, stopped, rule_met, breakdown, iterations, maxiter)
     return PCGResult(x, iterations, bool(converged), float(np.sqrt(rr) / bnorm), np.asarray(norms),
-                     breakdown, stopped, message)
+                     breakdown, stopped, message, rule_met)
 
 
-def _pcg_message(converged, stopped, breakdown, iterations, maxiter):
+def _pcg_message(converged, stopped, rule_met, breakdown, iterations, maxiter):
     if stopped:
         return "stopped by callback"
+    if rule_met:
+        return "stopping rule met"
     if converged:
         return "converged"
     if breakdown:
@@ -166,11 +184,12 @@ def _pcg_message(converged, stopped, breakdown, iterations, maxiter):
     return f"no convergence: the true residual stayed above the target after {_MAX_CYCLES} restarted CG cycles"
 
 
-def _cg_cycle(A, x, r, prec, target2, maxiter, norms, notify):
+def _cg_cycle(A, x, r, prec, target2, maxiter, norms, notify, stop=None):
     """CG steps from ``x`` with residual ``r`` (both updated in place) until ``‖r‖² ≤ target2`` or the budget is spent.
 
     Appends ``‖r‖`` after every step to ``norms`` (whose length counts the
-    iterations) and returns False on breakdown (``pᵀ A p ≤ 0``), else True.
+    iterations) and returns False on breakdown (``pᵀ A p ≤ 0``), else True;
+    raises ``_RuleMet`` when ``stop(step, p)`` returns True.
     """
     z = r if prec is None else prec(r)
     rz = dot(r, z)
@@ -190,6 +209,8 @@ def _cg_cycle(A, x, r, prec, target2, maxiter, norms, notify):
         norms.append(math.sqrt(rr))
         if notify is not None:
             notify(x, r)
+        if stop is not None and stop(step, p):
+            raise _RuleMet
         if rr <= target2:
             return True
         z = r if prec is None else prec(r)
@@ -201,12 +222,13 @@ def _cg_cycle(A, x, r, prec, target2, maxiter, norms, notify):
     return True
 
 
-def pcg(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=None, callback_residual=False):
+def pcg(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=None, callback_residual=False,
+        stop=None):
     r"""Preconditioned CG for ``A x = b`` stopping at ``‖b − A x‖ ≤ max(rtol·‖b‖, atol)``; the tuple form of :func:`pcg_info`.
 
     Parameters
     ----------
-    A, b, x0, M, rtol, atol, maxiter, callback, callback_residual
+    A, b, x0, M, rtol, atol, maxiter, callback, callback_residual, stop
         As for :func:`pcg_info`.
 
     Returns
@@ -219,7 +241,7 @@ def pcg(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=No
         ``‖b − A x‖ / ‖b‖`` recomputed at the returned ``x``.
     """
     result = pcg_info(A, b, x0=x0, M=M, rtol=rtol, atol=atol, maxiter=maxiter, callback=callback,
-                      callback_residual=callback_residual)
+                      callback_residual=callback_residual, stop=stop)
     return result.x, result.iterations, result.converged, result.relative_residual
 
 

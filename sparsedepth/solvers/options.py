@@ -13,6 +13,7 @@ May import :mod:`sparsedepth._validation`; nothing else of the package.
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass, field, fields
 from typing import ClassVar
 
@@ -127,8 +128,8 @@ class SolverOptions:
     def in_depth_units(self, scale):
         """A copy with the options in depth units divided by ``scale``.
 
-        The depth-unit options are ``eps_start``, ``eps_min``, ``scale`` (IRLS)
-        and ``learning_rate`` (Adam); ``None`` stays ``None``.
+        The depth-unit options are ``eps_start``, ``eps_min``, ``scale`` (IRLS),
+        ``learning_rate`` (Adam) and ``depth_atol`` (cg, amg); ``None`` stays ``None``.
         """
         scaled = copy.copy(self)
         for f in fields(self):
@@ -152,18 +153,33 @@ class DirectOptions(SolverOptions):
     gap_tol: float = _option(1e-6)
 
 
+def _resolve_gap_tol(options, scaled):
+    """``scaled`` with a ``gap_tol`` of None set: 1e-6 without a depth tolerance in ``options``, else ``inf``."""
+    if scaled.gap_tol is None:
+        depth_rule = options.depth_rtol is not None or options.depth_atol is not None
+        object.__setattr__(scaled, "gap_tol", math.inf if depth_rule else 1e-6)
+    return scaled
+
+
 @dataclass(frozen=True, kw_only=True)
 class CgOptions(SolverOptions):
     """Options of the ``cg`` solver (Jacobi-preconditioned CG).
 
     Parameters
     ----------
-    gap_tol : float, default 1e-6
-        Converged needs the duality gap ``<= gap_tol · max(F, 1e-7 F(0))``.
+    gap_tol, depth_rtol, depth_atol : float, optional
+        As for :class:`AmgOptions`; :func:`sparsedepth.complete_depth` sets
+        no depth tolerance for ``cg`` by itself.
     """
 
     solver: ClassVar[str] = "cg"
-    gap_tol: float = _option(1e-6)
+    gap_tol: float | None = _option(None, kind=float)
+    depth_rtol: float | None = _option(None, kind=float, positive=True)
+    depth_atol: float | None = _option(None, kind=float, positive=True, depth_unit=True)
+
+    def in_depth_units(self, scale):
+        """As :meth:`SolverOptions.in_depth_units`, with a ``gap_tol`` of None resolved (see the class)."""
+        return _resolve_gap_tol(self, super().in_depth_units(scale))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -175,13 +191,38 @@ class AmgOptions(SolverOptions):
     preconditioner : {"grid", "amg"}, default "grid"
         ``"grid"``: geometric :class:`~sparsedepth.linalg.multigrid.GridMultigrid`
         built once for ``A``; ``"amg"``: pyamg Ruge–Stüben.
-    gap_tol : float, default 1e-6
+    gap_tol : float, optional
         Converged needs the duality gap ``<= gap_tol · max(F, 1e-7 F(0))``.
+        Default 1e-6 when the solve stops on the residual (``tol``); with a
+        depth tolerance (below) no gap test: ``converged`` is the depth
+        rule's, and the gap reported is the one-product bound ``¼ ‖r‖² /
+        λ_min(A)`` (proven, loose: 1e-2 of ``F`` on a 640x480 frame), since
+        the exact gap would cost a second solve to a relative residual of
+        1e-10.
+    depth_rtol : float, optional
+        Stop when the estimated remaining change of the depth (root mean
+        square over the pixels of ``z_k − z*``) is at most ``depth_rtol ·
+        s``, ``s`` the depth scale of the solve (the power of two nearest the
+        median observed depth, :func:`~sparsedepth.solvers.depth_scale`).
+        :func:`sparsedepth.complete_depth` sets it to
+        :data:`~sparsedepth.solvers.quadratic.DEFAULT_DEPTH_RTOL` (3e-4;
+        1e-3 for the coarse solve of ``quality="fast"``) when neither
+        ``tol`` nor a depth tolerance is given.
+    depth_atol : float, optional
+        The same stop at an estimated remaining change of at most
+        ``depth_atol`` (depth units).  With both, the larger tolerance
+        counts; with neither (default), only the residual rule ``tol``.
     """
 
     solver: ClassVar[str] = "amg"
     preconditioner: str = _option("grid", choices=_PRECONDITIONERS)
-    gap_tol: float = _option(1e-6)
+    gap_tol: float | None = _option(None, kind=float)
+    depth_rtol: float | None = _option(None, kind=float, positive=True)
+    depth_atol: float | None = _option(None, kind=float, positive=True, depth_unit=True)
+
+    def in_depth_units(self, scale):
+        """As :meth:`SolverOptions.in_depth_units`, with a ``gap_tol`` of None resolved (see the class)."""
+        return _resolve_gap_tol(self, super().in_depth_units(scale))
 
 
 @dataclass(frozen=True, kw_only=True)
