@@ -20,8 +20,10 @@ solved with ``solver="auto"``:
   ``Weights`` beyond α, β, γ, δ, κ (``beta_image`` image-weighted L2,
   ``beta_second`` second-order, ``beta_second_image`` image-weighted
   second-order), one at a time, at its default weight if > 0, else at the
-  paper's β; the image-weighted L2 *instead of* the plain L2; and the tuned
-  defaults.
+  paper's β, and each modelling option the defaults use (``edge_sigma``
+  blurred edge weights, ``fill_contrast`` the image-aware prior fill,
+  ``depth_jump``) at its default; the image-weighted L2 *instead of* the
+  plain L2; and the tuned defaults.
 
 Variants equal to an earlier one (e.g. when a default weight is 0) are
 listed once.  Frames are subsampled by ``--step`` (default 4).
@@ -35,7 +37,7 @@ import sys
 import time
 
 import sparsedepth as sd
-from sparsedepth.objective.weights import EDGE_PENALTY_FIELDS
+from sparsedepth.objective.weights import EDGE_PENALTY_FIELDS, MODEL_FIELDS
 
 from . import harness as H
 
@@ -43,7 +45,8 @@ DEFAULT_STEP = 4
 FRACTION = 0.05
 PAPER_FIELDS = ("alpha", "beta", "gamma", "delta", "kappa")
 EXT_LABELS = {"beta_image": "image-weighted L2", "beta_second": "second-order",
-              "beta_second_image": "image-weighted second-order"}
+              "beta_second_image": "image-weighted second-order", "edge_sigma": "edge weights of a blurred image",
+              "fill_contrast": "image-aware (geodesic) prior fill", "depth_jump": "depth-aware re-solve"}
 
 
 def variants(D=None, P=None):
@@ -57,7 +60,9 @@ def variants(D=None, P=None):
     P = sd.Weights.paper() if P is None else P
     # every weight beyond the paper's alpha, beta, gamma, delta, kappa is an extension term
     ext = [k for k in D.as_dict() if k not in PAPER_FIELDS and k not in EDGE_PENALTY_FIELDS]
-    no_ext = {k: 0.0 for k in ext}
+    # a modelling option (not a term) is a row only where the defaults use it: it has no paper-like value
+    ext = [k for k in ext if k not in MODEL_FIELDS or getattr(D, k) > 0]
+    no_ext = {k: 0.0 for k in (*ext, *MODEL_FIELDS)}
     P = P.replace(**no_ext)
     prior = P.delta if P.delta > 0 else 1e-6 * max(P.alpha, 1.0)
     w_img = D.beta_image if D.beta_image > 0 else P.beta

@@ -48,7 +48,12 @@ _WEIGHT_HELP = {
                     "image edges (charbonnier convex; cauchy, geman_mcclure, welsch non-convex, solved by irls)",
     "edge_scale": "scale s of a robust --edge-penalty in metres: differences well below s are smoothed "
                   "quadratically, larger ones are allowed to jump",
+    "edge_sigma": "blur (pixels) of the image before the edge weights; 0 = none",
+    "fill_contrast": "image contrast cost of the prior's geodesic nearest-sample fill; 0 = Euclidean nearest fill",
+    "depth_jump": "relative depth change at which a second solve relaxes the image smoothness; 0 = one solve",
 }
+#: Weights fields that are modelling options, not term weights.
+_OPTION_FIELDS = ("edge_sigma", "fill_contrast", "depth_jump")
 
 
 EPILOG = f"""\
@@ -279,8 +284,9 @@ def _add_method_options(parser) -> None:
                                 help=f"{_WEIGHT_HELP[f.name]}; one of {', '.join(EDGE_PENALTIES)} "
                                      f"(default {default}).")
             continue
-        kind, metavar = (_positive_metres, "METRES") if f.name == "edge_scale" else (_nonnegative, "W")
-        what = "" if f.name == "edge_scale" else "weight "
+        kind, metavar = ((_positive_metres, "METRES") if f.name == "edge_scale"
+                         else (_nonnegative, "V") if f.name in _OPTION_FIELDS else (_nonnegative, "W"))
+        what = "" if f.name == "edge_scale" else "option " if f.name in _OPTION_FIELDS else "weight "
         method.add_argument(
             flag, dest=f"w_{f.name}", type=kind, metavar=metavar,
             help=f"{what}{f.name}: {_WEIGHT_HELP.get(f.name, 'a term weight of sparsedepth.Weights')} "
