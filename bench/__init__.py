@@ -15,6 +15,8 @@ and most have ``--quick`` for a seconds-long smoke test on tiny frames):
 * :mod:`bench.batch_scale` - batch throughput, process pool vs Dask LocalCluster (``docs/batch_scale.md``);
 * :mod:`bench.admm_scale` - ADMM's time per pixel on L1 problems at 0.3, 1.2 and 4.9 megapixels (``docs/admm_scale.md``);
 * :mod:`bench.solver_gaps` - every L1 solver on issue 20's problem, three frames: gaps and times relative to ADMM;
+* :mod:`bench.accuracy` - modelling variants (blurred edges, image-aware prior fill, depth-aware re-solve, ``prior=``) with a leave-one-dataset-out table (``docs/accuracy.md``);
+* :mod:`bench.speed` - the depth-based stop of the default solve and, through :mod:`bench.fast_peers`, FGS and IP-Basic beside ours (``docs/speed.md``, ``docs/figures/speed_accuracy.png``);
 * :mod:`bench.fast_mode` - ``quality="fast"`` against the default solve and OpenCV's fast global smoother (``docs/fast_mode.md``);
 * :mod:`bench.robust_penalties` - robust edge penalties against the L1 edge term (``docs/robust_penalties.md``);
 * :mod:`bench.tune` - the seeded search that chose ``sparsedepth.DEFAULT_WEIGHTS`` (``docs/tuning.md``).
