@@ -36,3 +36,17 @@ def make_scene(shape=(40, 60), seed=0):
     depth = 1.0 + 0.02 * ii + 0.01 * jj + 0.5 * (jj > shape[1] // 2)
     image = np.clip(60 + 120 * (jj > shape[1] // 2)[..., None] + rng.integers(0, 30, shape + (3,)), 0, 255)
     return image.astype(np.uint8), depth
+
+
+@pytest.fixture
+def scene_files(tmp_path):
+    """``rgb.png`` and ``sparse.png`` (10 % of :func:`make_scene`'s depth, mm) in ``tmp_path``, for CLI tests."""
+    import imageio.v3 as iio
+
+    import sparsedepth as sd
+
+    image, depth = make_scene()
+    iio.imwrite(tmp_path / "rgb.png", image)
+    sparse, _ = sd.sample_depth(depth, fraction=0.1, seed=1)
+    sd.write_depth(tmp_path / "sparse.png", sparse, scale=1000)
+    return tmp_path

@@ -11,7 +11,7 @@ from scipy.sparse.linalg import spsolve
 
 import sparsedepth as sd
 from conftest import make_scene
-from sparsedepth.completion import FAST_SWEEPS, fast_factor
+from sparsedepth.completion import fast_factor
 from sparsedepth.complete import main
 from sparsedepth.grid.resample import (block_mean, block_sample_mean, coarse_shape, edge_aware_sweeps,
                                        upsample_bilinear)
@@ -211,26 +211,19 @@ def test_solve_scaled_without_certificate_leaves_the_gap_out():
 
 
 # ----------------------------------------------------------------------------- --fast
-@pytest.fixture
-def files(tmp_path):
-    image, depth = make_scene()
-    iio.imwrite(tmp_path / "rgb.png", image)
-    sparse, _ = sd.sample_depth(depth, fraction=0.1, seed=1)
-    sd.write_depth(tmp_path / "sparse.png", sparse, scale=1000)
-    return tmp_path
 
 
-def test_cli_fast_writes_the_fast_completion(files, capsys):
-    rc = main(["--image", str(files / "rgb.png"), "--depth", str(files / "sparse.png"), "--depth-scale", "mm",
-               "--fast", "--out", str(files / "out.npy"), "--json", str(files / "m.json"), "-q"])
+def test_cli_fast_writes_the_fast_completion(scene_files, capsys):
+    rc = main(["--image", str(scene_files / "rgb.png"), "--depth", str(scene_files / "sparse.png"), "--depth-scale", "mm",
+               "--fast", "--out", str(scene_files / "out.npy"), "--json", str(scene_files / "m.json"), "-q"])
     assert rc == 0, capsys.readouterr().err
-    image = sd.read_image(files / "rgb.png")
-    sparse = sd.read_depth(files / "sparse.png", scale=1000)
+    image = sd.read_image(scene_files / "rgb.png")
+    sparse = sd.read_depth(scene_files / "sparse.png", scale=1000)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", sd.ClampWarning)
         expected = sd.complete_depth(image, sparse, quality="fast").depth
-    np.testing.assert_allclose(sd.read_depth(files / "out.npy"), expected, rtol=1e-12)
-    assert "fast" in json.loads((files / "m.json").read_text())["method"]
+    np.testing.assert_allclose(sd.read_depth(scene_files / "out.npy"), expected, rtol=1e-12)
+    assert "fast" in json.loads((scene_files / "m.json").read_text())["method"]
 
 
 @pytest.mark.parametrize("argv, words", [
@@ -238,9 +231,9 @@ def test_cli_fast_writes_the_fast_completion(files, capsys):
     (["--solver", "cg"], "takes no --solver"),
     (["--uncertainty", "u.npy"], "takes no --uncertainty"),
 ])
-def test_cli_fast_refuses_solver_options_with_one_line_and_exit_2(files, capsys, argv, words):
-    rc = main(["--image", str(files / "rgb.png"), "--depth", str(files / "sparse.png"), "--depth-scale", "mm",
-               "--fast", "-q", *[str(files / a) if a.endswith(".npy") else a for a in argv]])
+def test_cli_fast_refuses_solver_options_with_one_line_and_exit_2(scene_files, capsys, argv, words):
+    rc = main(["--image", str(scene_files / "rgb.png"), "--depth", str(scene_files / "sparse.png"), "--depth-scale", "mm",
+               "--fast", "-q", *[str(scene_files / a) if a.endswith(".npy") else a for a in argv]])
     assert rc == 2
     err = capsys.readouterr().err
     assert words in err and len(err.strip().splitlines()) == 1

@@ -5,19 +5,16 @@ import numpy as np
 import pytest
 
 import sparsedepth as sd
-from conftest import make_scene
 from sparsedepth.complete import main
 
 FAST = ["--gamma", "0", "--solver", "direct", "-q"]
 
 
 @pytest.fixture
-def files(tmp_path):
-    image, depth = make_scene()
-    iio.imwrite(tmp_path / "rgb.png", image)
-    sparse, _ = sd.sample_depth(depth, fraction=0.1, seed=1)
-    sd.write_depth(tmp_path / "sparse.png", sparse, scale=1000)
-    return tmp_path
+def files(scene_files):
+    return scene_files
+
+
 
 
 def _one(files, *extra):
