@@ -16,7 +16,8 @@ tolerances see data of order 1 whatever the unit.  Every solver's output
 carries a duality gap (:mod:`sparsedepth.solvers.certificate`), a bound on
 ``F(z) − F*``; ``converged`` needs the solver's own rule (below) and ``gap
 <= gap_tol · max(F, 1e-7 F(0))`` (option ``gap_tol``: 1e-6 for ``direct``,
-``cg``, ``amg`` and ``admm``, 1e-4 for ``irls``, 1e-2 for ``lbfgsb``, 1e-1
+``cg`` and ``amg`` under their residual rule and not tested under their
+depth rule, 1e-6 for ``admm``, 1e-4 for ``irls``, 1e-2 for ``lbfgsb``, 1e-1
 for ``adam``, whose smoothed objective is ~1e-4 to 1e-3 above the exact
 optimum).  Every relative stopping test on ``F`` has an absolute floor
 (:func:`~sparsedepth.solvers.common.objective_floor`), so ``F* = 0``
@@ -27,10 +28,13 @@ projected-gradient check.
 name        objective    stopping rule (``tol``)
 ==========  ===========  ====================================================
 direct      γ = 0        exact sparse LU solve of the normal equations
-cg          γ = 0        Jacobi-PCG, ``‖b − A z‖ ≤ tol ‖b‖``
+cg          γ = 0        Jacobi-PCG, ``‖b − A z‖ ≤ tol ‖b‖``, or (options
+                         ``depth_rtol``/``depth_atol``) an estimated RMS
+                         remaining change of the depth below that tolerance
 amg         γ = 0        PCG with a multigrid V-cycle (geometric GridMultigrid;
                          ``options={"preconditioner": "amg"}`` for pyamg
-                         Ruge–Stüben), same rule
+                         Ruge–Stüben), same rules; ``complete_depth``
+                         without ``tol`` uses ``depth_rtol = 3e-4``
 irls        any          ``F_{k-1} − F_k ≤ tol · F_k + floor`` at the final ε
 admm        any          primal residual ``<= tol`` (relative) starts exact
                          active-set polishes, 3, 6, 12, 12, ... iterations

@@ -68,7 +68,7 @@ class RemainingChange:
     largest, so a transient fast step does not end the solve).  It is an
     estimate, not a bound: a later phase of slower convergence is not
     foreseen.  At the default stop on the report frames at full size
-    (multigrid-preconditioned CG, ``ρ`` 0.5-0.9) it was 1.3 to 3.1 times
+    (multigrid-preconditioned CG, ``ρ`` 0.5-0.9) it is 1.3 to 2.5 times
     the true remaining change (``python -m bench.speed``, ``docs/speed.md``).
     Each call costs one dot product.
     """
