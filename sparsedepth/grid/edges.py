@@ -24,6 +24,7 @@ __all__ = [
     "image_differences",
     "image_gradient_magnitude",
     "edge_weights",
+    "pair_distances",
     "pair_edge_weights",
     "second_order_edge_weights",
     "smoothed_image",
@@ -97,6 +98,26 @@ def edge_weights(image, kappa: float) -> np.ndarray:
     return np.exp(-kappa * image_gradient_magnitude(image))
 
 
+def pair_distances(image):
+    """``‖I[i, j+1] − I[i, j]‖`` and ``‖I[i+1, j] − I[i, j]‖``, shapes ``(H, W−1)`` and ``(H−1, W)``.
+
+    ``image`` is an already scaled float ``(H, W, C)`` array
+    (:func:`~sparsedepth._validation.as_float_image`); the norms are over the
+    channels, in the image's precision (float32 stays float32).
+    """
+    return _channel_norm(image[:, 1:], image[:, :-1]), _channel_norm(image[1:], image[:-1])
+
+
+def _channel_norm(first, second):
+    """``‖first − second‖`` over the last axis, summed channel by channel (faster than a reduction along it)."""
+    difference = np.subtract(first, second)
+    difference *= difference
+    total = difference[..., 0].copy()
+    for channel in range(1, difference.shape[-1]):
+        total += difference[..., channel]
+    return np.sqrt(total, out=total)
+
+
 def pair_edge_weights(image, kappa: float) -> np.ndarray:
     """Per-pair image weights aligned with the rows of :func:`~sparsedepth.grid.operators.gradient`.
 
@@ -117,9 +138,10 @@ def pair_edge_weights(image, kappa: float) -> np.ndarray:
         If ``kappa`` is not a finite number ``>= 0``, or for a bad image.
     """
     kappa = check_nonnegative_real(kappa, name="kappa")
-    gx, gy = image_differences(image)
-    dx = np.sqrt(np.sum(gx * gx, axis=2))
-    dy = np.sqrt(np.sum(gy * gy, axis=2))
+    img = as_float_image(image)
+    H, W = img.shape[:2]
+    dx, dy = np.zeros((H, W)), np.zeros((H, W))  # the last column / row: no pair, distance 0, weight 1
+    dx[:, :-1], dy[:-1] = pair_distances(img)
     return np.exp(-kappa * np.concatenate([dx.ravel(), dy.ravel()]))
 
 

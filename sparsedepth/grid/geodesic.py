@@ -6,7 +6,7 @@ the [0, 1]-scaled image, ``‖·‖`` the Euclidean norm over the channels).  Wi
 city-block distance; with ``λ > 0`` a path that crosses a strong image edge is long, so a pixel takes its value
 from a sample on its own side of the edge (the same object, usually the same depth).
 
-May import NumPy, SciPy and :mod:`sparsedepth._validation`.
+May import NumPy, SciPy, :mod:`sparsedepth._validation` and :mod:`.edges`.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
 from .._validation import as_depth_and_mask, as_float_image, check_nonnegative_real, check_same_shape
+from .edges import pair_distances
 
 __all__ = ["geodesic_fill", "step_costs"]
 
@@ -31,9 +32,7 @@ def step_costs(image, contrast: float):
         If ``contrast`` is not a finite number ``>= 0``, or for a bad image.
     """
     contrast = check_nonnegative_real(contrast, name="contrast")
-    img = as_float_image(image)
-    dx = np.sqrt(np.sum((img[:, 1:] - img[:, :-1]) ** 2, axis=2))
-    dy = np.sqrt(np.sum((img[1:, :] - img[:-1, :]) ** 2, axis=2))
+    dx, dy = pair_distances(as_float_image(image))
     return 1.0 + contrast * dx, 1.0 + contrast * dy
 
 

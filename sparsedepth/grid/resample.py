@@ -11,7 +11,7 @@ coarse grid and comes back to the full one with these:
 * :func:`edge_aware_sweeps` - red-black Gauss-Seidel sweeps on an
   image-weighted smoothness model with the observations held.
 
-May import NumPy and :mod:`sparsedepth._validation`.
+May import NumPy, :mod:`sparsedepth._validation` and :mod:`.edges`.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import check_count, check_nonnegative_real
+from .edges import pair_distances
 
 __all__ = ["coarse_shape", "block_mean", "block_sample_mean", "upsample_bilinear", "edge_aware_sweeps"]
 
@@ -121,20 +122,6 @@ def upsample_bilinear(coarse, shape, factor: int) -> np.ndarray:
     return np.ascontiguousarray(out.T)
 
 
-def _pair_weights(first, second, kappa, smoothness):
-    """``smoothness · exp(−κ ‖first − second‖)`` over the channel axis, in float32."""
-    difference = np.subtract(first, second, dtype=np.float32)
-    difference *= difference
-    total = difference[..., 0].copy()
-    for channel in range(1, difference.shape[2]):
-        total += difference[..., channel]
-    np.sqrt(total, out=total)
-    total *= -kappa
-    np.exp(total, out=total)
-    total *= smoothness
-    return total
-
-
 # the numpydoc docstring (the model in Notes) is most of the length
 def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa: float, sweeps: int) -> np.ndarray:
     r"""Red-black Gauss-Seidel sweeps on an image-weighted smoothness model, the observations held fixed.
@@ -192,9 +179,10 @@ def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa
     H, W = z.shape
     padded = W + W % 2  # an even width: the last column of an odd-width grid is a fixed pixel without links
     wx = np.zeros((H, padded), dtype=np.float32)  # wx[y, x]: the pair (x, x + 1)
-    wx[:, :W - 1] = _pair_weights(image[:, 1:], image[:, :-1], kappa, smoothness)
     wy = np.zeros((H, padded), dtype=np.float32)  # wy[y, x]: the pair (y, y + 1)
-    wy[:-1, :W] = _pair_weights(image[1:], image[:-1], kappa, smoothness)
+    across, down = pair_distances(np.asarray(image, dtype=np.float32))
+    wx[:, :W - 1] = _pair_weights(across, kappa, smoothness)
+    wy[:-1, :W] = _pair_weights(down, kappa, smoothness)
     diagonal = np.ones((H, padded), dtype=np.float32)
     diagonal[:, 1:] += wx[:, :-1]
     diagonal += wx
@@ -219,6 +207,14 @@ def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa
             _half_sweep(fields[target], fields[1 - target], priors[target], inverses[target], frees[target],
                         horizontal, vertical[1 - target], vertical[target], row_offset=target)
     return _merge_parity(*fields)[:, :W]
+
+
+def _pair_weights(distance, kappa, smoothness):
+    """``smoothness · exp(−κ d)`` in place on the float32 pair distances ``d``."""
+    distance *= -kappa
+    np.exp(distance, out=distance)
+    distance *= smoothness
+    return distance
 
 
 def _split_parity(a):
