@@ -312,7 +312,7 @@ def _complete_with_prior(image, sparse_depth, mask, prior, alignment, *, x0, cal
     aligned, _, _ = align_prior(prior, depth, observed, alignment=alignment)
     residual = depth[observed] - aligned[observed]
     values = depth[observed]
-    depth_range = ((float(values.min()), float(values.max())) if settings["clip_to_observed"] else (0.0, np.inf))
+    depth_range = _depth_range(values, settings["clip_to_observed"])
     # c keeps every residual sample >= the median depth: positive, and of the depth's magnitude for the scaling
     shift = float(np.median(values)) + max(0.0, -float(residual.min()))
     shifted = np.zeros_like(depth)
@@ -436,7 +436,7 @@ def _scaled_objective(image, sparse_depth, mask, weights, l1_smoothing, clip_to_
     """
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     observed_values = depth[observed]
-    depth_range = (float(observed_values.min()), float(observed_values.max())) if clip_to_observed else (0.0, np.inf)
+    depth_range = _depth_range(observed_values, clip_to_observed)
     scale = depth_scale(observed_values)
     del observed_values
     depth /= scale
@@ -464,6 +464,13 @@ def _checked_x0(x0, shape):
     if not np.all(np.isfinite(start)):
         raise ValueError("x0 contains NaN or infinite values")
     return start
+
+
+def _depth_range(observed_values, clip_to_observed):
+    """The clamp range in the user's units: ``[min, max]`` of the observations, or ``[0, inf)`` without the clamp."""
+    if clip_to_observed:
+        return float(observed_values.min()), float(observed_values.max())
+    return 0.0, np.inf
 
 
 def _clamp(z, depth_range, clip_to_observed, rounding=1e-9):
@@ -548,8 +555,7 @@ def _complete_fast(image, sparse_depth, mask, *, weights, l1_smoothing, clip_to_
     z = upsample_bilinear(out.z.reshape(objective.shape).astype(np.float32), shape, factor)
     z = edge_aware_sweeps(z, fine_image, depth, observed, smoothness=FAST_SMOOTHNESS, kappa=FAST_KAPPA,
                           sweeps=FAST_SWEEPS).astype(np.float64)
-    observed_values = depth[observed]
-    depth_range = (float(observed_values.min()), float(observed_values.max())) if clip_to_observed else (0.0, np.inf)
+    depth_range = _depth_range(depth[observed], clip_to_observed)
     z, clamped = _clamp(z, depth_range, clip_to_observed, rounding=FLOAT32_ROUNDING)
     return CompletionResult(
         depth=z,
