@@ -106,7 +106,7 @@ def run(argv=None):
     ref = "full objective of the paper (α, β, γ, δ)"
     if ref not in [m.name for m in methods]:
         ref = methods[-1].name
-    records = [H.evaluate(m, f, fraction=FRACTION, seed=s) for f in frames for s in seeds for m in methods]
+    records = H.evaluate_all(methods, frames, seeds, fractions=[FRACTION])
     rows = H.summarise(records, reference=ref)
     header = ["variant", "weights", "RMSE", "MAE", "REL", "δ1", "RMSE / paper", "time (s)", "time × paper"]
     table = []

@@ -209,11 +209,7 @@ def run_section(args, argv, figure=None) -> tuple[str, list]:
     else:
         tuning_note = ("**OpenCV (`opencv-contrib-python-headless`, the `bench` extra) is not installed: the FGS "
                        "and IP-Basic rows are left out.**")
-    records = []
-    for fraction in FRACTIONS:
-        for f in frames:
-            for m in methods:
-                records.append(H.evaluate(m, f, fraction=fraction, seed=SEED))
+    records = H.evaluate_all(methods, frames, [SEED], fractions=FRACTIONS)
     rows, points = [], []
     ref_name = methods[-2].name if available() else H.NEAREST.name  # FGS
     for fraction in FRACTIONS:

@@ -64,7 +64,7 @@ def run(argv=None):
         counts = COUNTS
     seeds = H.seeds_of(args)
     methods = [H.NEAREST, H.LINEAR, H.BIHARMONIC, H.COLORIZATION, H.ours()]
-    records = [H.evaluate(m, f, count=c, seed=s) for c in counts for f in frames for s in seeds for m in methods]
+    records = H.evaluate_all(methods, frames, seeds, counts=counts)
     rows = H.summarise(records, reference="nearest", metrics=("rmse", "rel", "delta1", "delta2", "delta3"))
     table = []
     for c in counts:

@@ -65,8 +65,7 @@ def run(argv=None):
     frames = H.get_frames(args)
     seeds = H.seeds_of(args)
     ms = methods()
-    records = [H.evaluate(m, f, fraction=FRACTION, seed=s, keep_result=True)
-               for f in frames for s in seeds for m in ms]
+    records = H.evaluate_all(ms, frames, seeds, fractions=[FRACTION], keep_result=True)
     rows = H.summarise(records, reference="nearest")
     header = ["edge term", "RMSE / nearest", "REL", "δ1", "time (s)", "iterations", "converged"]
     table = []

@@ -15,7 +15,7 @@ a benchmark module.
 """
 
 from .cli import finish, parser, script_main, seeds_of
-from .evaluation import Record, evaluate, mean_std, metric, show_progress, summarise
+from .evaluation import Record, evaluate, evaluate_all, mean_std, metric, show_progress, summarise
 from .inputs import (DEFAULT_SEEDS, FRACTIONS, FrameData, get_frames, load_frame, quick_frames, report_frame_names,
                      sample, synthetic_frame)
 from .machine import blas_threads, cpu_model, machine_info, machine_markdown, version
@@ -26,7 +26,7 @@ from .timing import best_of, timed
 
 __all__ = [
     "finish", "parser", "script_main", "seeds_of",
-    "Record", "evaluate", "mean_std", "metric", "show_progress", "summarise",
+    "Record", "evaluate", "evaluate_all", "mean_std", "metric", "show_progress", "summarise",
     "DEFAULT_SEEDS", "FRACTIONS", "FrameData", "get_frames", "load_frame", "quick_frames", "report_frame_names",
     "sample", "synthetic_frame",
     "blas_threads", "cpu_model", "machine_info", "machine_markdown", "version",

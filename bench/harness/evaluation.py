@@ -22,7 +22,7 @@ from .inputs import FrameData, sample
 from .methods import Method
 from .timing import timed
 
-__all__ = ["Record", "evaluate", "show_progress", "mean_std", "metric", "summarise"]
+__all__ = ["Record", "evaluate", "evaluate_all", "show_progress", "mean_std", "metric", "summarise"]
 
 
 @dataclass(frozen=True)
@@ -77,6 +77,18 @@ def evaluate(method: Method, frame: FrameData, *, fraction=None, count=None, see
         print(f"  {method.name:>40s} {frame.name:>40s} {rec.sampling!s:>5s} seed {seed}: RMSE {metrics.rmse:.4g} "
               f"{runtime:.2f} s", file=sys.stderr, flush=True)
     return rec
+
+
+def evaluate_all(methods, frames, seeds, *, fractions=None, counts=None, keep_result=False) -> list[Record]:
+    """:func:`evaluate` of every method on every frame, seed and sampling (samplings outermost, methods innermost).
+
+    Give the samplings as observed ``fractions`` or as sample ``counts``, not both.
+    """
+    if (fractions is None) == (counts is None):
+        raise ValueError("give fractions or counts")
+    key = "fraction" if counts is None else "count"
+    return [evaluate(m, f, **{key: sampling}, seed=s, keep_result=keep_result)
+            for sampling in (fractions if counts is None else counts) for f in frames for s in seeds for m in methods]
 
 
 def mean_std(values) -> tuple[float, float]:
