@@ -146,7 +146,8 @@ def complete_depth(
         error).  Its
         result has no full-resolution objective: ``objective`` and ``gap``
         are NaN and ``terms`` is empty; the iterations and history are
-        those of the coarse solve.
+        those of the coarse solve, whose objective values are not computed
+        (NaN: the coarse objective is not the user's).
 
     Returns
     -------
@@ -551,7 +552,8 @@ def _complete_fast(image, sparse_depth, mask, *, weights, l1_smoothing, clip_to_
     if x0 is not None:
         x0 = block_mean(np.maximum(x0, 0.0), factor)
     out, _ = solve_scaled(objective, _starting_point(x0, coarse, objective.shape, scale), scale=scale, solver=name,
-                          tol=tol, max_iter=max_iter, callback=None, options=options, certify_result=False)
+                          tol=tol, max_iter=max_iter, callback=None, options=options, certify_result=False,
+                          objective_values=False)
     z = upsample_bilinear(out.z.reshape(objective.shape).astype(np.float32), shape, factor)
     z = edge_aware_sweeps(z, fine_image, depth, observed, smoothness=FAST_SMOOTHNESS, kappa=FAST_KAPPA,
                           sweeps=FAST_SWEEPS).astype(np.float64)

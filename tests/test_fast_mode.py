@@ -297,3 +297,24 @@ def test_cli_batch_fast_refuses_tol_naming_the_flag(tmp_path, capsys):
                str(tmp_path / "m.csv"), "--fast", "--tol", "1e-3", "-q"])
     assert rc == 2
     assert "--fast picks its own solve and takes no --tol" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("solver", ["cg", "amg"])
+def test_solve_without_objective_values_takes_the_same_steps_and_records_nan(solver):
+    from sparsedepth.solvers import depth_scale, scaled_objective
+    from sparsedepth.solvers.core import solve_scaled
+    image, depth = make_scene(shape=(30, 36))
+    sparse, mask = sd.sample_depth(depth, fraction=0.1, seed=1)
+    objective, coarse, _ = sd.build_objective(image, sparse, mask)
+    scale = depth_scale(sparse[mask])
+    scaled = scaled_objective(objective, scale)
+    runs = [solve_scaled(scaled, coarse.ravel() / scale, scale=scale, solver=solver, tol=1e-6, max_iter=None,
+                         callback=None, options=None, certify_result=False, objective_values=values)[0]
+            for values in (True, False)]
+    with_values, without = runs
+    np.testing.assert_array_equal(without.z, with_values.z)
+    assert len(without.history) == len(with_values.history) >= 2
+    assert np.isnan([h.objective for h in without.history]).all()
+    F = [h.objective for h in with_values.history]
+    assert np.isfinite(F).all()
+    np.testing.assert_allclose(F[-1], objective.value(with_values.z.reshape(objective.shape)), rtol=1e-10)

@@ -76,12 +76,18 @@ class Recorder:
         (the recorder raises :class:`CallbackStop`).
     scale : float
         The depth unit of the solver's units.
+    values : bool, default True
+        Record ``F`` at every iteration.  False records NaN where a call gives
+        no ``value`` (no evaluation of the terms), and solvers that compute
+        ``F`` only for the history skip it (:attr:`values`): for a solve
+        whose objective values nobody reads.
     """
 
-    def __init__(self, objective, callback, scale=1.0):
+    def __init__(self, objective, callback, scale=1.0, *, values=True):
         self.objective = objective
         self.callback = callback
         self.scale = float(scale)
+        self.values = bool(values)
         self.start = time.perf_counter()
         self.history = []
 
@@ -101,7 +107,10 @@ class Recorder:
 
     def __call__(self, iteration, z, *, fevals=None, gevals=None, inner=None, value=None):
         t = self.elapsed()
-        F = self.objective.value(z) if value is None else float(value)
+        if value is not None:
+            F = float(value)
+        else:
+            F = self.objective.value(z) if self.values else float("nan")
         F_user = self.user_value(F)
         self.history.append(IterationRecord(iteration, F_user, t, fevals, gevals, inner))
         if self.callback is not None:

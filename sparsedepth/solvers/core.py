@@ -176,7 +176,8 @@ def solve(objective, x0, *, solver, tol=None, max_iter=None, callback=None, opti
                         max_iter=max_iter, callback=callback, options=options)
 
 
-def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, options, certify_result=True):
+def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, options, certify_result=True,
+                 objective_values=True):
     """:func:`solve` for an objective and start already in units of ``scale`` (checked ``tol`` and ``max_iter``).
 
     ``options`` is a dict of the solver's options or an instance of its
@@ -184,12 +185,15 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
     duality gap is computed where the solver did not produce one (the gap is
     NaN and ``converged`` is the solver's own rule): the real-time mode's
     coarse solve, whose answer is an intermediate of a larger computation.
+    With ``objective_values=False`` the history's objective values are NaN
+    where the solver would evaluate ``F`` only to record it (the quadratic
+    solvers' CG steps and last iterate).
     """
     entry = REGISTRY[solver]
     if not entry.robust:
         refuse_robust(objective, solver)
     options = entry.options.from_mapping(options).in_depth_units(scale)
-    recorder = Recorder(objective, callback, scale)
+    recorder = Recorder(objective, callback, scale, values=objective_values)
     try:
         out = entry.solve(objective, x0, tol=tol, max_iter=max_iter, recorder=recorder, options=options)
     except CallbackStop as stop:

@@ -123,14 +123,16 @@ def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner, depth_
     M = make_preconditioner(A, preconditioner, shape=objective.shape)
     it = [0]
 
+    values = recorder.values
+
     def cb(xk, rk):
         it[0] += 1
-        recorder(it[0], xk, inner=it[0], value=c - dot(b, xk) - dot(rk, xk))
+        recorder(it[0], xk, inner=it[0], value=c - dot(b, xk) - dot(rk, xk) if values else math.nan)
 
     rule = None if depth_tol is None else RemainingChange(b.size, depth_tol)
     z, n, converged, rel = pcg(A, b, x0=x0, M=M, rtol=tol, maxiter=max_iter, callback=cb, callback_residual=True,
                                stop=rule)
-    if recorder.history and recorder.history[-1].iteration == n and n > 0:
+    if values and recorder.history and recorder.history[-1].iteration == n and n > 0:
         recorder.set_last_value(objective.value(z))
     residual = f"relative residual {rel:.2e} {'<=' if converged else '>'} tol {tol:.1e}"
     if rule is not None and rule.estimate <= depth_tol:
