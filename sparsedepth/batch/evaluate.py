@@ -161,6 +161,8 @@ def evaluate_frame(
     uncertainty: bool = False,
     max_uncertainty: float | None = None,
     quality: str = "default",
+    prior=None,
+    prior_alignment: str = "scale_shift",
 ) -> FrameOutcome:
     """Complete (or hole-fill) one frame and score it and the nearest-neighbour baseline.
 
@@ -190,6 +192,10 @@ def evaluate_frame(
         Passed to :func:`~sparsedepth.complete_depth` (not used by the
         colorization fill, which refuses ``uncertainty`` and
         ``max_uncertainty``).
+    prior, prior_alignment
+        Passed to :func:`~sparsedepth.complete_depth`: a dense depth map the
+        user brings, aligned to the observations and completed around (not
+        with the colorization fill, which refuses it).
 
     Returns
     -------
@@ -208,6 +214,9 @@ def evaluate_frame(
     if task == "fill" and fill_method == "colorization" and (uncertainty or max_uncertainty is not None):
         raise ValueError("uncertainty and max_uncertainty estimate the completion solver's error; the colorization "
                          "fill has none: use fill_method='complete'")
+    if task == "fill" and fill_method == "colorization" and prior is not None:
+        raise ValueError("prior is completed around by the solver; the colorization fill does not take it: use "
+                         "fill_method='complete'")
     weights = DEFAULT_WEIGHTS if weights is None else weights
     values = _depth_2d(depth, "depth")
     valid = _valid_pixels(image, values, mask)
@@ -228,7 +237,7 @@ def evaluate_frame(
         image, sparse, observed, task, fill_method,
         dict(weights=weights, solver=solver, tol=tol, max_iter=max_iter, callback=callback,
              clip_to_observed=clip_to_observed, uncertainty=uncertainty, max_uncertainty=max_uncertainty,
-             quality=quality),
+             quality=quality, prior=prior, prior_alignment=prior_alignment),
     )
     start = time.perf_counter()
     nearest = nearest_fill(sparse, observed)

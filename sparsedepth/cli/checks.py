@@ -67,6 +67,7 @@ def _check_combinations(args) -> str:
                           "apply to completion and --fill-method complete, not the colorization fill")
     _check_camera_options(args, mode)
     _check_edge_penalty(args)
+    _check_prior(args, mode, colorization)
     _check_fast(args, colorization)
     if mode == "batch":
         if args.uncertainty is not None or args.max_uncertainty is not None:
@@ -108,6 +109,23 @@ def _check_combinations(args) -> str:
                               "pip install 'sparsedepth[plot]' (or matplotlib)")
     _check_cluster_options(args, mode)
     return mode
+
+
+def _check_prior(args, mode, colorization) -> None:
+    """--prior: one frame of the user's files, completed by the solver's default mode, without the uncertainty."""
+    if args.prior is None:
+        if args.prior_alignment is not None:
+            raise UsageError("--prior-alignment aligns --prior: give --prior PATH too")
+        return
+    if mode != "files":
+        raise UsageError("--prior needs --image and --depth (one frame): it must match that frame's pixels")
+    if colorization:
+        raise UsageError("--prior is completed around by the solver: it applies to completion and "
+                          "--fill-method complete, not colorization")
+    given = [flag for flag, value in (("--fast", args.fast), ("--uncertainty", args.uncertainty is not None),
+                                      ("--max-uncertainty", args.max_uncertainty is not None)) if value]
+    if given:
+        raise UsageError(f"--prior cannot be combined with {', '.join(given)}")
 
 
 def _check_fast(args, colorization) -> None:

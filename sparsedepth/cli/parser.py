@@ -19,6 +19,7 @@ from ..holes import FILL_METHODS
 from ..io import DEPTH_SCALES, MAX_PIXELS
 from ..io import resolve_scale
 from ..objective import DEFAULT_WEIGHTS, EDGE_PENALTIES, Weights
+from ..priors import PRIOR_ALIGNMENTS
 from ..solvers import SOLVERS
 from .camera import CAMERA_PRESETS, parse_intrinsics
 
@@ -222,6 +223,13 @@ def _add_input_options(parser) -> None:
     inp.add_argument("--truth", metavar="PATH",
                      help="optional ground-truth depth (same formats and scale as --depth) to score against, "
                           "on the pixels not observed.")
+    inp.add_argument("--prior", metavar="PATH",
+                     help="optional dense depth map from elsewhere (e.g. a monocular network's prediction; depth, "
+                          "not inverse depth), same formats and scale as --depth, every pixel valid: aligned to the "
+                          "samples (--prior-alignment) and completed around (complete_depth(prior=...)).")
+    inp.add_argument("--prior-alignment", choices=list(PRIOR_ALIGNMENTS), metavar="{" + ",".join(PRIOR_ALIGNMENTS) + "}",
+                     help="least-squares fit of s * prior + t to the samples: scale_shift (default; relative "
+                          "depth), scale, or none (a metric prior used as it is).")
     inp.add_argument("--depth-scale", type=_scale, metavar="SCALE",
                      help="divisor of stored depth values: nyu or mm (1000), kitti (256), tum (5000), m (1), or a "
                           "number.  Required for integer data (png, pgm, tif, integer npy/npz/h5); float data default "

@@ -73,6 +73,8 @@ def build_report(args, argv, outcome, description, weights, weights_given, png_s
         "output_png_scale": png_scale,
         "intrinsics": None if intrinsics is None else dict(zip(("fx", "fy", "cx", "cy"), map(float, intrinsics))),
     }
+    if getattr(args, "prior", None) is not None:
+        report["prior"] = {"file": args.prior, "alignment": args.prior_alignment or "scale_shift"}
     if result is not None:
         report.update(
             solver=result.solver, weights=weights.as_dict(), weights_given=weights_given,

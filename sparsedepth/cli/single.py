@@ -121,7 +121,22 @@ def _read_inputs(args, stream):
             raise ValueError(f"--truth '{args.truth}' has shape {truth.shape} but --depth '{args.depth}' has "
                              f"shape {depth.shape}")
         _warn_scale(truth, f"--truth '{args.truth}'", args.depth_scale, stream)
-    return image, depth, mask, truth, f"{args.image} + {args.depth}"
+    prior = None if args.prior is None else _read_prior(args, calib, depth.shape, stream)
+    description = f"{args.image} + {args.depth}" + ("" if prior is None else f" + prior {args.prior}")
+    return image, depth, mask, truth, prior, description
+
+
+def _read_prior(args, calib, shape, stream) -> np.ndarray:
+    """The --prior map in the units of --depth; UsageError unless it has the frame's size and a value everywhere."""
+    prior = _read_depth_flag(args.prior, "--prior", args, calib, stream)
+    if prior.shape != shape:
+        raise UsageError(f"--prior '{args.prior}' is {prior.shape[0]}x{prior.shape[1]} but --depth '{args.depth}' is "
+                          f"{shape[0]}x{shape[1]} (H x W); they must have the same size")
+    missing = int(np.count_nonzero(~np.isfinite(prior)))
+    if missing:
+        raise UsageError(f"--prior '{args.prior}' has {missing} pixels without a value (0, NaN, inf or excluded by "
+                          "--invalid-value/--min-depth/--max-depth); a prior must be dense: fill its holes first")
+    return prior
 
 
 _DEPTH_OUTPUTS = ("--out", "depth.npy", "depth.png")
@@ -159,7 +174,7 @@ def input_files(args) -> list[Named]:
     """Every input file of one frame, named by its option."""
     return [Named(flag, value, Path(value)) for flag, value in (
         ("--image", args.image), ("--depth", args.depth), ("--mask", args.mask), ("--truth", args.truth),
-        ("--calib", args.calib)) if value is not None]
+        ("--prior", args.prior), ("--calib", args.calib)) if value is not None]
 
 
 def _check_png_range(depth, scale, targets, what) -> None:
@@ -186,20 +201,20 @@ def _bytes_writer(data: bytes):
 
 
 def _load_frame(args, mode, stream):
-    """(image, depth, mask, truth, description, keep_fraction, intrinsics) of the demo or the user's files,
+    """(image, depth, mask, truth, prior, description, keep_fraction, intrinsics) of the demo or the user's files,
     downsampled; intrinsics of the downsampled grid, or None when unknown."""
     demo_intrinsics = None
     if mode == "demo":
         frame = load_motorcycle()
         demo_intrinsics = frame.intrinsics
-        image, depth, mask, truth = frame.image, np.asarray(frame.depth), None, None
+        image, depth, mask, truth, prior = frame.image, np.asarray(frame.depth), None, None, None
         description = "Middlebury 2014 Motorcycle"
         downsample = DEMO_DOWNSAMPLE if args.downsample is None else args.downsample
         keep_fraction = args.keep_fraction
         if keep_fraction is None and args.keep_count is None:
             keep_fraction = DEMO_KEEP_FRACTION
     else:
-        image, depth, mask, truth, description = _read_inputs(args, stream)
+        image, depth, mask, truth, prior, description = _read_inputs(args, stream)
         downsample = 1 if args.downsample is None else args.downsample
         keep_fraction = args.keep_fraction
     intrinsics = frame_intrinsics(args, mode, depth.shape, downsample, demo_intrinsics)
@@ -208,10 +223,11 @@ def _load_frame(args, mode, stream):
         image, depth = image[::downsample, ::downsample], depth[::downsample, ::downsample]
         mask = None if mask is None else mask[::downsample, ::downsample]
         truth = None if truth is None else truth[::downsample, ::downsample]
-    return image, depth, mask, truth, description, keep_fraction, intrinsics
+        prior = None if prior is None else prior[::downsample, ::downsample]
+    return image, depth, mask, truth, prior, description, keep_fraction, intrinsics
 
 
-def _evaluate(args, image, depth, mask, truth, keep_fraction, weights, stream):
+def _evaluate(args, image, depth, mask, truth, prior, keep_fraction, weights, stream):
     """:func:`~sparsedepth.batch.evaluate_frame` with the options; warnings and solver progress go to ``stream``."""
     complete_fill = args.fill_holes and args.fill_method == "complete"
     use_solver = not args.fill_holes or complete_fill
@@ -225,6 +241,7 @@ def _evaluate(args, image, depth, mask, truth, keep_fraction, weights, stream):
             clip_to_observed=args.clip_to_observed,
             uncertainty=wants_uncertainty(args), max_uncertainty=args.max_uncertainty,
             quality="fast" if args.fast else "default",
+            prior=prior, prior_alignment=args.prior_alignment or "scale_shift",
         )
 
 
@@ -287,7 +304,7 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
     :class:`~sparsedepth.cli.messages.UsageError` or a library error.
     """
     weights, weights_given = weights_of(args)
-    image, depth, mask, truth, description, keep_fraction, intrinsics = _load_frame(args, mode, stderr)
+    image, depth, mask, truth, prior, description, keep_fraction, intrinsics = _load_frame(args, mode, stderr)
     png_scale = args.out_scale if args.out_scale is not None else (args.depth_scale or 1000.0)
     png_scale = resolve_scale(png_scale)
     planned = plan_outputs(args, mode)
@@ -296,7 +313,7 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
     _check_png_range(depth if mask is None else np.where(mask, depth, np.nan), png_scale, png_targets,
                      f"the depth of {'the demo' if mode == 'demo' else '--depth'}")
 
-    outcome = _evaluate(args, image, depth, mask, truth, keep_fraction, weights, stderr)
+    outcome = _evaluate(args, image, depth, mask, truth, prior, keep_fraction, weights, stderr)
 
     # every output is encoded and checked before any file is touched; commit writes all or none
     _check_png_range(outcome.depth, png_scale, png_targets, "the completed depth")
