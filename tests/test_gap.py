@@ -201,3 +201,45 @@ def test_gap_is_nan_where_the_quadratic_part_is_singular():
                                 clip_to_observed=False)
         assert np.isnan(res.gap) and "not available" in res.message
         assert res.converged, res.message
+
+
+def test_irls_to_gap_tol_1e6_is_certified_by_its_finishing_phase(l1_problem):
+    obj, coarse, F_ref = l1_problem
+    out, _ = solve(obj, coarse.ravel(), solver="irls", options={"gap_tol": 1e-6})
+    F = obj.value(out.z)
+    assert out.converged, out.message
+    assert out.gap <= 1e-6 * F * (1 + 1e-12)
+    assert out.gap >= F - F_ref - 1e-12 * F_ref
+    assert F - out.gap <= F_ref * (1 + 1e-12)
+    assert "finished by" in out.message and "ADMM iterations" in out.message
+    steps = [h.iteration for h in out.history]
+    assert steps == sorted(set(steps)) and steps[-1] > out.iterations // 2  # one history, numbered on
+    assert out.history[-1].objective == pytest.approx(F, rel=1e-12)
+
+
+def test_irls_finish_none_is_newton_steps_only(l1_problem):
+    obj, coarse, F_ref = l1_problem
+    newton, _ = solve(obj, coarse.ravel(), solver="irls", options={"finish": "none"})
+    default, _ = solve(obj, coarse.ravel(), solver="irls")
+    assert "ADMM" not in newton.message
+    # at the default gap_tol (= newton_gap) the Newton phase certifies by itself: the same run either way
+    if default.converged and "finished by" not in default.message:
+        np.testing.assert_array_equal(default.z, newton.z)
+    assert newton.gap >= obj.value(newton.z) - F_ref - 1e-12 * F_ref
+
+
+@settings(derandomize=True, database=None, deadline=None, max_examples=6,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(problem=_problems())
+def test_irls_at_gap_tol_1e6_is_within_its_gap_of_lbfgsb(problem):
+    image, sparse, mask, weights = problem
+    obj, coarse, _ = build_objective(image, sparse, mask, weights=weights)
+    ref, _ = solve(obj, coarse.ravel(), solver="lbfgsb", tol=1e-15, max_iter=20000)
+    F_ref = obj.value(ref.z)
+    out, _ = solve(obj, coarse.ravel(), solver="irls", options={"gap_tol": 1e-6})
+    F = obj.value(out.z)
+    rounding = 1e-10 * F_ref
+    assert out.gap >= F - F_ref - rounding
+    if out.converged:
+        assert out.gap <= 1e-6 * F * (1 + 1e-12)
+        assert F - out.gap <= F_ref + rounding

@@ -23,7 +23,7 @@ from .active_set import polish_active_set
 from .certificate import Certificate
 from .common import gap_threshold, objective_floor, output, refuse_robust, relative
 
-__all__ = ["solve_admm", "default_rho", "combine", "RHO_REFERENCE_PIXELS"]
+__all__ = ["solve_admm", "finish_from", "default_rho", "combine", "RHO_REFERENCE_PIXELS"]
 
 
 #: The pixel count at which :func:`default_rho` was tuned (a 640x480 frame); ρ grows with the side length above it.
@@ -171,9 +171,27 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     recorder(0, z, inner=0)
     if not objective.has_l1:
         return _solve_quadratic(objective, z, recorder, options)
-    run = _AdmmRun(objective, z, options, max_iter)
-    k = 0
-    while k < max_iter:
+    return _run(_AdmmRun(objective, z, options, max_iter), tol, max_iter, recorder)
+
+
+def finish_from(objective, z, p, *, tol, max_iter, recorder, options, first_iteration):
+    """ADMM with its active-set polishes from a point ``z`` and dual ``p`` of another solver; a :class:`SolverOutput`.
+
+    The exact finishing phase of :func:`~sparsedepth.solvers.irls.solve_irls`:
+    ``u = K z`` and the scaled multiplier ``λ = clip(p, −c, c) / ρ``, then
+    the iteration and stopping rules of :func:`solve_admm`, its iterations
+    recorded as ``first_iteration + 1, ...`` (``max_iter`` of them at most).
+    """
+    run = _AdmmRun(objective, np.maximum(np.asarray(z, dtype=float), 0.0), options, max_iter)
+    c = run.l1.weights
+    run.lam = np.clip(p, -c, c) / run.rho
+    return _run(run, tol, max_iter, recorder, first=first_iteration)
+
+
+def _run(run, tol, max_iter, recorder, first=0):
+    """Iterate ``run`` until its stopping rules or ``max_iter`` iterations (numbered from ``first + 1``)."""
+    k, last = first, first + max_iter
+    while k < last:
         k += 1
         run.iterate(k, recorder)
         if not run.polish and run.r_norm <= tol and run.s_norm <= tol:
@@ -185,7 +203,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
                 continue
             if verdict:
                 break
-        run.adapt_rho(k)
+        run.adapt_rho(k - first)
     return run.finish(k, recorder)
 
 

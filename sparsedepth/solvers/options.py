@@ -268,6 +268,17 @@ class IrlsOptions(SolverOptions):
     certify_below : float, optional
         The gap is computed at the end of each ``ε`` level from ``ε <=``
         it on (depth units); default ``1e-5`` times ``scale``.
+    finish : {"admm", "none"}, default "admm"
+        The exact finishing phase of ``method="newton"``: with ``"admm"``
+        the Newton steps stop once the duality gap is within the larger of
+        ``gap_tol`` and ``newton_gap`` (or when they stall), and, unless
+        that already meets ``gap_tol``, ADMM iterations with active-set
+        polishes (:func:`~sparsedepth.solvers.admm.finish_from`) continue
+        from the Newton point and dual to ``gap_tol``; ``"none"``: Newton
+        steps only.
+    newton_gap : float, default 1e-4
+        The relative duality gap at which the Newton phase hands over to the
+        finishing phase.
     """
 
     solver: ClassVar[str] = "irls"
@@ -286,6 +297,8 @@ class IrlsOptions(SolverOptions):
     level_steps: int = _option(3)
     tie_band: float | None = _option(None, kind=float, positive=True, depth_unit=True)
     certify_below: float | None = _option(None, kind=float, positive=True, depth_unit=True)
+    finish: str = _option("admm", kind=str, choices=("admm", "none"))
+    newton_gap: float = _option(1e-4)
 
 
 @dataclass(frozen=True, kw_only=True)
