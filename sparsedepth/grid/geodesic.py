@@ -86,15 +86,47 @@ def geodesic_fill(image, sparse_depth, mask=None, *, contrast: float = 10.0, ret
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     img = as_float_image(image)
     check_same_shape(img.shape[:2], depth.shape, "image", "sparse_depth")
-    cx, cy = step_costs(img, contrast)
-    H, W = depth.shape
-    index = np.arange(H * W).reshape(H, W)
-    rows = np.concatenate([index[:, :-1].ravel(), index[:-1, :].ravel()])
-    cols = np.concatenate([index[:, 1:].ravel(), index[1:, :].ravel()])
-    graph = sp.csr_array((np.concatenate([cx.ravel(), cy.ravel()]), (rows, cols)), shape=(H * W, H * W))
+    graph = _grid_graph(*step_costs(img, contrast))
     sources = np.flatnonzero(observed)
     distance, _, nearest = dijkstra(graph, directed=False, indices=sources, min_only=True, return_predecessors=True)
-    fill = depth.ravel()[nearest].reshape(H, W)
+    del graph
+    fill = depth.ravel()[nearest].reshape(depth.shape)
     if return_distance:
-        return fill, distance.reshape(H, W)
+        return fill, distance.reshape(depth.shape)
     return fill
+
+
+def _grid_graph(cx, cy):
+    """The 4-connected grid graph with step costs ``cx`` (to the right) and ``cy`` (down), as canonical CSR.
+
+    Row ``p = i W + j`` stores its edge to ``p + 1`` (when ``j < W − 1``),
+    then its edge to ``p + W`` (when ``i < H − 1``); each undirected edge
+    once.  Written straight into the CSR arrays (float64 costs, int32
+    indices when they fit): no coordinate lists, no sort.
+    """
+    H, W = cy.shape[0] + 1, cx.shape[1] + 1
+    n = H * W
+    itype = np.int32 if 2 * n < np.iinfo(np.int32).max else np.int64
+    per_row = np.full((H, W), 2, dtype=itype)  # edges stored in each pixel's row
+    per_row[:, -1] -= 1
+    per_row[-1, :] -= 1
+    indptr = np.zeros(n + 1, dtype=itype)
+    np.cumsum(per_row.reshape(-1), out=indptr[1:])
+    del per_row
+    nnz = int(indptr[-1])
+    data = np.empty(nnz)
+    indices = np.empty(nnz, dtype=itype)
+    top = (H - 1) * (2 * W - 1)  # the image rows above the last: 2 W − 1 edges each
+    if H > 1:
+        d = data[:top].reshape(H - 1, 2 * W - 1)
+        c = indices[:top].reshape(H - 1, 2 * W - 1)
+        here = np.arange(n - W, dtype=itype).reshape(H - 1, W)
+        d[:, 0:2 * W - 2:2] = cx[:-1]
+        c[:, 0:2 * W - 2:2] = here[:, :-1] + 1
+        d[:, 1:2 * W - 2:2] = cy[:, :-1]
+        c[:, 1:2 * W - 2:2] = here[:, :-1] + W
+        d[:, -1] = cy[:, -1]
+        c[:, -1] = here[:, -1] + W
+    data[top:] = cx[-1]
+    indices[top:] = np.arange(n - W + 1, n, dtype=itype)
+    return sp.csr_array((data, indices, indptr), shape=(n, n))

@@ -1,6 +1,6 @@
 """Preconditioners for the SPD systems of the package by name: Jacobi, grid multigrid, pyamg.
 
-May import :mod:`.multigrid`, NumPy, SciPy and pyamg.
+May import :mod:`.multigrid`, :mod:`sparsedepth.grid`, NumPy, SciPy and pyamg.
 """
 
 from __future__ import annotations
@@ -9,6 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import LinearOperator
 
+from ..grid.stencil import SymmetricStencil
 from .multigrid import GridMultigrid
 
 __all__ = ["make_preconditioner", "PRECONDITIONERS"]
@@ -21,7 +22,10 @@ def make_preconditioner(A, kind: str = "amg", *, shape=None):
 
     Parameters
     ----------
-    A : scipy.sparse matrix, (N, N), symmetric positive definite
+    A : scipy.sparse matrix or SymmetricStencil, (N, N), symmetric positive definite
+        A :class:`~sparsedepth.grid.stencil.SymmetricStencil` (e.g.
+        ``objective.normal_equations(form="stencil")``) gives the same
+        preconditioner as its CSR form (``"amg"`` converts it).
     kind : {"grid", "amg", "jacobi", "none"} or GridMultigrid
         ``"grid"``: one symmetric V-cycle of a geometric
         :class:`~sparsedepth.linalg.multigrid.GridMultigrid` (``interpolation="auto"``) built here (needs
@@ -32,7 +36,8 @@ def make_preconditioner(A, kind: str = "amg", *, shape=None):
         ``GridMultigrid`` (e.g. after :meth:`~GridMultigrid.update`) is used
         as is.
     shape : tuple of int, optional
-        Grid shape ``(H, W)`` with ``H * W = N``; required for ``"grid"``.
+        Grid shape ``(H, W)`` with ``H * W = N``; required for ``"grid"``
+        (a stencil's own grid by default).
 
     Returns
     -------
@@ -46,6 +51,8 @@ def make_preconditioner(A, kind: str = "amg", *, shape=None):
         diagonal with ``"jacobi"``.
     """
     n = A.shape[0]
+    if shape is None and isinstance(A, SymmetricStencil):
+        shape = A.grid_shape
     if isinstance(kind, GridMultigrid):
         return kind.aspreconditioner()
     if kind == "none":
@@ -63,6 +70,7 @@ def make_preconditioner(A, kind: str = "amg", *, shape=None):
     if kind == "amg":
         import pyamg
 
-        ml = pyamg.ruge_stuben_solver(sp.csr_matrix(A), max_coarse=300, coarse_solver="splu")
+        csr = A.tocsr() if isinstance(A, SymmetricStencil) else A
+        ml = pyamg.ruge_stuben_solver(sp.csr_matrix(csr), max_coarse=300, coarse_solver="splu")
         return ml.aspreconditioner(cycle="V")
     raise ValueError(f"unknown preconditioner {kind!r}; one of {PRECONDITIONERS}")

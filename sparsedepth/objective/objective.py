@@ -37,7 +37,7 @@ from ..grid.edges import (edge_weights, image_gradient_magnitude, pair_edge_weig
                           smoothed_image)
 from ..grid.geodesic import geodesic_fill
 from ..grid.operators import StencilOperator, gradient_stencil, hessian_stencil
-from ..grid.stencil import stencil_to_csr
+from ..grid.stencil import SymmetricStencil, stencil_to_csr
 from .terms import AbsTerm, QuadraticTerm, RobustTerm
 from .weights import DEFAULT_WEIGHTS, Weights, check_weights
 
@@ -164,11 +164,25 @@ class Objective:
             grad += t.gradient(z)
         return grad
 
-    def normal_equations(self):
+    def normal_equations(self, *, form="csr"):
         """``(A, b, c)`` with quadratic part ``= zᵀAz − 2bᵀz + c`` (cached).
 
         For the depth objective ``A = αM + β(∂xᵀ∂x + ∂yᵀ∂y) + δI`` (+ the
         optional terms) and ``b = αM z_obs + δ z_c``.
+
+        Parameters
+        ----------
+        form : {"csr", "stencil"}, default "csr"
+            ``"csr"``: ``A`` as a scipy.sparse CSR array.  ``"stencil"``: ``A``
+            as a :class:`~sparsedepth.grid.stencil.SymmetricStencil` (the
+            images of its offsets ``>= (0, 0)`` only: 56 instead of 160 bytes
+            per pixel for the 13-point system), for the solves that only
+            multiply by ``A`` and precondition it
+            (:func:`~sparsedepth.linalg.krylov.pcg`,
+            :func:`~sparsedepth.linalg.preconditioners.make_preconditioner`);
+            the CSR array instead when it is already cached, when a term's
+            operator is a general sparse matrix, or when the assembled stencil
+            is not exactly (bit for bit) symmetric.
 
         Notes
         -----
@@ -178,25 +192,38 @@ class Objective:
         the full in-grid pattern of :func:`~sparsedepth.grid.stencil.stencil_to_csr`,
         which the multigrid set-up reads back without sparse diagonal
         extraction.  Terms whose operator is a general sparse matrix are
-        added as ``K^T diag(r) K`` products.
+        added as ``K^T diag(r) K`` products.  Both forms multiply a vector
+        bit for bit alike.  One form is cached: asking for ``"csr"`` after
+        ``"stencil"`` converts the cached stencil and caches the CSR array
+        instead.
         """
-        if self._normal is None:
-            n = self.size
-            offsets, stencil, general = self._stencil_parts()
+        if form not in ("csr", "stencil"):
+            raise ValueError(f"form must be 'csr' or 'stencil', got {form!r}")
+        if self._normal is not None:
+            A, b, c = self._normal
+            if form == "csr" and not sp.issparse(A):
+                self._normal = (A.tocsr(), b, c)
+            return self._normal
+        n = self.size
+        offsets, stencil, general = self._stencil_parts(separate=form == "stencil")
+        A = None
+        if form == "stencil" and not general:
+            A = SymmetricStencil.from_stencil(offsets, stencil, copy=False)
+        if A is None:
             A = stencil_to_csr(offsets, stencil)
-            del stencil
-            for t in general:
-                A = A + t.normal_matrix(n)
-            if general:
-                A = sp.csr_array(A)
-                A.sum_duplicates()
-                A.sort_indices()
-            b = np.zeros(n)
-            c = 0.0
-            for t in self.quadratic_terms:
-                b += t.normal_rhs(n)
-                c += t.constant()
-            self._normal = (A, b, c)
+        del stencil
+        for t in general:
+            A = A + t.normal_matrix(n)
+        if general:
+            A = sp.csr_array(A)
+            A.sum_duplicates()
+            A.sort_indices()
+        b = np.zeros(n)
+        c = 0.0
+        for t in self.quadratic_terms:
+            b += t.normal_rhs(n)
+            c += t.constant()
+        self._normal = (A, b, c)
         return self._normal
 
     def clear_cache(self):
@@ -229,8 +256,12 @@ class Objective:
             raise ValueError(f"terms {[t.name for t in general]} have general sparse operators; no stencil form")
         return offsets, stencil
 
-    def _stencil_parts(self):
-        """Stencil of the stencil-form terms, and the list of the other quadratic terms."""
+    def _stencil_parts(self, separate=False):
+        """Stencil of the stencil-form terms, and the list of the other quadratic terms.
+
+        With ``separate`` the stencil is a list of ``(H, W)`` images instead of one array, so that the images a
+        caller no longer needs can be freed one by one.
+        """
         offsets = {(0, 0)}
         stencil_terms, general = [], []
         for t in self.quadratic_terms:
@@ -242,7 +273,10 @@ class Objective:
             else:
                 general.append(t)
         offsets = sorted(offsets)
-        stencil = np.zeros((len(offsets),) + self.shape)
+        if separate:
+            stencil = [np.zeros(self.shape) for _ in offsets]
+        else:
+            stencil = np.zeros((len(offsets),) + self.shape)
         centre = offsets.index((0, 0))
         for t in stencil_terms:
             if t.operator is None:

@@ -39,9 +39,16 @@ residuals stay float64, so a solve's accuracy does not depend on it.
 :func:`solve_spd` runs preconditioned CG (:mod:`sparsedepth.linalg.krylov`)
 with a choice of preconditioners and returns an honest residual history.
 
+The fine operator may also be a :class:`~sparsedepth.grid.stencil.SymmetricStencil`
+(half the stencil images, no CSR: ``Objective.normal_equations(form="stencil")``);
+on large frames its float64 sweeps and the float32 coarse levels then run
+band by band through the same kernel (:mod:`.bands`), bit for bit as on
+the CSR forms, without holding them.
+
 Modules, from the bottom up: :mod:`.stencils` (reading stencils from CSR),
 :mod:`.interpolation` (prolongation weights), :mod:`.transfer` (prolongation
-operators), :mod:`.galerkin` (coarse operators), :mod:`.smoothers`, :mod:`.iteration` (PCG
+operators), :mod:`.galerkin` (coarse operators), :mod:`.bands` (band-wise
+sweeps and products of symmetric stencils), :mod:`.smoothers`, :mod:`.iteration` (PCG
 and V-cycle iterations with their residual history),
 :mod:`.hierarchy` (:class:`GridMultigrid`), :mod:`.solve` (:func:`solve_spd`).
 The subpackage may import :mod:`sparsedepth.linalg.krylov`,

@@ -15,7 +15,13 @@ __all__ = ["gauss_seidel_forward", "gauss_seidel_backward", "jacobi_damping", "j
 
 
 def gauss_seidel_forward(A, x, b, sweeps):
-    """``sweeps`` forward Gauss--Seidel sweeps on the CSR system ``A x = b``, updating ``x`` in place."""
+    """``sweeps`` forward Gauss--Seidel sweeps on the CSR system ``A x = b``, updating ``x`` in place.
+
+    ``A`` may also be a :class:`~sparsedepth.linalg.multigrid.bands.BandedStencil` (its own band-wise sweeps).
+    """
+    if hasattr(A, "gauss_seidel"):
+        A.gauss_seidel(x, b, sweeps)
+        return
     n = x.shape[0]
     for _ in range(sweeps):
         amg_core.gauss_seidel(A.indptr, A.indices, A.data, x, b, 0, n, 1)
@@ -23,6 +29,9 @@ def gauss_seidel_forward(A, x, b, sweeps):
 
 def gauss_seidel_backward(A, x, b, sweeps):
     """``sweeps`` backward Gauss--Seidel sweeps (last row first), updating ``x`` in place."""
+    if hasattr(A, "gauss_seidel"):
+        A.gauss_seidel(x, b, sweeps, backward=True)
+        return
     n = x.shape[0]
     for _ in range(sweeps):
         amg_core.gauss_seidel(A.indptr, A.indices, A.data, x, b, n - 1, -1, -1)
@@ -34,6 +43,8 @@ def jacobi_damping(A):
     :math:`\rho = \max_i \sum_j |a_{ij}| / a_{ii}` is the Gershgorin bound of
     :math:`D^{-1} A`.  ``ValueError`` unless the diagonal is positive.
     """
+    if not hasattr(A, "indptr"):  # a stencil form: its CSR form, for the row sums
+        A = A.tocsr()
     diag = A.diagonal()
     if np.any(diag <= 0):
         raise ValueError("the Jacobi smoother needs a positive diagonal.")

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..._validation import as_grid_operator
-from ...grid.stencil import csr_to_stencil, full_pattern_offsets
+from ...grid.stencil import SymmetricStencil, csr_to_stencil, full_pattern_offsets
 
 __all__ = ["grid_stencil", "extract_stencil", "StencilSource", "fine_stencil_source"]
 
@@ -198,19 +198,25 @@ class StencilSource:
     ``_KEEP_STENCIL_PIXELS`` read it whole once (:meth:`read_whole`).
     """
 
-    def __init__(self, offsets, shape, *, array=None, csr=None, csr_offsets=None):
+    def __init__(self, offsets, shape, *, array=None, csr=None, csr_offsets=None, symmetric=None):
         self.offsets = list(offsets)
         self.shape = tuple(shape)
         self.array = array
         self.csr = csr
         self.csr_offsets = None if csr_offsets is None else list(csr_offsets)
+        self.symmetric = symmetric  # a SymmetricStencil, read class by class like a CSR source
+        if symmetric is not None:
+            self.csr_offsets = list(symmetric.offsets)
 
     def parity_class(self, py, px):
         """Stencil images on the pixels ``(py::2, px::2)``, shape ``(K, ny, nx)`` (``py = None``: all pixels)."""
         if self.array is not None:
             return np.ascontiguousarray(self.array[:, py::2, px::2])
-        parity = None if py is None else (py, px)  # None: the whole grid
-        _, part = csr_to_stencil(self.csr, self.shape, offsets=self.csr_offsets, parity=parity)
+        if self.symmetric is not None:
+            part = self.symmetric.parity_class(py, px).astype(np.float64, copy=False)
+        else:
+            parity = None if py is None else (py, px)  # None: the whole grid
+            _, part = csr_to_stencil(self.csr, self.shape, offsets=self.csr_offsets, parity=parity)
         if self.csr_offsets == self.offsets:
             return part
         out = np.zeros((len(self.offsets),) + part.shape[1:])
@@ -223,7 +229,7 @@ class StencilSource:
         """Read a CSR source into one array now (the set-up asks for most classes twice)."""
         if self.array is None:
             self.array = self.parity_class(None, None)
-            self.csr = None
+            self.csr = self.symmetric = None
         return self
 
 
@@ -237,7 +243,13 @@ def _pattern_offsets(A, shape, radius=None):
 
 
 def fine_stencil_source(A, shape, radius=None):
-    """Offsets and :class:`StencilSource` of a fine operator (pattern read, else extraction)."""
+    """Offsets and :class:`StencilSource` of a fine operator (a symmetric stencil, pattern read, else extraction)."""
+    if isinstance(A, SymmetricStencil):
+        largest = 2 if radius is None else int(radius)
+        if any(max(abs(dy), abs(dx)) > largest for dy, dx in A.offsets):
+            raise ValueError(f"`A` couples pixels farther apart than a stencil of radius {largest}: offsets "
+                             f"{A.offsets}")
+        return list(A.offsets), StencilSource(A.offsets, shape, symmetric=A)
     offsets = _pattern_offsets(A, shape, radius)
     if offsets is not None:
         return offsets, StencilSource(offsets, shape, csr=A, csr_offsets=offsets)

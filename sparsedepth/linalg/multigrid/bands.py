@@ -1,0 +1,186 @@
+r"""Gauss--Seidel sweeps and products of a symmetric stencil, a band of image rows at a time.
+
+pyamg's Gauss--Seidel kernel needs a CSR matrix.  Instead of holding the
+whole CSR form of a level (12 bytes per non-zero in float64, 1.25 GB for an
+8-megapixel 13-point system), :class:`BandedStencil` writes the CSR values of
+a few image rows at a time into a small buffer (one gather from the stencil's
+images) and runs the kernel on that band.  The vectors are copied into a grid padded by the stencil radius
+``R`` on every side, so that every band has the same column indices
+(computed once) and every pixel the same ``K`` entries, the neighbours
+outside the grid pointing into the zero padding (whatever finite
+coefficient such an entry holds, it multiplies an exact zero).  Rows
+are visited in the order of the whole-matrix kernel, each row sums its
+entries in the same order, and the extra entries add exact zeros, so a sweep
+or a product equals the one on :meth:`~sparsedepth.grid.stencil.SymmetricStencil.tocsr`
+in the same precision, bit for bit.
+
+May import NumPy, SciPy, pyamg and :mod:`sparsedepth.grid`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from pyamg import amg_core
+
+from ...grid.stencil import SymmetricStencil
+
+__all__ = ["BandedStencil"]
+
+#: values per band buffer (rows x columns x offsets): 1 MB in float64, a few rows of a large image
+_BAND_VALUES = 1 << 17
+
+
+class BandedStencil:
+    """A :class:`~sparsedepth.grid.stencil.SymmetricStencil` applied in precision ``dtype`` through band-wise CSR.
+
+    Parameters
+    ----------
+    A : SymmetricStencil
+        The operator; its images are read (and cast) band by band, never copied whole.
+    dtype : numpy dtype
+        Precision of the sweeps and products (float32 or float64).
+
+    Attributes
+    ----------
+    shape : tuple of int
+        ``(N, N)``.
+    dtype : numpy.dtype
+    stencil : SymmetricStencil
+    """
+
+    def __init__(self, A, dtype):
+        if not isinstance(A, SymmetricStencil):
+            raise TypeError(f"`A` must be a SymmetricStencil, got {type(A).__name__}")
+        self.stencil = A
+        self.dtype = np.dtype(dtype)
+        self.shape = A.shape
+        H, W = self.grid_shape = A.grid_shape
+        self.radius = R = max(max(abs(dy), abs(dx)) for dy, dx in A.offsets)
+        self._wp = W + 2 * R
+        K = len(A.offsets)
+        self._rows = max(1, min(H, _BAND_VALUES // (W * K)))
+        self._delta = np.array([dy * self._wp + dx for dy, dx in A.offsets])
+        self._patterns = {}
+        self._gathers = {}
+
+    # ---- band structure -----------------------------------------------------
+    def _pattern(self, rows):
+        """``(indptr, indices, matrix)`` of a band of ``rows`` image rows, in the coordinates of its padded view."""
+        if rows not in self._patterns:
+            R, W, wp = self.radius, self.grid_shape[1], self._wp
+            K = len(self.stencil.offsets)
+            view_rows = rows + 2 * R
+            counts = np.zeros((view_rows, wp), dtype=np.int32)
+            counts[R:R + rows, R:R + W] = K
+            indptr = np.zeros(view_rows * wp + 1, dtype=np.int32)
+            np.cumsum(counts.reshape(-1), out=indptr[1:])
+            centre = (np.arange(R, R + rows)[:, None] * wp + np.arange(R, R + W)[None, :]).astype(np.int32)
+            indices = (centre[:, :, None] + self._delta[None, None, :].astype(np.int32)).reshape(-1)
+            values = np.zeros(indices.size, dtype=self.dtype)
+            matrix = sp.csr_array((values, indices, indptr), shape=(view_rows * wp, view_rows * wp))
+            # the kernels read the arrays the matrix holds (SciPy may have copied or cast them)
+            self._patterns[rows] = (matrix.indptr, matrix.indices, matrix)
+        return self._patterns[rows]
+
+    def _bands(self, reverse=False):
+        H, B = self.grid_shape[0], self._rows
+        starts = list(range(0, H, B))
+        return [(y0, min(H, y0 + B)) for y0 in (starts[::-1] if reverse else starts)]
+
+    def _gather(self, y0, y1):
+        """``(start, index)``: the band's CSR values are ``data.ravel()[start:][index]`` (clipped to the array).
+
+        Entry ``(r, x, k)`` reads offset ``k``'s coefficient at pixel ``(y0 + r, x)``: the stored image of ``k``
+        there, or for a lower offset ``o`` the image of ``−o`` at the neighbour ``p + o``.  Entries whose
+        neighbour lies outside the grid read some other finite coefficient: they multiply the zero padding.
+        Bands away from the top share one index array per height (relative to ``start``).
+        """
+        A = self.stencil
+        H, W = self.grid_shape
+        lead = self.radius * (W + 1)  # the farthest a lower offset reaches back
+        start = y0 * W - lead
+        key = (y1 - y0, None if start >= 0 else y0)
+        if key not in self._gathers:
+            slot = np.array([A._slot[o] if o >= (0, 0) else A._slot[(-o[0], -o[1])] for o in A.offsets])
+            shift = np.array([0 if o >= (0, 0) else o[0] * W + o[1] for o in A.offsets])
+            base = slot * (H * W) + shift + lead + (0 if start >= 0 else start)
+            r = np.arange(y1 - y0)[:, None, None]
+            x = np.arange(W)[None, :, None]
+            self._gathers[key] = (r * W + x + base[None, None, :]).astype(np.intp)
+        return max(start, 0), self._gathers[key]
+
+    def _fill(self, y0, y1):
+        """Write the CSR values of image rows ``y0:y1`` into their band matrix; returns its flat values."""
+        _, _, matrix = self._pattern(y1 - y0)
+        start, index = self._gather(y0, y1)
+        source = self.stencil.data.reshape(-1)[start:]
+        if source.dtype == self.dtype:
+            np.take(source, index.reshape(-1), out=matrix.data, mode="clip")
+        else:
+            matrix.data[...] = np.take(source, index.reshape(-1), mode="clip")
+        return matrix.data
+
+    def _padded(self, v):
+        H, W = self.grid_shape
+        R = self.radius
+        out = np.zeros((H + 2 * R, self._wp), dtype=self.dtype)
+        out[R:R + H, R:R + W] = v.reshape(H, W)
+        return out
+
+    def _view(self, padded, y0, y1):
+        """The flat view of padded rows ``y0 .. y1 + 2R`` (image rows ``y0 − R .. y1 + R``)."""
+        return padded.reshape(-1)[y0 * self._wp:(y1 + 2 * self.radius) * self._wp]
+
+    # ---- operations ---------------------------------------------------------
+    def gauss_seidel(self, x, b, sweeps=1, *, backward=False):
+        """``sweeps`` Gauss--Seidel sweeps on ``A x = b`` (forward, or last row first), updating ``x`` in place."""
+        H, W = self.grid_shape
+        R, wp = self.radius, self._wp
+        xp = self._padded(x)
+        bp = self._padded(b)
+        for _ in range(sweeps):
+            for y0, y1 in self._bands(reverse=backward):
+                indptr, indices, _ = self._pattern(y1 - y0)
+                data = self._fill(y0, y1)
+                first, stop = R * wp, (R + y1 - y0) * wp
+                xv, bv = self._view(xp, y0, y1), self._view(bp, y0, y1)
+                if backward:
+                    amg_core.gauss_seidel(indptr, indices, data, xv, bv, stop - 1, first - 1, -1)
+                else:
+                    amg_core.gauss_seidel(indptr, indices, data, xv, bv, first, stop, 1)
+        x.reshape(H, W)[...] = xp[R:R + H, R:R + W]
+        return x
+
+    def matvec(self, x):
+        """``A x`` in precision :attr:`dtype` (``x`` is cast to it).
+
+        In the stencil's own precision this is the stencil's product by image
+        slices (:meth:`SymmetricStencil.matvec`, the same bits and no
+        gathering); otherwise the band-wise CSR product.
+        """
+        H, W = self.grid_shape
+        R = self.radius
+        x = np.asarray(x).reshape(-1)
+        if x.shape[0] != self.shape[1]:
+            raise ValueError(f"expected a vector of length {self.shape[1]} (grid {self.grid_shape}), got "
+                             f"{x.shape[0]}")
+        if x.dtype == self.dtype == self.stencil.dtype:
+            return self.stencil.matvec(x)
+        xp = self._padded(x)
+        out = np.empty((H, W), dtype=self.dtype)
+        for y0, y1 in self._bands():
+            _, _, matrix = self._pattern(y1 - y0)
+            self._fill(y0, y1)
+            y = matrix @ self._view(xp, y0, y1)
+            out[y0:y1] = y.reshape(-1, self._wp)[R:R + y1 - y0, R:R + W]
+        return out.reshape(-1)
+
+    def __matmul__(self, x):
+        return self.matvec(x)
+
+    def diagonal(self):
+        return self.stencil.diagonal().astype(self.dtype)
+
+    def __repr__(self):
+        return f"BandedStencil({self.stencil!r}, dtype={self.dtype}, rows per band={self._rows})"
