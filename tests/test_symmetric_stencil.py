@@ -235,3 +235,27 @@ def test_banded_coarse_levels_equal_the_csr_hierarchy(monkeypatch, shape):
     z, _, converged, _ = pcg(S, b, x0=coarse.ravel(), M=ours.aspreconditioner(), rtol=1e-11)
     assert converged
     np.testing.assert_allclose(S @ z, b, rtol=0, atol=1e-10 * np.linalg.norm(b))
+
+
+def test_large_frames_solve_in_stencil_form_with_the_csr_solution(monkeypatch):
+    """From STENCIL_FORM_PIXELS on, the γ = 0 solve keeps A as a SymmetricStencil; same depth as the CSR solve."""
+    import warnings
+
+    import sparsedepth as sd
+    from conftest import make_scene
+    from sparsedepth.grid.stencil import SymmetricStencil
+    from sparsedepth.solvers import quadratic
+
+    image, depth = make_scene(shape=(40, 52))
+    sparse, mask = sd.sample_depth(depth, fraction=0.05, seed=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sd.ClampWarning)
+        csr = sd.complete_depth(image, sparse, mask)
+        monkeypatch.setattr(quadratic, "STENCIL_FORM_PIXELS", 1)
+        objective, _, _ = sd.build_objective(image, sparse, mask)
+        assert quadratic.system_form(objective) == "stencil"
+        stencil = sd.complete_depth(image, sparse, mask)
+    np.testing.assert_allclose(stencil.depth, csr.depth, rtol=1e-12, atol=0)
+    assert stencil.converged == csr.converged and np.isfinite(stencil.gap)
+    A, _, _ = objective.normal_equations(form=quadratic.system_form(objective))
+    assert isinstance(A, SymmetricStencil)

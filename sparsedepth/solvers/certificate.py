@@ -179,7 +179,7 @@ class Certificate:
     def gap(self, z, *, p=None, eps=0.0, tied=None):
         """:func:`duality_gap` of ``z`` (solver units); NaN when the solve with ``A`` fails."""
         objective = self.objective
-        A, b, _ = objective.normal_equations()
+        A, b, _ = objective.normal_equations(form="stencil")  # products and a preconditioned solve: either form
         z = np.asarray(z, dtype=np.float64).ravel()
         if self.nonnegative:
             z = np.maximum(z, 0.0)

@@ -134,7 +134,7 @@ def start_kkt_residual(objective, z, smoothed):
     ``2‖Az‖∞ + 2‖b‖∞ + ‖Kᵀ|c|‖∞`` (the sizes of the gradient's parts; ``c``
     the L1 and robust terms' ``weight · r``, robust gradients entering exactly).
     """
-    A, b, _ = objective.normal_equations()
+    A, b, _ = objective.normal_equations(form="stencil")  # products only: the cached form, no conversion
     if smoothed:
         g = objective.smoothed_value_and_gradient(z)[1]
     else:
@@ -247,7 +247,7 @@ def certify(objective, z, solver, options):
         # product, and the solve below is needed only where the cheap bound is not already within gap_tol
         curvature = curvature_lower_bound(objective)
         if curvature > 0:
-            A, b, _ = objective.normal_equations()
+            A, b, _ = objective.normal_equations(form="stencil")  # the cached form
             r = 2.0 * (A @ z - b)
             cheap = 0.25 * float(r @ r) / curvature
             if cheap <= gap_threshold(objective, objective.value(z), options.gap_tol):

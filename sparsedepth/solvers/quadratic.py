@@ -22,6 +22,8 @@ __all__ = ["solve_direct", "solve_cg", "solve_amg", "RemainingChange", "DEFAULT_
 #: ``depth_rtol`` of the ``amg`` solve of :func:`sparsedepth.complete_depth` when neither ``tol`` nor a depth
 #: tolerance is given: an RMS remaining change of 3e-4 of the depth scale.
 DEFAULT_DEPTH_RTOL = 3e-4
+#: frames from this many pixels (about 4.2 megapixels) solve γ = 0 with ``A`` in symmetric stencil form
+STENCIL_FORM_PIXELS = 1 << 22
 
 
 def solve_direct(objective, x0, *, tol=None, max_iter=None, recorder, options):
@@ -99,6 +101,17 @@ class RemainingChange:
         return steps[-1] * rate / (1.0 - rate)
 
 
+def system_form(objective):
+    """``"stencil"`` (:class:`~sparsedepth.grid.stencil.SymmetricStencil`) from :data:`STENCIL_FORM_PIXELS` pixels on, else ``"csr"``.
+
+    The symmetric stencil keeps half the coefficient images and no index
+    arrays (an 8-megapixel default system: 448 MB instead of 1.28 GB), but
+    its product takes about twice the CSR product's time at 640x480
+    (``bench/scaling.py`` measures both).
+    """
+    return "stencil" if objective.size >= STENCIL_FORM_PIXELS else "csr"
+
+
 def _depth_tolerance(options):
     """The tolerance on the RMS remaining change in solver units (None: no depth rule); options already scaled."""
     rtol, atol = options.depth_rtol, options.depth_atol
@@ -118,7 +131,7 @@ def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner, depth_
     products instead of a full evaluation of every term; the last entry is
     re-evaluated exactly term by term.
     """
-    A, b, c = objective.normal_equations()
+    A, b, c = objective.normal_equations(form=system_form(objective))
     recorder(0, x0)
     M = make_preconditioner(A, preconditioner, shape=objective.shape)
     it = [0]
