@@ -18,6 +18,7 @@ and most have ``--quick`` for a seconds-long smoke test on tiny frames):
 * :mod:`bench.accuracy` - modelling variants (blurred edges, image-aware prior fill, depth-aware re-solve, ``prior=``) with a leave-one-dataset-out table (``docs/accuracy.md``);
 * :mod:`bench.speed` - the depth-based stop of the default solve and, through :mod:`bench.fast_peers`, FGS and IP-Basic beside ours (``docs/speed.md``, ``docs/figures/speed_accuracy.png``);
 * :mod:`bench.fast_mode` - ``quality="fast"`` against the default solve and OpenCV's fast global smoother (``docs/fast_mode.md``);
+* :mod:`bench.scaling` - time per pixel of the default and fast modes from 0.3 to 4.9 megapixels and their 8-megapixel peak memory (``docs/scaling.md``);
 * :mod:`bench.robust_penalties` - robust edge penalties against the L1 edge term (``docs/robust_penalties.md``);
 * :mod:`bench.tune` - the seeded search that chose ``sparsedepth.DEFAULT_WEIGHTS`` (``docs/tuning.md``).
 
