@@ -6,7 +6,10 @@ other weight is that of the baseline, the library's defaults with the modelling 
 * ``edge_sigma`` - the image blurred by a Gaussian before every edge weight;
 * ``fill_contrast`` (with a larger ``delta``) - the geodesic, image-aware nearest-sample fill as the prior ``z_c``;
 * ``depth_jump`` - one re-solve with the image smoothness relaxed where the first solution jumps;
-* combinations of the above.
+* combinations of the above;
+* ``beta_local_linear`` / ``local_linear_eps`` - the windowed local-linear term (the matting Laplacian of Levin et
+  al.: depth an affine function of the colour in every 3x3 window), added to the current defaults, with the
+  image-weighted smoothness weights ``beta_image`` and ``beta_second_image`` scaled by a factor of the grid.
 
 A row's free parameters are picked on :data:`bench.frames.TUNE_FRAMES` only (the grid point with the lowest mean
 RMSE / nearest-neighbour RMSE over frames × 1/5/10 % × seeds, scored by :func:`bench.tune.score`) and that choice
@@ -51,7 +54,8 @@ from . import harness  # noqa: E402
 from .tune import score  # noqa: E402
 
 #: The modelling fields of :class:`sparsedepth.Weights`, all off in the baseline.
-OFF = {name: 0.0 for name in sd.Weights.__dataclass_fields__ if name in ("edge_sigma", "fill_contrast", "depth_jump")}
+OFF = {name: 0.0 for name in sd.Weights.__dataclass_fields__
+       if name in ("edge_sigma", "fill_contrast", "depth_jump", "beta_local_linear", "local_linear_eps")}
 
 
 def baseline() -> sd.Weights:
@@ -66,8 +70,10 @@ def variants(quick: bool = False) -> list[tuple[str, list[dict]]]:
     contrasts = (5.0, 20.0, 50.0)
     deltas = (delta, 10 * delta, 100 * delta)
     jumps = (0.02, 0.05, 0.1)
+    local_weights, local_eps, smooth_scales = (0.003, 0.01, 0.03), (1e-6, 1e-5, 1e-4), (0.3, 1.0)
     if quick:
         sigmas, contrasts, deltas, jumps = (1.0,), (20.0,), (delta, 10 * delta), (0.05,)
+        local_weights, local_eps, smooth_scales = (0.01,), (1e-5,), (0.3, 1.0)
     return [
         ("baseline (defaults, modelling fields off)", [{}]),
         ("blurred-image edge weights (edge_sigma)", [dict(edge_sigma=s) for s in sigmas]),
@@ -76,7 +82,20 @@ def variants(quick: bool = False) -> list[tuple[str, list[dict]]]:
         ("depth-aware re-solve (depth_jump)", [dict(depth_jump=j) for j in jumps]),
         ("geodesic fill + blurred edges",
          [dict(edge_sigma=s, fill_contrast=c, delta=d) for s, c, d in itertools.product(sigmas, contrasts, deltas)]),
+        (LOCAL_LINEAR, [local_linear(b, e, s) for b, e, s in itertools.product(local_weights, local_eps, smooth_scales)]),
     ]
+
+
+#: The label of the local-linear variant.
+LOCAL_LINEAR = "local-linear windows + geodesic fill + blurred edges"
+
+
+def local_linear(weight: float, eps: float, smooth_scale: float) -> dict:
+    """The changes to :func:`baseline` of one local-linear candidate: the term on top of edge_sigma = 1 and
+    fill_contrast = 20 (the defaults it is measured against), the image-weighted smoothness times ``smooth_scale``."""
+    base = baseline()
+    return dict(edge_sigma=1.0, fill_contrast=20.0, beta_local_linear=weight, local_linear_eps=eps,
+                beta_image=smooth_scale * base.beta_image, beta_second_image=smooth_scale * base.beta_second_image)
 
 
 def dataset_of(name: str) -> str:
