@@ -56,11 +56,21 @@ from .tune import score  # noqa: E402
 #: The modelling fields of :class:`sparsedepth.Weights`, all off in the baseline.
 OFF = {name: 0.0 for name in sd.Weights.__dataclass_fields__
        if name in ("edge_sigma", "fill_contrast", "depth_jump", "beta_local_linear", "local_linear_eps")}
+#: The image-weighted smoothness weights of ``python -m bench.tune`` (docs/tuning.md), chosen before any modelling
+#: field: the baseline keeps them whatever the defaults are, and the local-linear grid scales them.
+TUNED_SMOOTHNESS = {"beta_image": 0.00673, "beta_second_image": 0.039}
 
 
 def baseline() -> sd.Weights:
-    """The library's default weights with every modelling field off (the objective before this ablation)."""
-    return sd.DEFAULT_WEIGHTS.replace(**OFF)
+    """The library's default weights with every modelling field off and the tuned image smoothness (the objective
+    before this ablation)."""
+    return sd.DEFAULT_WEIGHTS.replace(**OFF, **TUNED_SMOOTHNESS)
+
+
+def current_defaults() -> dict:
+    """``sd.DEFAULT_WEIGHTS`` as changes to :func:`baseline` (the fields where they differ)."""
+    base = baseline()
+    return {k: v for k, v in sd.DEFAULT_WEIGHTS.as_dict(used_only=True).items() if getattr(base, k) != v}
 
 
 def variants(quick: bool = False) -> list[tuple[str, list[dict]]]:
@@ -93,9 +103,8 @@ LOCAL_LINEAR = "local-linear windows + geodesic fill + blurred edges"
 def local_linear(weight: float, eps: float, smooth_scale: float) -> dict:
     """The changes to :func:`baseline` of one local-linear candidate: the term on top of edge_sigma = 1 and
     fill_contrast = 20 (the defaults it is measured against), the image-weighted smoothness times ``smooth_scale``."""
-    base = baseline()
     return dict(edge_sigma=1.0, fill_contrast=20.0, beta_local_linear=weight, local_linear_eps=eps,
-                beta_image=smooth_scale * base.beta_image, beta_second_image=smooth_scale * base.beta_second_image)
+                **{k: smooth_scale * v for k, v in TUNED_SMOOTHNESS.items()})
 
 
 def dataset_of(name: str) -> str:
@@ -210,7 +219,7 @@ def main(argv=None) -> int:
                      *(f"{r:.3f}" for r in per_fraction(reported[1], fractions)), f"{mean_over(reported[1]):.3f}",
                      f"{reported[2] / base_report[2]:.2f}"])
     print("current defaults", file=sys.stderr, flush=True)
-    defaults = run_grid([{k: getattr(sd.DEFAULT_WEIGHTS, k) for k in OFF}], report_frames, fractions, seeds)[0]
+    defaults = run_grid([current_defaults()], report_frames, fractions, seeds)[0]
     rows.append(["current defaults (`sd.DEFAULT_WEIGHTS` at run time, not tuned here)",
                  changes_text({k: v for k, v in defaults[0].items() if v}), "",
                  *(f"{r:.3f}" for r in per_fraction(defaults[1], fractions)), f"{mean_over(defaults[1]):.3f}",
@@ -264,6 +273,12 @@ def report(args, tune_frames, report_frames, fractions, rows, results, chosen, b
         "(lower is better), mean over frames × sparsities × seeds. Each row's parameters are the grid point best "
         "on the tuning frames; its report-frame numbers use that choice. Time: Σ wall time of `complete_depth` on "
         "the report frames / the baseline's, same run.",
+        "",
+        f"The row **{LOCAL_LINEAR}** adds the windowed local-linear term (`beta_local_linear`, the matting "
+        "Laplacian of Levin, Lischinski & Weiss 2008 over 3x3 windows of the blurred colour image, ridge weight "
+        "`local_linear_eps`; `sparsedepth.grid.affinity`) to edge_sigma = 1 and fill_contrast = 20, with "
+        "`beta_image` and `beta_second_image` scaled by the factor of the grid; it makes the system 25-point "
+        "instead of 13-point.",
         "",
         harness.markdown_table(["variant", "chosen on tuning frames", "tuning score",
                                 *(f"report {100 * f:g} %" for f in fractions), "report mean", "time × baseline"],

@@ -267,3 +267,18 @@ def test_cli_flags_set_the_new_fields():
     weights, given = weights_of(args)
     assert (weights.beta_local_linear, weights.local_linear_eps) == (0.02, 1e-5)
     assert given == {"beta_local_linear": 0.02, "local_linear_eps": 1e-5}
+
+
+def test_fast_mode_solves_the_objective_with_the_term_on_its_coarse_grid():
+    rng = np.random.default_rng(9)
+    H, W = 48, 64
+    step = (np.arange(W) >= 30)[None, :].repeat(H, axis=0)
+    image = np.clip(np.dstack([np.where(step, 0.8, 0.2)] * 3) + 0.02 * rng.standard_normal((H, W, 3)), 0, 1)
+    truth = np.where(step, 4.0, 2.0) + 0.01 * np.arange(H)[:, None]
+    sparse, mask = sd.sample_depth(truth, fraction=0.05, seed=3)
+    w = sd.Weights(beta_local_linear=0.01, local_linear_eps=1e-5)
+    fast = sd.complete_depth(image, sparse, mask, weights=w, quality="fast")
+    assert fast.depth.shape == (H, W) and np.all(np.isfinite(fast.depth))
+    nearest = sd.nearest_fill(sparse, mask)
+    hidden = ~mask
+    assert np.sqrt(np.mean((fast.depth - truth)[hidden] ** 2)) < np.sqrt(np.mean((nearest - truth)[hidden] ** 2))
