@@ -186,20 +186,32 @@ class LocalLinearOperator(StencilOperator):
         H, W = self.grid_shape
         return array[..., 1 + o[0]:H - 1 + o[0], 1 + o[1]:W - 1 + o[1]]
 
-    def _fit(self, z):
-        """``(a, b)`` of every window for ``z`` (cached for the last ``z``): shapes ``(C, H-2, W-2)``, ``(H-2, W-2)``."""
+    def _rows(self, z):
+        """Every block of ``K z`` on the interior pixels, shape ``(9 + C, H-2, W-2)`` (cached for the last ``z``)."""
         if self._fit_cache is not None and np.array_equal(self._fit_cache[0], z):
             return self._fit_cache[1]
         img = self._as_image(z)
+        C = self.channels
         zbar = _window_sum(img, *self.grid_shape) / 9.0
         cross = np.zeros(self._mean.shape)
+        product = np.empty(self._mean.shape)
         for o in WINDOW_OFFSETS:
-            cross += self._shifted(self._image, o) * self._shifted(img, o)
-        cov = cross / 9.0 - self._mean * zbar
-        a = _apply(self._inverse, cov)
-        b = zbar - _dot(a, self._mean)
-        self._fit_cache = (np.array(z, dtype=np.float64, copy=True), (a, b))
-        return a, b
+            np.multiply(self._shifted(self._image, o), self._shifted(img, o), out=product)
+            cross += product
+        cross /= 9.0
+        cross -= self._mean * zbar  # the covariance of image and depth in each window
+        a = _apply(self._inverse, cross)
+        intercept = zbar - _dot(a, self._mean)
+        rows = np.empty((9 + C,) + zbar.shape)
+        for j, o in enumerate(WINDOW_OFFSETS):
+            row = rows[j]
+            np.subtract(self._shifted(img, o), intercept, out=row)
+            for c in range(C):
+                np.multiply(a[c], self._shifted(self._image[c], o), out=product[0])
+                row -= product[0]
+        np.multiply(a, np.sqrt(self.eps), out=rows[9:])
+        self._fit_cache = (np.array(z, dtype=np.float64, copy=True), rows)
+        return rows
 
     # -- StencilOperator interface ---------------------------------------------
     def block_matvec(self, z, b, out=None):
@@ -207,17 +219,8 @@ class LocalLinearOperator(StencilOperator):
         img = self._as_image(z)
         out = np.zeros(self.grid_shape) if out is None else out.reshape(self.grid_shape)
         out[...] = 0.0
-        if not self._windows:
-            return out.reshape(-1)
-        a, intercept = self._fit(img.reshape(-1))
-        view = out[self._interior]
-        if b < 9:
-            o = WINDOW_OFFSETS[b]
-            view += self._shifted(img, o)
-            view -= _dot(a, self._shifted(self._image, o))
-            view -= intercept
-        else:
-            view += np.sqrt(self.eps) * a[b - 9]
+        if self._windows:
+            out[self._interior] = self._rows(img.reshape(-1))[b]
         return out.reshape(-1)
 
     def block_rmatvec_add(self, out, b, v):
@@ -279,16 +282,24 @@ class LocalLinearOperator(StencilOperator):
         if not self._windows:
             return stencil
         slot = {o: k for k, o in enumerate(offsets)}
-        centred = [self._shifted(self._image, o) - self._mean for o in WINDOW_OFFSETS]
+        C = self.channels
+        centred = np.empty((9, C) + self._mean.shape[1:])
+        for i, o in enumerate(WINDOW_OFFSETS):
+            np.subtract(self._shifted(self._image, o), self._mean, out=centred[i])
+        constant = -scale / 9.0
+        coupling = np.empty(self._mean.shape[1:])
+        product = np.empty(self._mean.shape[1:])
         for i, oi in enumerate(WINDOW_OFFSETS):
             projected = _apply(self._inverse, centred[i])
+            projected *= constant  # -(scale / 9) P (I_i - mu)
             for j in range(i, 9):
                 oj = WINDOW_OFFSETS[j]
-                coupling = _dot(projected, centred[j])
-                coupling += 1.0
-                coupling *= -scale / 9.0
+                np.multiply(projected[0], centred[j, 0], out=coupling)
+                for c in range(1, C):
+                    np.multiply(projected[c], centred[j, c], out=product)
+                    coupling += product
+                coupling += constant + scale if i == j else constant
                 if i == j:
-                    coupling += scale
                     self._shifted(stencil[slot[(0, 0)]], oi)[...] += coupling
                     continue
                 # L is symmetric: the pair (i, j) is the coupling of p + o_i with p + o_j and of p + o_j with p + o_i
