@@ -167,12 +167,14 @@ def test_weight_zero_reproduces_the_objective_and_completion_bit_for_bit():
     image = rng.random((20, 24, 3))
     truth = 1.0 + np.add.outer(np.linspace(0, 1, 20), np.linspace(0, 2, 24))
     sparse, mask = sd.sample_depth(truth, fraction=0.1, seed=0)
-    before = sd.complete_depth(image, sparse, mask)
-    after = sd.complete_depth(image, sparse, mask, weights=sd.Weights(beta_local_linear=0.0, local_linear_eps=0.5))
+    off = sd.Weights(beta_local_linear=0.0)
+    before = sd.complete_depth(image, sparse, mask, weights=off)
+    after = sd.complete_depth(image, sparse, mask, weights=off.replace(local_linear_eps=0.5))
     np.testing.assert_array_equal(before.depth, after.depth)
     assert before.terms == after.terms and "local_linear" not in after.terms
-    objective, _, _ = build_objective(image, sparse, mask, weights=sd.Weights(local_linear_eps=0.5))
-    assert [t.name for t in objective.terms] == [t.name for t in build_objective(image, sparse, mask)[0].terms]
+    names = [t.name for t in build_objective(image, sparse, mask, weights=off)[0].terms]
+    assert names == ["data", "smooth", "edge", "prior", "smooth_image", "second_order", "second_order_image"]
+    assert "local_linear" in sd.complete_depth(image, sparse, mask).terms  # the defaults use the term
 
 
 def test_the_25_point_system_is_solved_by_the_multigrid_and_amg():
@@ -251,9 +253,10 @@ def test_grids_without_a_full_window_give_the_zero_operator():
 
 def test_eps_is_a_model_field_reported_only_when_its_term_is_used():
     assert "local_linear_eps" in MODEL_FIELDS
-    assert not {"beta_local_linear", "local_linear_eps"} & set(sd.Weights().as_dict(used_only=True))
+    off = sd.Weights(beta_local_linear=0.0).as_dict(used_only=True)
+    assert not {"beta_local_linear", "local_linear_eps"} & set(off)
     used = sd.Weights(beta_local_linear=0.1).as_dict(used_only=True)
-    assert used["beta_local_linear"] == 0.1 and used["local_linear_eps"] == sd.Weights().local_linear_eps
+    assert used["beta_local_linear"] == 0.1 and used["local_linear_eps"] == sd.Weights().local_linear_eps == 1e-5
     assert "local_linear_eps" not in sd.Weights(beta_local_linear=0.1, local_linear_eps=0.0).as_dict(used_only=True)
     assert sd.Weights.paper().beta_local_linear == 0.0
     names = [f.name for f in dataclasses.fields(sd.Weights)]

@@ -321,7 +321,8 @@ def test_batch_settings_of_an_l1_batch_match_files_without_the_edge_penalty_fiel
     from sparsedepth.batch import BatchOptions
     from sparsedepth.batch.csvlog import fingerprint, settings_difference
 
-    off = dict.fromkeys(MODEL_FIELDS, 0.0)  # the objective of the files written before the modelling fields
+    # the objective of the files written before the modelling fields and the local-linear term
+    off = dict.fromkeys((*MODEL_FIELDS, "beta_local_linear"), 0.0)
     current = fingerprint([], BatchOptions(keep_fraction=0.05, weights=Weights(gamma=0.01, **off)))
     assert "edge_penalty" not in current["options"]["weights"] and "edge_scale" not in current["options"]["weights"]
     stored = {**current, "options": {**current["options"], "weights": {
