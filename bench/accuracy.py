@@ -6,7 +6,10 @@ other weight is that of the baseline, the library's defaults with the modelling 
 * ``edge_sigma`` - the image blurred by a Gaussian before every edge weight;
 * ``fill_contrast`` (with a larger ``delta``) - the geodesic, image-aware nearest-sample fill as the prior ``z_c``;
 * ``depth_jump`` - one re-solve with the image smoothness relaxed where the first solution jumps;
-* combinations of the above.
+* combinations of the above;
+* ``beta_local_linear`` / ``local_linear_eps`` - the windowed local-linear term (the matting Laplacian of Levin et
+  al.: depth an affine function of the colour in every 3x3 window), added to the current defaults, with the
+  image-weighted smoothness weights ``beta_image`` and ``beta_second_image`` scaled by a factor of the grid.
 
 A row's free parameters are picked on :data:`bench.frames.TUNE_FRAMES` only (the grid point with the lowest mean
 RMSE / nearest-neighbour RMSE over frames × 1/5/10 % × seeds, scored by :func:`bench.tune.score`) and that choice
@@ -51,12 +54,23 @@ from . import harness  # noqa: E402
 from .tune import score  # noqa: E402
 
 #: The modelling fields of :class:`sparsedepth.Weights`, all off in the baseline.
-OFF = {name: 0.0 for name in sd.Weights.__dataclass_fields__ if name in ("edge_sigma", "fill_contrast", "depth_jump")}
+OFF = {name: 0.0 for name in sd.Weights.__dataclass_fields__
+       if name in ("edge_sigma", "fill_contrast", "depth_jump", "beta_local_linear", "local_linear_eps")}
+#: The image-weighted smoothness weights of ``python -m bench.tune`` (docs/tuning.md), chosen before any modelling
+#: field: the baseline keeps them whatever the defaults are, and the local-linear grid scales them.
+TUNED_SMOOTHNESS = {"beta_image": 0.00673, "beta_second_image": 0.039}
 
 
 def baseline() -> sd.Weights:
-    """The library's default weights with every modelling field off (the objective before this ablation)."""
-    return sd.DEFAULT_WEIGHTS.replace(**OFF)
+    """The library's default weights with every modelling field off and the tuned image smoothness (the objective
+    before this ablation)."""
+    return sd.DEFAULT_WEIGHTS.replace(**OFF, **TUNED_SMOOTHNESS)
+
+
+def current_defaults() -> dict:
+    """``sd.DEFAULT_WEIGHTS`` as changes to :func:`baseline` (the fields where they differ)."""
+    base = baseline()
+    return {k: v for k, v in sd.DEFAULT_WEIGHTS.as_dict(used_only=True).items() if getattr(base, k) != v}
 
 
 def variants(quick: bool = False) -> list[tuple[str, list[dict]]]:
@@ -66,8 +80,10 @@ def variants(quick: bool = False) -> list[tuple[str, list[dict]]]:
     contrasts = (5.0, 20.0, 50.0)
     deltas = (delta, 10 * delta, 100 * delta)
     jumps = (0.02, 0.05, 0.1)
+    local_weights, local_eps, smooth_scales = (0.003, 0.01, 0.03), (1e-6, 1e-5, 1e-4), (0.3, 1.0)
     if quick:
         sigmas, contrasts, deltas, jumps = (1.0,), (20.0,), (delta, 10 * delta), (0.05,)
+        local_weights, local_eps, smooth_scales = (0.01,), (1e-5,), (0.3, 1.0)
     return [
         ("baseline (defaults, modelling fields off)", [{}]),
         ("blurred-image edge weights (edge_sigma)", [dict(edge_sigma=s) for s in sigmas]),
@@ -76,7 +92,19 @@ def variants(quick: bool = False) -> list[tuple[str, list[dict]]]:
         ("depth-aware re-solve (depth_jump)", [dict(depth_jump=j) for j in jumps]),
         ("geodesic fill + blurred edges",
          [dict(edge_sigma=s, fill_contrast=c, delta=d) for s, c, d in itertools.product(sigmas, contrasts, deltas)]),
+        (LOCAL_LINEAR, [local_linear(b, e, s) for b, e, s in itertools.product(local_weights, local_eps, smooth_scales)]),
     ]
+
+
+#: The label of the local-linear variant.
+LOCAL_LINEAR = "local-linear windows + geodesic fill + blurred edges"
+
+
+def local_linear(weight: float, eps: float, smooth_scale: float) -> dict:
+    """The changes to :func:`baseline` of one local-linear candidate: the term on top of edge_sigma = 1 and
+    fill_contrast = 20 (the defaults it is measured against), the image-weighted smoothness times ``smooth_scale``."""
+    return dict(edge_sigma=1.0, fill_contrast=20.0, beta_local_linear=weight, local_linear_eps=eps,
+                **{k: smooth_scale * v for k, v in TUNED_SMOOTHNESS.items()})
 
 
 def dataset_of(name: str) -> str:
@@ -191,7 +219,7 @@ def main(argv=None) -> int:
                      *(f"{r:.3f}" for r in per_fraction(reported[1], fractions)), f"{mean_over(reported[1]):.3f}",
                      f"{reported[2] / base_report[2]:.2f}"])
     print("current defaults", file=sys.stderr, flush=True)
-    defaults = run_grid([{k: getattr(sd.DEFAULT_WEIGHTS, k) for k in OFF}], report_frames, fractions, seeds)[0]
+    defaults = run_grid([current_defaults()], report_frames, fractions, seeds)[0]
     rows.append(["current defaults (`sd.DEFAULT_WEIGHTS` at run time, not tuned here)",
                  changes_text({k: v for k, v in defaults[0].items() if v}), "",
                  *(f"{r:.3f}" for r in per_fraction(defaults[1], fractions)), f"{mean_over(defaults[1]):.3f}",
@@ -245,6 +273,12 @@ def report(args, tune_frames, report_frames, fractions, rows, results, chosen, b
         "(lower is better), mean over frames × sparsities × seeds. Each row's parameters are the grid point best "
         "on the tuning frames; its report-frame numbers use that choice. Time: Σ wall time of `complete_depth` on "
         "the report frames / the baseline's, same run.",
+        "",
+        f"The row **{LOCAL_LINEAR}** adds the windowed local-linear term (`beta_local_linear`, the matting "
+        "Laplacian of Levin, Lischinski & Weiss 2008 over 3x3 windows of the blurred colour image, ridge weight "
+        "`local_linear_eps`; `sparsedepth.grid.affinity`) to edge_sigma = 1 and fill_contrast = 20, with "
+        "`beta_image` and `beta_second_image` scaled by the factor of the grid; it makes the system 25-point "
+        "instead of 13-point.",
         "",
         harness.markdown_table(["variant", "chosen on tuning frames", "tuning score",
                                 *(f"report {100 * f:g} %" for f in fractions), "report mean", "time × baseline"],

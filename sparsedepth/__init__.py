@@ -20,6 +20,7 @@ the parts listed before it, NumPy, SciPy, pyamg, scikit-image and h5py;
 ``grid/``
     The pixel grid: stencils (``stencil``), finite-difference operators
     (``operators``), the image gradient and edge weights (``edges``), the
+    windowed local-linear affinities (``affinity``: the matting Laplacian), the
     image-aware nearest-sample fill (``geodesic``).
 ``io/``
     Files: images, depth formats and their units, calibration, NumPy/HDF5

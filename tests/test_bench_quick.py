@@ -99,8 +99,9 @@ def test_solvers_quick_gaps_and_plots(tmp_path):
             assert r["gap_max"] < 1e-8  # exact on the quadratic problem
         if r["solver"] == "amg":
             # its default stop is an RMS remaining depth change of 3e-4 of the depth scale, not a residual of 1e-8:
-            # F − F* = ‖z − z*‖²_A, measured 1.2e-5 of F here
-            assert r["gap_max"] < 1e-4
+            # F − F* = ‖z − z*‖²_A, measured 1.1e-4 of F here with the default local-linear term (its stiffer
+            # directions weigh the same depth change more), 7.6e-5 without it
+            assert r["gap_max"] < 3e-4
     assert (tmp_path / "solver_objective_vs_iter.png").stat().st_size > 1000
     assert (tmp_path / "solver_objective_vs_time.png").stat().st_size > 1000
 

@@ -13,7 +13,8 @@ from conftest import make_problem
 
 # 13-point second-order term plus image-weighted first-order rows (the likely new defaults)
 QUAD13 = Weights(
-    alpha=1.0, beta=0.05, gamma=0.0, delta=1e-3, kappa=5.0, beta_image=0.5, beta_second=0.3, beta_second_image=0.0
+    alpha=1.0, beta=0.05, gamma=0.0, delta=1e-3, kappa=5.0, beta_image=0.5, beta_second=0.3, beta_second_image=0.0,
+    beta_local_linear=0.0,  # the default local-linear term would make the system 25-point
 )
 L1_13 = QUAD13.replace(gamma=0.03)
 

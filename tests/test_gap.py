@@ -195,7 +195,7 @@ def test_gap_is_nan_where_the_quadratic_part_is_singular():
     mask = rng.random((6, 7)) < 0.4
     mask[0, 0] = True
     w = Weights(alpha=1.0, beta=0.0, gamma=0.1, delta=0.0, kappa=0.0, beta_image=0.0, beta_second=0.0,
-                beta_second_image=0.0)
+                beta_second_image=0.0, beta_local_linear=0.0)
     for solver in ("admm", "irls"):
         res = sd.complete_depth(image, np.where(mask, depth, np.nan), mask, weights=w, solver=solver,
                                 clip_to_observed=False)

@@ -62,6 +62,7 @@ def weights(draw, *, gamma=False, delta=True, kappa=True, second_order=True):
         beta_second=draw(_maybe_zero(1e-3, 1.0)) if second_order else 0.0,
         beta_second_image=draw(_maybe_zero(1e-3, 1.0)) if second_order else 0.0,
         edge_sigma=0.0, fill_contrast=0.0,  # the references below use the raw image's weights and nearest z_c
+        beta_local_linear=0.0,  # and the first- and second-order terms only
     )
 
 

@@ -52,9 +52,13 @@ _WEIGHT_HELP = {
     "edge_sigma": "blur (pixels) of the image before the edge weights; 0 = none",
     "fill_contrast": "image contrast cost of the prior's geodesic nearest-sample fill; 0 = Euclidean nearest fill",
     "depth_jump": "relative depth change at which a second solve relaxes the image smoothness; 0 = one solve",
+    "beta_local_linear": "windowed local-linear term: in every 3x3 window depth is fitted as an affine function of "
+                         "the colour (matting Laplacian)",
+    "local_linear_eps": "ridge weight on the slope of the local-linear fits, in squared [0, 1] image units; "
+                        "0 = no ridge",
 }
 #: Weights fields that are modelling options, not term weights.
-_OPTION_FIELDS = ("edge_sigma", "fill_contrast", "depth_jump")
+_OPTION_FIELDS = ("edge_sigma", "fill_contrast", "depth_jump", "local_linear_eps")
 
 
 EPILOG = f"""\

@@ -33,6 +33,7 @@ import scipy.sparse as sp
 
 from .._validation import as_depth_and_mask, as_float_image, check_positive_real, check_same_shape
 from ..baselines import nearest_fill
+from ..grid.affinity import local_linear_operator
 from ..grid.edges import (edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights,
                           smoothed_image)
 from ..grid.geodesic import geodesic_fill
@@ -325,7 +326,10 @@ def build_objective(
     -------
     objective : Objective
         Terms ``data``, ``smooth``, ``edge``, ``prior``, ``smooth_image``,
-        ``second_order``, ``second_order_image``; ``edge`` is an
+        ``second_order``, ``second_order_image``, and ``local_linear`` when
+        ``weights.beta_local_linear > 0`` (the windowed affine fit to the
+        image blurred by ``weights.edge_sigma``,
+        :func:`~sparsedepth.grid.affinity.local_linear_operator`); ``edge`` is an
         :class:`AbsTerm` for ``weights.edge_penalty = "l1"``, else a
         :class:`RobustTerm` with that penalty and ``weights.edge_scale``.
     coarse : ndarray, (H, W)
@@ -371,11 +375,15 @@ def build_objective(
         QuadraticTerm("second_order", weights.beta_second, hessian),
         QuadraticTerm("second_order_image", weights.beta_second_image, hessian, w2),
     ]
-    quad_smooth = weights.beta > 0 or weights.beta_image > 0 or weights.beta_second > 0 or weights.beta_second_image > 0
+    if weights.beta_local_linear > 0:  # no term at weight 0: the objective and its term list stay as without it
+        terms.append(QuadraticTerm("local_linear", weights.beta_local_linear,
+                                   local_linear_operator(img, weights.local_linear_eps)))
+    quad_smooth = (weights.beta > 0 or weights.beta_image > 0 or weights.beta_second > 0
+                   or weights.beta_second_image > 0 or weights.beta_local_linear > 0)
     if weights.delta == 0 and (weights.alpha == 0 or not (quad_smooth or weights.gamma > 0)):
         raise ValueError(
             "weights leave the problem without a unique solution: need delta > 0, or alpha > 0 together with a "
-            f"smoothness weight (beta, gamma, beta_image or beta_second); got {weights}"
+            f"smoothness weight (beta, gamma, beta_image, beta_second or beta_local_linear); got {weights}"
         )
     return Objective(shape, terms, l1_smoothing=l1_smoothing), coarse, observed
 

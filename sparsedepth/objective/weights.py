@@ -18,7 +18,7 @@ EDGE_PENALTIES = ("l1", *PENALTIES)
 #: The fields of :class:`Weights` that choose the edge term's penalty (not term weights: a str and a scale).
 EDGE_PENALTY_FIELDS = ("edge_penalty", "edge_scale")
 #: The fields of :class:`Weights` that shape the terms instead of weighting them (numbers >= 0, 0 = off).
-MODEL_FIELDS = ("edge_sigma", "fill_contrast", "depth_jump")
+MODEL_FIELDS = ("edge_sigma", "fill_contrast", "depth_jump", "local_linear_eps")
 #: Default ``edge_scale`` in depth units (metres): 5 cm.
 DEFAULT_EDGE_SCALE = 0.05
 
@@ -36,12 +36,17 @@ class Weights:
              + beta_image  Σ wx (∂x z)² + wy (∂y z)²        smooth_image (image-weighted L2)
              + beta_second Σ (∂xx z)² + (∂yy z)² + 2 (∂xy z)²   second_order
              + beta_second_image  Σ w2 ⊙ (same rows)        second_order_image
+             + beta_local_linear  Σ_w min_(a,b) Σ_(i∈w) (z_i − aᵀI_i − b)² + ε‖a‖²   local_linear
 
     with the per-pixel edge weight ``w = exp(-kappa ‖∇I‖)`` of the reference
     paper, the per-pair weights ``wx = exp(-kappa ‖I[i, j+1] - I[i, j]‖)``,
     ``wy = exp(-kappa ‖I[i+1, j] - I[i, j]‖)``, and ``w2`` the smallest pair
     weight a second-difference row spans (see
     :func:`sparsedepth.grid.edges.second_order_edge_weights`).
+    The ``local_linear`` term sums over every 3x3 window ``w`` the cost of the
+    best affine fit of depth to the image's colour there (the matting
+    Laplacian of Levin et al.; ``ε = local_linear_eps``, see
+    :mod:`sparsedepth.grid.affinity`).
     A weight of 0 removes its term, so "L2 only" or "data only" is a choice of weights.
     With ``edge_penalty`` other than ``"l1"`` the edge term penalises each
     difference by the robust ``φ(t) = s ρ(t/s)`` of that name instead of
@@ -49,11 +54,12 @@ class Weights:
     :class:`~sparsedepth.objective.robust.RobustPenalty`), which lets depth
     jump where the image has an edge without the staircase of L1.
 
-    Three fields shape the terms rather than weight them (:data:`MODEL_FIELDS`;
+    Four fields shape the terms rather than weight them (:data:`MODEL_FIELDS`;
     0 switches each off): ``edge_sigma`` blurs the image before every edge
     weight, ``fill_contrast`` makes ``z_c`` the image-aware (geodesic) fill,
-    and ``depth_jump`` re-solves once with the smoothness relaxed where the
-    first solution jumps.
+    ``depth_jump`` re-solves once with the smoothness relaxed where the
+    first solution jumps, and ``local_linear_eps`` is the ridge weight of the
+    ``local_linear`` term's window fits (0: none).
 
     Parameters
     ----------
@@ -72,6 +78,12 @@ class Weights:
         Image-weighted second-order smoothness (>= 0): a second difference
         that straddles an image edge costs less, so the surface may bend or
         jump there.  An extension beyond the reference paper.
+    beta_local_linear : float
+        Weight (>= 0) of the windowed local-linear term: depth may follow any
+        affine function of the colour inside each 3x3 window, so it bends and
+        jumps with the image but not where the image is flat.  Couples pixels
+        up to two apart (a 25-point system).  An extension beyond the
+        reference paper.
     edge_penalty : {"l1", "charbonnier", "cauchy", "geman_mcclure", "welsch"}
         The penalty of the edge term (weight ``gamma``): ``"l1"`` (default,
         convex) or a robust penalty, Barron's shape ``a`` = 1, 0, -2, -inf
@@ -102,6 +114,14 @@ class Weights:
         ``1 / (1 + (Δz / (τ z̄))²)`` with ``Δz`` the pair's depth difference
         and ``z̄`` its mean depth in the first solution, and solves again
         from it (about twice the time).  Scale-free (a relative change).
+    local_linear_eps : float
+        ``ε >= 0`` of the ``local_linear`` term, in squared image units
+        ([0, 1]² per channel): the ridge penalty ``ε ‖a‖²`` on each window's
+        slope.  Windows whose colour varies much less than ``sqrt(ε / 9)``
+        fit a constant (depth smooth there); strongly varying windows let
+        depth follow the colour.  0 fits without a ridge (the pseudo-inverse
+        of the window's colour covariance).  Unused while
+        ``beta_local_linear = 0``.
 
     Raises
     ------
@@ -124,7 +144,10 @@ class Weights:
     multiplying every weight by one number leaves the solution unchanged
     (the :data:`MODEL_FIELDS` are not weights and stay as they are).  The
     default ``edge_sigma = 1`` and ``fill_contrast = 20`` (blurred-image edge
-    weights, geodesic ``z_c``) were chosen on the tuning frames by
+    weights, geodesic ``z_c``), and the local-linear term
+    (``beta_local_linear = 0.01``, ``local_linear_eps = 1e-5``, with
+    ``beta_image`` and ``beta_second_image`` at 0.3 times the values of the
+    weight search) were chosen on the tuning frames by
     ``python -m bench.accuracy``; ``docs/accuracy.md`` has their scores on the
     report frames and leave-one-dataset-out.
     """
@@ -137,9 +160,11 @@ class Weights:
     gamma: float = 0.0
     delta: float = 0.000131
     kappa: float = 25.0
-    beta_image: float = 0.00673
+    # beta_image and beta_second_image: bench.tune's 0.00673 and 0.039 times 0.3, the factor chosen with the
+    # local-linear term by ``python -m bench.accuracy`` on TUNE_FRAMES (docs/accuracy.md)
+    beta_image: float = 0.002019
     beta_second: float = 0.000286
-    beta_second_image: float = 0.039
+    beta_second_image: float = 0.0117
     edge_penalty: str = "l1"
     edge_scale: float = DEFAULT_EDGE_SCALE
     # edge_sigma and fill_contrast: the grid point of ``python -m bench.accuracy`` best on TUNE_FRAMES
@@ -147,6 +172,10 @@ class Weights:
     edge_sigma: float = 1.0
     fill_contrast: float = 20.0
     depth_jump: float = 0.0
+    # beta_local_linear and local_linear_eps: the grid point of ``python -m bench.accuracy`` best on TUNE_FRAMES,
+    # which also wins on REPORT_FRAMES and leave-one-dataset-out (docs/accuracy.md)
+    beta_local_linear: float = 0.01
+    local_linear_eps: float = 1e-5
 
     def __post_init__(self):
         for f in fields(self):
@@ -182,8 +211,8 @@ class Weights:
         0.0
         """
         return cls(alpha=alpha, beta=beta, gamma=gamma, delta=delta, kappa=kappa,
-                   beta_image=0.0, beta_second=0.0, beta_second_image=0.0,
-                   edge_sigma=0.0, fill_contrast=0.0, depth_jump=0.0)
+                   beta_image=0.0, beta_second=0.0, beta_second_image=0.0, beta_local_linear=0.0,
+                   edge_sigma=0.0, fill_contrast=0.0, depth_jump=0.0, local_linear_eps=0.0)
 
     def replace(self, **changes) -> "Weights":
         """A copy with some weights changed (``Weights().replace(gamma=0)``)."""
@@ -193,8 +222,9 @@ class Weights:
         """``{field: value}``; with ``used_only``, without the fields that do not act on this objective.
 
         Those are ``edge_penalty`` and ``edge_scale`` for the L1 edge term (it
-        has no scale) and every :data:`MODEL_FIELDS` entry at 0 (switched
-        off); reports and batch fingerprints list only what is used, so an
+        has no scale), ``beta_local_linear`` and ``local_linear_eps`` while
+        ``beta_local_linear = 0`` (the term is absent), and every
+        :data:`MODEL_FIELDS` entry at 0 (switched off); reports and batch fingerprints list only what is used, so an
         objective without a modelling option reads as it did before those
         fields existed.
         """
@@ -202,9 +232,11 @@ class Weights:
         if used_only and self.edge_penalty == "l1":
             for name in EDGE_PENALTY_FIELDS:
                 del items[name]
+        if used_only and self.beta_local_linear == 0:
+            del items["beta_local_linear"], items["local_linear_eps"]
         if used_only:
             for name in MODEL_FIELDS:
-                if items[name] == 0:
+                if items.get(name, 1) == 0:
                     del items[name]
         return items
 

@@ -1,0 +1,287 @@
+"""The windowed local-linear term (matting Laplacian, Weights.beta_local_linear / local_linear_eps)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+import sparsedepth as sd
+from sparsedepth.grid.affinity import PINV_CUTOFF, WINDOW_OFFSETS, local_linear_operator
+from sparsedepth.grid.stencil import stencil_to_csr
+from sparsedepth.linalg.multigrid import GridMultigrid
+from sparsedepth.objective.objective import build_objective
+from sparsedepth.objective.weights import MODEL_FIELDS
+
+DOUBLE = dict(fine_precision="double", coarse_precision="double")
+pytestmark = pytest.mark.filterwarnings("ignore::sparsedepth.ClampWarning")
+
+
+def _window_indices(H, W):
+    """Flat indices of the nine pixels of every 3x3 window inside an (H, W) grid (loop, C order)."""
+    for y in range(1, H - 1):
+        for x in range(1, W - 1):
+            yield [(y + dy) * W + x + dx for dy, dx in WINDOW_OFFSETS]
+
+
+def _laplacian_by_loop(image, eps):
+    """Levin et al.'s matting Laplacian, one window at a time with dense linear algebra (independent reference)."""
+    H, W = image.shape[:2]
+    colours = image.reshape(H * W, -1)
+    C = colours.shape[1]
+    L = np.zeros((H * W, H * W))
+    for idx in _window_indices(H, W):
+        X = colours[idx]
+        mu = X.mean(axis=0)
+        cov = (X - mu).T @ (X - mu) / 9.0
+        if eps > 0:
+            P = np.linalg.inv(cov + eps / 9.0 * np.eye(C))
+        else:  # the pseudo-inverse, eigenvalues <= PINV_CUTOFF dropped
+            values, vectors = np.linalg.eigh(cov)
+            keep = values > PINV_CUTOFF
+            P = (vectors[:, keep] / values[keep]) @ vectors[:, keep].T
+        L[np.ix_(idx, idx)] += np.eye(9) - (1.0 + (X - mu) @ P @ (X - mu).T) / 9.0
+    return L
+
+
+def _ridge_cost_by_loop(image, z, eps):
+    """Σ over windows of min_(a, b) Σ (z_i − aᵀ I_i − b)² + eps ‖a‖², by a least-squares solve per window."""
+    H, W = image.shape[:2]
+    colours = image.reshape(H * W, -1)
+    C = colours.shape[1]
+    total = 0.0
+    for idx in _window_indices(H, W):
+        design = np.vstack([np.hstack([colours[idx], np.ones((9, 1))]),
+                            np.hstack([np.sqrt(eps) * np.eye(C), np.zeros((C, 1))])])
+        target = np.concatenate([z[idx], np.zeros(C)])
+        coef, *_ = np.linalg.lstsq(design, target, rcond=None)
+        total += float(np.sum((design @ coef - target) ** 2))
+    return total
+
+
+def _stencil_matrix(K):
+    offsets = K.offsets()
+    stencil = np.zeros((len(offsets),) + K.grid_shape)
+    K.add_normal_stencil(stencil, offsets)
+    return stencil_to_csr(offsets, stencil).toarray()
+
+
+CASES = [(1, 1e-3), (3, 1e-2), (3, 1e-5), (1, 0.0), (3, 0.0)]
+
+
+@pytest.mark.parametrize("channels, eps", CASES)
+def test_normal_stencil_equals_a_loop_over_windows(channels, eps):
+    rng = np.random.default_rng(channels)
+    image = rng.random((5, 7, channels))
+    image[:3, :3] = 0.4  # a flat window: its covariance is 0 (pseudo-inverse 0 for eps = 0)
+    K = local_linear_operator(image if channels > 1 else image[..., 0], eps)
+    L = _laplacian_by_loop(image, eps)
+    np.testing.assert_allclose(_stencil_matrix(K), L, rtol=0, atol=1e-11)
+    Kd = K.tocsr().toarray()
+    np.testing.assert_allclose(Kd.T @ Kd, L, rtol=0, atol=1e-11)
+
+
+@pytest.mark.parametrize("channels, eps", [(1, 1e-3), (3, 1e-2), (3, 0.0)])
+def test_squared_rows_are_the_ridge_fit_cost_of_every_window(channels, eps):
+    rng = np.random.default_rng(10 + channels)
+    image = rng.random((4, 6, channels))
+    z = rng.standard_normal(24)
+    K = local_linear_operator(image, eps)
+    reference = _ridge_cost_by_loop(image, z, eps) if eps > 0 else z @ _laplacian_by_loop(image, 0.0) @ z
+    assert float(np.sum((K @ z) ** 2)) == pytest.approx(reference, rel=1e-11)
+
+
+@pytest.mark.parametrize("channels, eps", [(1, 1e-3), (3, 1e-4), (3, 0.0)])
+def test_adjoint_and_block_products(channels, eps):
+    rng = np.random.default_rng(20 + channels)
+    K = local_linear_operator(rng.random((6, 8, channels)), eps)
+    z, v = rng.standard_normal(K.shape[1]), rng.standard_normal(K.shape[0])
+    Kz, KTv = K @ z, K.T @ v
+    assert v @ Kz == pytest.approx(z @ KTv, rel=1e-12, abs=1e-12)
+    n = K.shape[1]
+    Kd = K.tocsr().toarray()
+    np.testing.assert_allclose(Kz, Kd @ z, rtol=0, atol=1e-12)
+    total = np.zeros(n)
+    for b in range(len(K.blocks)):  # the block products QuadraticTerm uses
+        np.testing.assert_allclose(K.block_matvec(z, b), Kd[b * n:(b + 1) * n] @ z, rtol=0, atol=1e-12)
+        K.block_rmatvec_add(total, b, v[b * n:(b + 1) * n])
+    np.testing.assert_allclose(total, KTv, rtol=0, atol=1e-12)
+
+
+def test_affine_functions_of_the_image_cost_nothing_without_ridge_and_constants_never():
+    rng = np.random.default_rng(3)
+    grey = rng.random((6, 7))
+    depth = 2.0 + 3.0 * grey
+    for eps in (0.0, 1e-3, 1.0):
+        K = local_linear_operator(grey, eps)
+        assert np.sum((K @ np.full(42, 1.7)) ** 2) < 1e-24
+    assert np.sum((local_linear_operator(grey, 0.0) @ depth.ravel()) ** 2) < 1e-20
+    # with a ridge the slope 3 costs eps * 9 per window at most (a = 3 is feasible): strictly less, but > 0
+    cost = np.sum((local_linear_operator(grey, 1e-3) @ depth.ravel()) ** 2)
+    assert 0 < cost < 1e-3 * 9 * 20
+
+
+def test_term_value_and_gradient_match_finite_differences_and_the_stencil():
+    rng = np.random.default_rng(4)
+    image = rng.random((7, 9, 3))
+    sparse = np.zeros((7, 9))
+    mask = rng.random((7, 9)) < 0.3
+    sparse[mask] = 1.0 + rng.random(mask.sum())
+    w = sd.Weights(beta_local_linear=0.7, local_linear_eps=1e-3, edge_sigma=0.0)
+    objective, _, _ = build_objective(image, sparse, mask, weights=w)
+    term = objective.term("local_linear")
+    z = rng.standard_normal(63)
+    grad = term.gradient(z)
+    h = 1e-6
+    for k in rng.choice(63, size=8, replace=False):
+        e = np.zeros(63)
+        e[k] = h
+        fd = (term.value(z + e) - term.value(z - e)) / (2 * h)
+        assert fd == pytest.approx(grad[k], rel=1e-6, abs=1e-8)
+    L = _laplacian_by_loop(image, 1e-3)
+    np.testing.assert_allclose(grad, 2 * 0.7 * L @ z, rtol=0, atol=1e-10)
+    assert term.value(z) == pytest.approx(0.7 * z @ L @ z, rel=1e-12)
+    A, b, _ = objective.normal_equations()
+    without, _, _ = build_objective(image, sparse, mask, weights=w.replace(beta_local_linear=0.0))
+    A0 = without.normal_equations()[0]
+    np.testing.assert_allclose((A - A0).toarray(), 0.7 * L, rtol=0, atol=1e-12)
+
+
+def test_the_term_uses_the_image_blurred_by_edge_sigma():
+    rng = np.random.default_rng(5)
+    image = rng.random((8, 8, 3))
+    sparse = np.where(rng.random((8, 8)) < 0.4, 2.0, 0.0)
+    w = sd.Weights(beta_local_linear=0.1, edge_sigma=1.5)
+    objective, _, _ = build_objective(image, sparse, weights=w)
+    K = objective.term("local_linear").operator
+    expected = local_linear_operator(sd.grid.smoothed_image(image, 1.5), w.local_linear_eps)
+    z = rng.standard_normal(64)
+    np.testing.assert_array_equal(K @ z, expected @ z)
+
+
+def test_weight_zero_reproduces_the_objective_and_completion_bit_for_bit():
+    rng = np.random.default_rng(6)
+    image = rng.random((20, 24, 3))
+    truth = 1.0 + np.add.outer(np.linspace(0, 1, 20), np.linspace(0, 2, 24))
+    sparse, mask = sd.sample_depth(truth, fraction=0.1, seed=0)
+    off = sd.Weights(beta_local_linear=0.0)
+    before = sd.complete_depth(image, sparse, mask, weights=off)
+    after = sd.complete_depth(image, sparse, mask, weights=off.replace(local_linear_eps=0.5))
+    np.testing.assert_array_equal(before.depth, after.depth)
+    assert before.terms == after.terms and "local_linear" not in after.terms
+    names = [t.name for t in build_objective(image, sparse, mask, weights=off)[0].terms]
+    assert names == ["data", "smooth", "edge", "prior", "smooth_image", "second_order", "second_order_image"]
+    assert "local_linear" in sd.complete_depth(image, sparse, mask).terms  # the defaults use the term
+
+
+def test_the_25_point_system_is_solved_by_the_multigrid_and_amg():
+    rng = np.random.default_rng(7)
+    shape = (33, 47)
+    image = np.clip(rng.random(shape + (3,)) * 0.2 + (np.arange(47) > 20)[None, :, None] * 0.7, 0, 1)
+    truth = 2.0 + np.where(np.arange(47) > 20, 1.0, 0.0)[None, :] + 0.01 * np.arange(33)[:, None]
+    sparse, mask = sd.sample_depth(truth, fraction=0.05, seed=1)
+    w = sd.Weights(beta_local_linear=0.05, local_linear_eps=1e-4)
+    objective, _, _ = build_objective(image, sparse, mask, weights=w)
+    A, b, _ = objective.normal_equations()
+    offsets, _ = objective.normal_stencil()
+    assert max(max(abs(dy), abs(dx)) for dy, dx in offsets) == 2 and len(offsets) == 25
+    mg = GridMultigrid(A, shape, max_coarse=1, **DOUBLE)
+    for fine, coarse in zip(mg.levels[:-1], mg.levels[1:]):  # Galerkin coarse operators of the 25-point system
+        P = sp.csr_array(fine.P if sp.issparse(fine.P) else fine.P.tocsr())
+        expected = (P.T @ fine.A @ P).toarray()
+        scale = (abs(P.T) @ abs(fine.A) @ abs(P)).toarray()
+        assert np.all(np.abs(coarse.A.toarray() - expected) <= 1e-12 * (scale + 1e-300))
+    direct = spla.spsolve(sp.csc_matrix(A), b)
+    result = sd.complete_depth(image, sparse, mask, weights=w, solver="amg", tol=1e-10, clip_to_observed=False)
+    assert result.converged
+    np.testing.assert_allclose(result.depth.ravel(), direct, rtol=0, atol=1e-6 * np.max(np.abs(direct)))
+
+
+def test_local_linear_term_moves_the_completion_towards_an_image_aligned_step():
+    """Depth steps where the image steps: the term must not lower the accuracy on such a scene, and it acts."""
+    rng = np.random.default_rng(8)
+    H, W = 30, 40
+    step = (np.arange(W) >= 17)[None, :].repeat(H, axis=0)
+    image = np.dstack([np.where(step, 0.8, 0.2)] * 3) + 0.01 * rng.standard_normal((H, W, 3))
+    truth = np.where(step, 4.0, 2.0)
+    sparse, mask = sd.sample_depth(truth, fraction=0.03, seed=2)
+    plain = sd.complete_depth(image, sparse, mask, weights=sd.Weights(edge_sigma=0.0, fill_contrast=0.0))
+    local = sd.complete_depth(image, sparse, mask,
+                              weights=sd.Weights(edge_sigma=0.0, fill_contrast=0.0, beta_local_linear=0.05,
+                                                 local_linear_eps=1e-4))
+    hidden = ~mask
+    err_plain = np.sqrt(np.mean((plain.depth - truth)[hidden] ** 2))
+    err_local = np.sqrt(np.mean((local.depth - truth)[hidden] ** 2))
+    assert err_local < err_plain
+    assert local.terms["local_linear"] > 0
+
+
+# -- validation ----------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("value", [-1e-3, float("nan"), float("inf")])
+def test_bad_eps_is_refused_naming_the_field(value):
+    with pytest.raises(ValueError, match="local_linear_eps"):
+        sd.Weights(local_linear_eps=value)
+    with pytest.raises(ValueError, match="local_linear_eps"):
+        local_linear_operator(np.zeros((4, 4)), value)
+
+
+@pytest.mark.parametrize("value", [-0.1, float("nan")])
+def test_bad_weight_is_refused_naming_the_field(value):
+    with pytest.raises(ValueError, match="beta_local_linear"):
+        sd.Weights(beta_local_linear=value)
+
+
+def test_eps_that_is_not_a_number_and_row_weights_are_refused():
+    with pytest.raises(ValueError, match="local_linear_eps must be a number"):
+        sd.Weights(local_linear_eps="small")
+    K = local_linear_operator(np.zeros((4, 4)), 1e-3)
+    with pytest.raises(ValueError, match="row_weights"):
+        K.add_normal_stencil(np.zeros((25, 4, 4)), K.offsets(), row_weights=np.ones(K.shape[0]))
+
+
+def test_grids_without_a_full_window_give_the_zero_operator():
+    K = local_linear_operator(np.random.default_rng(0).random((2, 5, 3)), 1e-3)
+    z = np.arange(10.0)
+    assert np.array_equal(K @ z, np.zeros(K.shape[0]))
+    assert np.array_equal(K.T @ np.ones(K.shape[0]), np.zeros(10))
+    assert not _stencil_matrix(K).any()
+
+
+def test_eps_is_a_model_field_reported_only_when_its_term_is_used():
+    assert "local_linear_eps" in MODEL_FIELDS
+    off = sd.Weights(beta_local_linear=0.0).as_dict(used_only=True)
+    assert not {"beta_local_linear", "local_linear_eps"} & set(off)
+    used = sd.Weights(beta_local_linear=0.1).as_dict(used_only=True)
+    assert used["beta_local_linear"] == 0.1 and used["local_linear_eps"] == sd.Weights().local_linear_eps == 1e-5
+    assert "local_linear_eps" not in sd.Weights(beta_local_linear=0.1, local_linear_eps=0.0).as_dict(used_only=True)
+    assert sd.Weights.paper().beta_local_linear == 0.0
+    names = [f.name for f in dataclasses.fields(sd.Weights)]
+    assert names[-2:] == ["beta_local_linear", "local_linear_eps"]  # positional order of the older fields kept
+
+
+def test_cli_flags_set_the_new_fields():
+    from sparsedepth.cli.parser import build_parser, weights_of
+
+    args = build_parser().parse_args(["--beta-local-linear", "0.02", "--local-linear-eps", "1e-5"])
+    weights, given = weights_of(args)
+    assert (weights.beta_local_linear, weights.local_linear_eps) == (0.02, 1e-5)
+    assert given == {"beta_local_linear": 0.02, "local_linear_eps": 1e-5}
+
+
+def test_fast_mode_solves_the_objective_with_the_term_on_its_coarse_grid():
+    rng = np.random.default_rng(9)
+    H, W = 48, 64
+    step = (np.arange(W) >= 30)[None, :].repeat(H, axis=0)
+    image = np.clip(np.dstack([np.where(step, 0.8, 0.2)] * 3) + 0.02 * rng.standard_normal((H, W, 3)), 0, 1)
+    truth = np.where(step, 4.0, 2.0) + 0.01 * np.arange(H)[:, None]
+    sparse, mask = sd.sample_depth(truth, fraction=0.05, seed=3)
+    w = sd.Weights(beta_local_linear=0.01, local_linear_eps=1e-5)
+    fast = sd.complete_depth(image, sparse, mask, weights=w, quality="fast")
+    assert fast.depth.shape == (H, W) and np.all(np.isfinite(fast.depth))
+    nearest = sd.nearest_fill(sparse, mask)
+    hidden = ~mask
+    assert np.sqrt(np.mean((fast.depth - truth)[hidden] ** 2)) < np.sqrt(np.mean((nearest - truth)[hidden] ** 2))
