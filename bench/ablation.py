@@ -46,7 +46,10 @@ FRACTION = 0.05
 PAPER_FIELDS = ("alpha", "beta", "gamma", "delta", "kappa")
 EXT_LABELS = {"beta_image": "image-weighted L2", "beta_second": "second-order",
               "beta_second_image": "image-weighted second-order", "edge_sigma": "edge weights of a blurred image",
-              "fill_contrast": "image-aware (geodesic) prior fill", "depth_jump": "depth-aware re-solve"}
+              "fill_contrast": "image-aware (geodesic) prior fill", "depth_jump": "depth-aware re-solve",
+              "beta_local_linear": "windowed local-linear (matting Laplacian)"}
+#: Fields that only shape another term (not a row of their own): the row of that term carries the default's value.
+PARAMETER_OF = {"local_linear_eps": "beta_local_linear"}
 
 
 def variants(D=None, P=None):
@@ -61,7 +64,7 @@ def variants(D=None, P=None):
     # every weight beyond the paper's alpha, beta, gamma, delta, kappa is an extension term
     ext = [k for k in D.as_dict() if k not in PAPER_FIELDS and k not in EDGE_PENALTY_FIELDS]
     # a modelling option (not a term) is a row only where the defaults use it: it has no paper-like value
-    ext = [k for k in ext if k not in MODEL_FIELDS or getattr(D, k) > 0]
+    ext = [k for k in ext if (k not in MODEL_FIELDS or getattr(D, k) > 0) and k not in PARAMETER_OF]
     no_ext = {k: 0.0 for k in (*ext, *MODEL_FIELDS)}
     P = P.replace(**no_ext)
     prior = P.delta if P.delta > 0 else 1e-6 * max(P.alpha, 1.0)
@@ -75,7 +78,9 @@ def variants(D=None, P=None):
     ]
     for k in ext:
         value = getattr(D, k) if getattr(D, k) > 0 else P.beta
-        out.append((f"paper + {EXT_LABELS.get(k, k)} ({k} = {value:g})", P.replace(**{k: value})))
+        shape = {name: getattr(D, name) for name, term in PARAMETER_OF.items() if term == k}
+        label = ", ".join(f"{name} = {v:g}" for name, v in {k: value, **shape}.items())
+        out.append((f"paper + {EXT_LABELS.get(k, k)} ({label})", P.replace(**{k: value}, **shape)))
         if k == "beta_image":
             out.append((f"image-weighted L2 instead of L2 (beta = 0, beta_image = {w_img:g})",
                         P.replace(beta=0.0, beta_image=w_img)))

@@ -85,7 +85,7 @@ file format is a module in ``io/`` dispatched from ``io/depth.py`` or
 
 from . import datasets, io
 from .baselines import biharmonic_fill, colorization_baseline, linear_fill, nearest_fill
-from .completion import choose_solver, complete_depth
+from .completion import FAST_WEIGHTS, choose_solver, complete_depth
 from .grid.geodesic import geodesic_fill
 from .priors import PRIOR_ALIGNMENTS, align_prior
 from .metrics import DepthMetrics, depth_metrics
@@ -113,6 +113,7 @@ __all__ = [
     "choose_solver",
     "Weights",
     "DEFAULT_WEIGHTS",
+    "FAST_WEIGHTS",
     "CompletionResult",
     "ClampWarning",
     "UncertaintyCalibration",

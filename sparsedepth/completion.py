@@ -33,6 +33,13 @@ FAST_COARSE_RTOL = 1e-4
 #: The fast mode's edge-aware sweeps on the full grid: ``λ``, ``κ`` and the number of sweeps
 #: (:func:`~sparsedepth.grid.resample.edge_aware_sweeps`), chosen on the tuning frames (``bench/fast_mode.py``).
 FAST_SMOOTHNESS, FAST_KAPPA, FAST_SWEEPS = 16.0, 30.0, 3
+#: The weights ``quality="fast"`` solves with when given the default weights: the image-weighted first- and
+#: second-order terms of the 13-point model without the local-linear term, which does not carry over to a grid 2-4x
+#: coarser (its 3x3 windows then span 6-12 pixels), and the Euclidean nearest fill as ``z_c`` (the geodesic fill's
+#: search is ~10 % of the fast mode's time and changed nothing measurable there); chosen on the tuning frames:
+#: ``python -m bench.fast_mode`` (docs/fast_mode.md, "The fast mode's weights").
+FAST_WEIGHTS = DEFAULT_WEIGHTS.replace(beta_local_linear=0.0, beta_image=0.00673, beta_second_image=0.039,
+                                       fill_contrast=0.0)
 #: Relative moves the fast mode's clamp does not count: the rounding of its float32 sweeps.
 FLOAT32_ROUNDING = 1e-6
 
@@ -138,7 +145,9 @@ def complete_depth(
     quality : {"default", "fast"}
         ``"fast"``: the real-time mode (see Notes): a solve on a grid 2, 3
         or 4 times coarser per side, interpolated back and refined by a few
-        edge-aware sweeps.  It takes ``weights``, ``clip_to_observed``,
+        edge-aware sweeps.  With the default weights it solves with
+        :data:`FAST_WEIGHTS` (the defaults made for the coarse grid); other
+        ``weights`` are used as given.  It takes ``weights``, ``clip_to_observed``,
         ``x0`` (its block means start the coarse solve: pass the previous
         frame's depth to reuse it along a video) and the inputs; ``solver``
         must be ``"auto"`` and ``tol``, ``max_iter``, ``callback``,
@@ -529,6 +538,8 @@ def _check_quality(quality, **arguments) -> bool:
 def _complete_fast(image, sparse_depth, mask, *, weights, l1_smoothing, clip_to_observed, x0) -> CompletionResult:
     """The real-time mode (:func:`complete_depth`, Notes): coarse solve, bilinear upsampling, edge-aware sweeps."""
     start_time = time.perf_counter()
+    if weights == DEFAULT_WEIGHTS:
+        weights = FAST_WEIGHTS
     name = "cg" if weights.gamma == 0 else choose_solver(weights)
     _, tol, max_iter, options = _check_arguments(weights, name, FAST_COARSE_RTOL if name == "cg" else None, None,
                                                  None, clip_to_observed)

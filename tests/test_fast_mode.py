@@ -223,7 +223,9 @@ def test_cli_fast_writes_the_fast_completion(scene_files, capsys):
         warnings.simplefilter("ignore", sd.ClampWarning)
         expected = sd.complete_depth(image, sparse, quality="fast").depth
     np.testing.assert_allclose(sd.read_depth(scene_files / "out.npy"), expected, rtol=1e-12)
-    assert "fast" in json.loads((scene_files / "m.json").read_text())["method"]
+    report = json.loads((scene_files / "m.json").read_text())
+    assert "fast" in report["method"]
+    assert report["weights"] == sd.FAST_WEIGHTS.as_dict()  # the weights the fast mode solved with
 
 
 @pytest.mark.parametrize("argv, words", [
@@ -318,3 +320,18 @@ def test_solve_without_objective_values_takes_the_same_steps_and_records_nan(sol
     F = [h.objective for h in with_values.history]
     assert np.isfinite(F).all()
     np.testing.assert_allclose(F[-1], objective.value(with_values.z.reshape(objective.shape)), rtol=1e-10)
+
+
+def test_fast_mode_takes_its_own_weights_for_the_defaults_and_yours_as_given():
+    image, depth = make_scene(shape=(48, 60))
+    sparse, mask = sd.sample_depth(depth, fraction=0.05, seed=4)
+    assert sd.FAST_WEIGHTS != sd.DEFAULT_WEIGHTS and sd.FAST_WEIGHTS.beta_local_linear == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sd.ClampWarning)
+        default = sd.complete_depth(image, sparse, mask, quality="fast")
+        explicit = sd.complete_depth(image, sparse, mask, quality="fast", weights=sd.FAST_WEIGHTS)
+        mine = sd.Weights(beta_local_linear=0.0, fill_contrast=5.0)
+        given = sd.complete_depth(image, sparse, mask, quality="fast", weights=mine)
+    np.testing.assert_array_equal(default.depth, explicit.depth)
+    assert default.weights == sd.FAST_WEIGHTS and given.weights == mine
+    assert not np.array_equal(given.depth, default.depth)

@@ -77,7 +77,7 @@ def build_report(args, argv, outcome, description, weights, weights_given, png_s
         report["prior"] = {"file": args.prior, "alignment": args.prior_alignment or "scale_shift"}
     if result is not None:
         report.update(
-            solver=result.solver, weights=weights.as_dict(), weights_given=weights_given,
+            solver=result.solver, weights=result.weights.as_dict(), weights_given=weights_given,
             converged=result.converged, message=result.message, iterations=result.iterations,
             objective=result.objective, terms=result.terms, clamped=result.clamped,
             solver_runtime=result.runtime,
