@@ -112,6 +112,34 @@ def tune_fgs(frames_, seeds=(0,)):
     return best
 
 
+#: Weights the fast mode could solve with, compared on the tuning frames (``sd.FAST_WEIGHTS`` is the choice).
+def weight_candidates():
+    return [("`sd.FAST_WEIGHTS`", sd.FAST_WEIGHTS),
+            ("`sd.DEFAULT_WEIGHTS` (the default solve's)", sd.DEFAULT_WEIGHTS),
+            ("`sd.FAST_WEIGHTS` with the geodesic fill (fill_contrast = 20)", sd.FAST_WEIGHTS.replace(fill_contrast=20.0))]
+
+
+def weights_table(frames_, seeds=(0,)):
+    """Markdown: each candidate's mean ratio on ``frames_`` at 1/5/10 % and its time relative to the first."""
+    from sparsedepth.completion import _complete_fast  # the fast mode with exactly the weights given
+    from sparsedepth.objective.objective import DEFAULT_L1_SMOOTHING
+
+    candidates = weight_candidates()
+    ratios = {label: [] for label, _ in candidates}
+    seconds = {label: 0.0 for label, _ in candidates}
+    for frame, _, _, sparse, mask, nearest, nearest_rmse in _inputs(frames_, FRACTIONS, seeds):
+        for label, weights in candidates:  # interleaved: the same load for each
+            run = _quiet(lambda: _complete_fast(frame.image, sparse, mask, weights=weights, l1_smoothing=DEFAULT_L1_SMOOTHING,
+                                                clip_to_observed=True, x0=None).depth)
+            start = time.perf_counter()
+            dense = run()
+            seconds[label] += time.perf_counter() - start
+            ratios[label].append(_ratio(dense, frame, mask, nearest_rmse))
+    first = candidates[0][0]
+    rows = [[label, f"{np.mean(ratios[label]):.4f}", f"{seconds[label] / seconds[first]:.2f}"] for label, _ in candidates]
+    return H.markdown_table(["fast mode with", "mean RMSE / nearest (tuning frames)", "time / first row"], rows)
+
+
 def _quiet(fn):
     def run(*args, **kwargs):
         with warnings.catch_warnings():
@@ -212,6 +240,7 @@ def main(argv=None) -> int:
                       f"sigma_color = {sigma:g} (mean ratio there {score:.3f}), from lambda in "
                       f"{list(FGS_LAMBDAS)} and sigma_color in {list(FGS_SIGMAS)}; OpenCV {cv2.__version__}, one "
                       "thread.")
+    weights_text = weights_table(tune_frames, seeds=(0,))
     records = {label: measure(frames_, FRACTIONS, seeds, repeat, fgs_setting) for label, frames_ in sizes.items()}
     lines = ["# The real-time mode", "",
              "Written by `python -m bench.fast_mode` (see `bench/fast_mode.py` for what is measured and how); do "
@@ -226,6 +255,10 @@ def main(argv=None) -> int:
         lines += [summary_table(recs, label), ""]
     for label, recs in records.items():
         lines += [f"Per frame at 5 % observed ({label}):", "", per_frame_table(recs, 0.05), ""]
+    lines += ["## The fast mode's weights", "",
+              "With the default weights `quality=\"fast\"` solves with `sd.FAST_WEIGHTS`, chosen here on the tuning "
+              "frames (step 2, seed 0, 1/5/10 %; each candidate run on the same inputs in turn):", "",
+              weights_text, ""]
     lines += [f"Wall time of this run: {time.perf_counter() - start:.0f} s.", ""]
     text = "\n".join(lines)
     print(text)

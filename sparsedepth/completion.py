@@ -255,7 +255,8 @@ def complete_depth(
     """
     if _check_quality(quality, solver=solver, tol=tol, max_iter=max_iter, callback=callback, options=options,
                       uncertainty=uncertainty, max_uncertainty=max_uncertainty, prior=prior):
-        return _complete_fast(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
+        return _complete_fast(image, sparse_depth, mask, weights=FAST_WEIGHTS if weights == DEFAULT_WEIGHTS else weights,
+                              l1_smoothing=l1_smoothing,
                               clip_to_observed=clip_to_observed, x0=x0)
     name, tol, max_iter, options = _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed)
     want_uncertainty = _check_uncertainty_arguments(uncertainty, max_uncertainty)
@@ -538,8 +539,6 @@ def _check_quality(quality, **arguments) -> bool:
 def _complete_fast(image, sparse_depth, mask, *, weights, l1_smoothing, clip_to_observed, x0) -> CompletionResult:
     """The real-time mode (:func:`complete_depth`, Notes): coarse solve, bilinear upsampling, edge-aware sweeps."""
     start_time = time.perf_counter()
-    if weights == DEFAULT_WEIGHTS:
-        weights = FAST_WEIGHTS
     name = "cg" if weights.gamma == 0 else choose_solver(weights)
     _, tol, max_iter, options = _check_arguments(weights, name, FAST_COARSE_RTOL if name == "cg" else None, None,
                                                  None, clip_to_observed)
