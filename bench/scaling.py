@@ -8,12 +8,12 @@ smoke test on small sizes that prints only)::
 
 What is measured
 ----------------
-* *Modes.*  ``default``: ``sd.complete_depth(image, sparse, mask)``;
-  ``default, stencil form``: the same call with
-  ``Objective.normal_equations()`` answering ``form="stencil"`` (a
-  :class:`~sparsedepth.grid.stencil.SymmetricStencil` instead of the CSR
-  matrix) at the default solve's call sites, which only multiply by ``A``,
-  precondition it or read ``c`` (see :func:`_stencil_form`); ``fast``:
+* *Modes.*  ``default``: ``sd.complete_depth(image, sparse, mask)``, whose
+  γ = 0 solve keeps ``A`` as CSR below
+  :data:`~sparsedepth.solvers.quadratic.STENCIL_FORM_PIXELS` pixels and as a
+  :class:`~sparsedepth.grid.stencil.SymmetricStencil` from there on;
+  ``default, stencil form at every size``: the same call with the stencil
+  form at every size (see :func:`_stencil_form`); ``fast``:
   ``quality="fast"``.
 * *Time per pixel.*  Frame ``nyu_metric3d/00000`` (640x480), and the same
   frame resized to 1280x960 and 2560x1920 (image bilinear, depth nearest,
@@ -60,9 +60,9 @@ from . import perf  # noqa: E402
 DOC = H.REPO / "docs" / "scaling.md"
 SIZES = ((480, 640), (960, 1280), (1920, 2560))
 QUICK_SIZES = ((120, 160), (240, 320))
-MODES = {"default": {}, "default, stencil form": {}, "fast": {"quality": "fast"}}
+MODES = {"default": {}, "default, stencil form at every size": {}, "fast": {"quality": "fast"}}
 #: the mode that runs the default solve with ``Objective.normal_equations`` answering in the stencil form
-STENCIL_MODE = "default, stencil form"
+STENCIL_MODE = "default, stencil form at every size"
 #: the parts of the default mode, timed by wrapping these functions where complete_depth looks them up
 PARTS = (("sparsedepth.objective.objective", "geodesic_fill", "geodesic fill"),
          ("sparsedepth.completion", "build_objective", "objective"),
@@ -74,28 +74,23 @@ PARTS = (("sparsedepth.objective.objective", "geodesic_fill", "geodesic fill"),
 
 @contextlib.contextmanager
 def _stencil_form(on=True):
-    """``Objective.normal_equations()`` answers ``form="stencil"`` by default while this is active.
+    """The γ = 0 solve keeps ``A`` in symmetric stencil form at every size while this is active.
 
-    The default solve calls it in four places (the CG solve, the certificate,
-    the gap threshold, the objective floor), all of which only multiply by
-    ``A`` or read ``c``: this is the default mode once those call sites ask
-    for the stencil form.
+    :func:`sparsedepth.solvers.quadratic.system_form` takes it from
+    :data:`~sparsedepth.solvers.quadratic.STENCIL_FORM_PIXELS` pixels on (the
+    ``default`` mode); this mode lowers that threshold to one pixel.
     """
     if not on:
         yield
         return
-    from sparsedepth.objective.objective import Objective
+    from sparsedepth.solvers import quadratic
 
-    original = Objective.normal_equations
-
-    def stencil_form(self, *, form="stencil"):
-        return original(self, form=form)
-
-    Objective.normal_equations = stencil_form
+    original = quadratic.STENCIL_FORM_PIXELS
+    quadratic.STENCIL_FORM_PIXELS = 1
     try:
         yield
     finally:
-        Objective.normal_equations = original
+        quadratic.STENCIL_FORM_PIXELS = original
 
 
 def _complete(problem, mode):

@@ -6,7 +6,6 @@ import numpy as np
 
 import sparsedepth as sd
 from sparsedepth.grid.stencil import SymmetricStencil
-from sparsedepth.objective.objective import Objective
 
 
 def test_scaling_quick_report(capsys):
@@ -26,8 +25,10 @@ def test_stencil_form_switch_is_restored():
     image = rng.integers(0, 256, (12, 14, 3)).astype(np.uint8)
     mask = rng.random((12, 14)) < 0.2
     sparse = np.where(mask, 1.0 + rng.random((12, 14)), 0.0)
-    original = Objective.normal_equations
+    from sparsedepth.solvers import quadratic
+
+    original = quadratic.STENCIL_FORM_PIXELS
+    obj, _, _ = sd.build_objective(image, sparse, mask, weights=sd.DEFAULT_WEIGHTS.replace(gamma=0))
     with scaling._stencil_form():
-        obj, _, _ = sd.build_objective(image, sparse, mask, weights=sd.DEFAULT_WEIGHTS.replace(gamma=0))
-        assert isinstance(obj.normal_equations()[0], SymmetricStencil)
-    assert Objective.normal_equations is original
+        assert isinstance(obj.normal_equations(form=quadratic.system_form(obj))[0], SymmetricStencil)
+    assert quadratic.STENCIL_FORM_PIXELS == original and quadratic.system_form(obj) == "csr"
