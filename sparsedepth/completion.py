@@ -35,9 +35,9 @@ FAST_COARSE_RTOL = 1e-4
 FAST_SMOOTHNESS, FAST_KAPPA, FAST_SWEEPS = 16.0, 30.0, 3
 #: The weights ``quality="fast"`` solves with when given the default weights: the image-weighted first- and
 #: second-order terms of the 13-point model without the local-linear term, which does not carry over to a grid 2-4x
-#: coarser (its 3x3 windows then span 6-12 pixels), and the Euclidean nearest fill as ``z_c`` (the geodesic fill's
-#: search is ~10 % of the fast mode's time and changed nothing measurable there); chosen on the tuning frames:
-#: ``python -m bench.fast_mode`` (docs/fast_mode.md, "The fast mode's weights").
+#: coarser (its 3x3 windows then span 6-12 pixels), and the Euclidean nearest fill as ``z_c``; chosen on the tuning
+#: frames, where each is more accurate than the alternative: ``python -m bench.fast_mode`` (docs/fast_mode.md, "The
+#: fast mode's weights").
 FAST_WEIGHTS = DEFAULT_WEIGHTS.replace(beta_local_linear=0.0, beta_image=0.00673, beta_second_image=0.039,
                                        fill_contrast=0.0)
 #: Relative moves the fast mode's clamp does not count: the rounding of its float32 sweeps.
