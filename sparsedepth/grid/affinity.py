@@ -283,20 +283,22 @@ class LocalLinearOperator(StencilOperator):
             return stencil
         slot = {o: k for k, o in enumerate(offsets)}
         C = self.channels
-        centred = np.empty((9, C) + self._mean.shape[1:])
-        for i, o in enumerate(WINDOW_OFFSETS):
-            np.subtract(self._shifted(self._image, o), self._mean, out=centred[i])
         constant = -scale / 9.0
+        # I_j − μ is recomputed for each pair instead of kept for all nine j: C planes instead of 9 C (an 8-MP
+        # colour frame: 190 MB instead of 1.7 GB), the same operations in the same order
+        centred = np.empty((C,) + self._mean.shape[1:])
         coupling = np.empty(self._mean.shape[1:])
         product = np.empty(self._mean.shape[1:])
         for i, oi in enumerate(WINDOW_OFFSETS):
-            projected = _apply(self._inverse, centred[i])
+            np.subtract(self._shifted(self._image, oi), self._mean, out=centred)
+            projected = _apply(self._inverse, centred)
             projected *= constant  # -(scale / 9) P (I_i - mu)
             for j in range(i, 9):
                 oj = WINDOW_OFFSETS[j]
-                np.multiply(projected[0], centred[j, 0], out=coupling)
+                np.subtract(self._shifted(self._image, oj), self._mean, out=centred)
+                np.multiply(projected[0], centred[0], out=coupling)
                 for c in range(1, C):
-                    np.multiply(projected[c], centred[j, c], out=product)
+                    np.multiply(projected[c], centred[c], out=product)
                     coupling += product
                 coupling += constant + scale if i == j else constant
                 if i == j:
