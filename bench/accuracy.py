@@ -48,14 +48,14 @@ import numpy as np  # noqa: E402
 from scipy import ndimage  # noqa: E402
 
 import sparsedepth as sd  # noqa: E402
+from sparsedepth.objective.weights import MODEL_FIELDS  # noqa: E402
 
 from . import frames as frame_list  # noqa: E402
 from . import harness  # noqa: E402
 from .tune import score  # noqa: E402
 
-#: The modelling fields of :class:`sparsedepth.Weights`, all off in the baseline.
-OFF = {name: 0.0 for name in sd.Weights.__dataclass_fields__
-       if name in ("edge_sigma", "fill_contrast", "depth_jump", "beta_local_linear", "local_linear_eps")}
+#: The modelling fields of :class:`sparsedepth.Weights` and the local-linear term, all off in the baseline.
+OFF = {name: 0.0 for name in (*MODEL_FIELDS, "beta_local_linear")}
 #: The image-weighted smoothness weights of ``python -m bench.tune`` (docs/tuning.md), chosen before any modelling
 #: field: the baseline keeps them whatever the defaults are, and the local-linear grid scales them.
 TUNED_SMOOTHNESS = {"beta_image": 0.00673, "beta_second_image": 0.039}

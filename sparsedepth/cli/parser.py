@@ -19,6 +19,7 @@ from ..holes import FILL_METHODS
 from ..io import DEPTH_SCALES, MAX_PIXELS
 from ..io import resolve_scale
 from ..objective import DEFAULT_WEIGHTS, EDGE_PENALTIES, Weights
+from ..objective.weights import MODEL_FIELDS
 from ..priors import PRIOR_ALIGNMENTS
 from ..solvers import SOLVERS
 from .camera import CAMERA_PRESETS, parse_intrinsics
@@ -57,8 +58,6 @@ _WEIGHT_HELP = {
     "local_linear_eps": "ridge weight on the slope of the local-linear fits, in squared [0, 1] image units; "
                         "0 = no ridge",
 }
-#: Weights fields that are modelling options, not term weights.
-_OPTION_FIELDS = ("edge_sigma", "fill_contrast", "depth_jump", "local_linear_eps")
 
 
 EPILOG = f"""\
@@ -297,8 +296,8 @@ def _add_method_options(parser) -> None:
                                      f"(default {default}).")
             continue
         kind, metavar = ((_positive_metres, "METRES") if f.name == "edge_scale"
-                         else (_nonnegative, "V") if f.name in _OPTION_FIELDS else (_nonnegative, "W"))
-        what = "" if f.name == "edge_scale" else "option " if f.name in _OPTION_FIELDS else "weight "
+                         else (_nonnegative, "V") if f.name in MODEL_FIELDS else (_nonnegative, "W"))
+        what = "" if f.name == "edge_scale" else "option " if f.name in MODEL_FIELDS else "weight "
         method.add_argument(
             flag, dest=f"w_{f.name}", type=kind, metavar=metavar,
             help=f"{what}{f.name}: {_WEIGHT_HELP.get(f.name, 'a term weight of sparsedepth.Weights')} "
