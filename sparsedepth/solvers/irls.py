@@ -18,10 +18,7 @@ from .certificate import Certificate, curvature_lower_bound
 from .common import gap_threshold, objective_floor, output, relative
 from .options import AdmmOptions
 
-__all__ = ["solve_irls", "FINISH_TOL", "FINISH_MAX_ITER"]
-
-#: ``tol`` (primal residual at which the polishes start) and ``max_iter`` of the exact finishing phase (ADMM's defaults)
-FINISH_TOL, FINISH_MAX_ITER = 1.5e-3, 1000
+__all__ = ["solve_irls"]
 
 
 def solve_irls(objective, x0, *, tol, max_iter, recorder, options):
@@ -385,7 +382,10 @@ def _solve_newton(objective, system, x0, *, max_iter, recorder, options):
         recorded = k + 1
         recorder(recorded, best_z, inner=inner_total, value=best_F)
     if finish and not (converged and newton_gap_tol <= options.gap_tol):
-        out = finish_from(objective, best_z, p, tol=FINISH_TOL, max_iter=FINISH_MAX_ITER, recorder=recorder,
+        from .registry import REGISTRY  # the registry imports this module: ADMM's default tol and max_iter, at call time
+
+        admm = REGISTRY["admm"]
+        out = finish_from(objective, best_z, p, tol=admm.tol, max_iter=admm.max_iter, recorder=recorder,
                           options=AdmmOptions(gap_tol=options.gap_tol), first_iteration=recorded)
         message = (f"Newton phase: {message}; finished by {out.iterations - recorded} ADMM iterations with "
                    f"active-set polishes from its point: {out.message}")
