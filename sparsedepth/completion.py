@@ -201,16 +201,6 @@ def complete_depth(
     observations; the number of moved pixels is ``result.clamped`` and a
     :class:`~sparsedepth.ClampWarning` is issued when it is not 0.
 
-    With ``quality="fast"`` the image is averaged over ``f x f`` blocks and
-    each block with samples gets their mean; the coarse problem (same
-    weights) is solved as above, interpolated bilinearly between block
-    centres, and corrected by the residuals at the samples,
-    ``c = G(m r) / max(G(m), m̄)`` (``G`` a Gaussian of ``σ = f / 2``
-    pixels, ``m`` the mask, ``m̄`` its mean, ``r`` the sample minus the
-    interpolated value), before the clamp.  On the report frames it keeps
-    most of the gain over the nearest fill at a fraction of the time
-    (``docs/speed.md``).
-
     An outlier sample (say 65.5 m in a 1-4 m room) is kept as an
     observation: the data term pulls its neighbourhood toward it, so a
     blob of too-large depth surrounds it and the smoothness terms ring
@@ -233,7 +223,7 @@ def complete_depth(
     ``quality="fast"`` averages the image and the observations over blocks
     of ``f x f`` pixels (:func:`fast_factor`: ``f = 4`` up to one
     observation per 16 pixels, 3 up to one per 9, 2 above), solves the
-    same objective on the ``f`` times coarser grid (no duality gap is
+    objective of ``weights`` (:data:`FAST_WEIGHTS` for the defaults) on the ``f`` times coarser grid (no duality gap is
     computed; Jacobi-preconditioned CG to a relative residual of
     :data:`FAST_COARSE_RTOL` for γ = 0), interpolates the
     solution bilinearly between the block centres and refines it by
@@ -419,10 +409,10 @@ def _with_uncertainty(result, image, sparse_depth, mask, settings, max_uncertain
                                removed=removed)
 
 
-def _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed, depth_rtol=DEFAULT_DEPTH_RTOL):
+def _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed):
     """The solver name ``"auto"`` resolves to, and the checked ``tol``, ``max_iter``, ``options``.
 
-    Without ``tol`` and a depth tolerance, ``options["depth_rtol"]`` of ``"amg"`` is set to ``depth_rtol``.
+    Without ``tol`` and a depth tolerance, ``options["depth_rtol"]`` of ``"amg"`` is set to :data:`DEFAULT_DEPTH_RTOL`.
     """
     check_weights(weights)
     name = choose_solver(weights) if solver == "auto" else solver
@@ -431,7 +421,7 @@ def _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed, 
     explicit_tol = tol is not None
     tol, max_iter, options = check_solver_arguments(name, tol, max_iter, options)
     if name == "amg" and not explicit_tol and options["depth_rtol"] is None and options["depth_atol"] is None:
-        options["depth_rtol"] = depth_rtol
+        options["depth_rtol"] = DEFAULT_DEPTH_RTOL
     if not isinstance(clip_to_observed, (bool, np.bool_)):
         raise TypeError(f"clip_to_observed must be True or False; got {type(clip_to_observed).__name__}")
     return name, tol, max_iter, options

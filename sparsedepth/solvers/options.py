@@ -196,7 +196,7 @@ class AmgOptions(SolverOptions):
         Default 1e-6 when the solve stops on the residual (``tol``); with a
         depth tolerance (below) no gap test: ``converged`` is the depth
         rule's, and the gap reported is the one-product bound ``¼ ‖r‖² /
-        λ_min(A)`` (proven, loose: 1e-2 of ``F`` on a 640x480 frame), since
+        λ_min(A)`` (proven, loose), since
         the exact gap would cost a second solve to a relative residual of
         1e-10.
     depth_rtol : float, optional
@@ -205,9 +205,8 @@ class AmgOptions(SolverOptions):
         s``, ``s`` the depth scale of the solve (the power of two nearest the
         median observed depth, :func:`~sparsedepth.solvers.depth_scale`).
         :func:`sparsedepth.complete_depth` sets it to
-        :data:`~sparsedepth.solvers.quadratic.DEFAULT_DEPTH_RTOL` (3e-4;
-        1e-3 for the coarse solve of ``quality="fast"``) when neither
-        ``tol`` nor a depth tolerance is given.
+        :data:`~sparsedepth.solvers.quadratic.DEFAULT_DEPTH_RTOL` (3e-4)
+        when neither ``tol`` nor a depth tolerance is given.
     depth_atol : float, optional
         The same stop at an estimated remaining change of at most
         ``depth_atol`` (depth units).  With both, the larger tolerance

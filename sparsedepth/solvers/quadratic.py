@@ -70,8 +70,8 @@ class RemainingChange:
     largest, so a transient fast step does not end the solve).  It is an
     estimate, not a bound: a later phase of slower convergence is not
     foreseen.  At the default stop on the report frames at full size
-    (multigrid-preconditioned CG, ``ρ`` 0.5-0.9) it is 1.3 to 2.5 times
-    the true remaining change (``python -m bench.speed``, ``docs/speed.md``).
+    (multigrid-preconditioned CG) it is 0.93 to 1.38 times the true
+    remaining change (``python -m bench.speed``, ``docs/speed.md``).
     Each call costs one dot product.
     """
 
