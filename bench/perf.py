@@ -18,7 +18,7 @@ references alike.
 Problems (frame ``nyu_metric3d/00000``, 5 % of the valid pixels observed,
 ``sample_depth(..., fraction=0.05, seed=0)``):
 
-1. *Quadratic*: ``DEFAULT_WEIGHTS.replace(gamma=0)`` (a 13-point system); the
+1. *Quadratic*: :data:`QUADRATIC_WEIGHTS` (a 13-point system); the
    normal equations ``A z = b`` of :meth:`Objective.normal_equations` are
    assembled once (time reported separately); ``scipy.sparse.linalg.spsolve``
    on them vs ``solve(..., solver="amg")`` (geometric multigrid set-up + PCG to
@@ -83,7 +83,14 @@ SEED = 0
 #: The fixed L1 weight set of the gamma > 0 target: the paper's objective with its own weights, written out so
 #: that the row does not move when the defaults do.
 L1_WEIGHTS = sd.Weights.paper(alpha=1.0, beta=0.1, gamma=0.01, delta=1e-3, kappa=10.0)
-#: The paper's quadratic terms alone (5-point stencil), for comparison with the 13-point defaults.
+#: The 13-point image-weighted quadratic problem of every quadratic row (first- and second-order smoothness weighted by
+#: the image's edges, a weak prior to the nearest fill, no modelling option), written out so that the rows do not move
+#: when the defaults do.  The defaults' own solve is measured by ``python -m bench.speed`` (its stopping rule) and
+#: ``python -m bench.scaling`` (time per pixel and memory).
+QUADRATIC_WEIGHTS = sd.Weights(alpha=1.0, beta=0.0, gamma=0.0, delta=0.000131, kappa=25.0, beta_image=0.00673,
+                               beta_second=0.000286, beta_second_image=0.039, edge_sigma=0.0, fill_contrast=0.0,
+                               beta_local_linear=0.0)
+#: The paper's quadratic terms alone (5-point stencil), for comparison with :data:`QUADRATIC_WEIGHTS`.
 PAPER_QUADRATIC = sd.Weights.paper(alpha=1.0, beta=0.1, gamma=0.0, delta=1e-3, kappa=10.0)
 REL = 1e-6
 MP8 = (2448, 3264)
@@ -231,7 +238,7 @@ def bench_colorization(quick):
 # --------------------------------------------------------------------------
 def bench_scaling(scales, rounds=3):
     """Quadratic solve (set-up + PCG) at several sizes, rounds interleaved, best per size."""
-    w = sd.DEFAULT_WEIGHTS.replace(gamma=0)
+    w = QUADRATIC_WEIGHTS
     problems = {}
     for s in scales:
         image, _, sparse, mask = load_problem(scale=s)
@@ -284,7 +291,7 @@ def _peak_rss_mb():
 def child_memory(mode):
     """Run one complete_depth on an 8-MP frame in this (fresh) process; print JSON."""
     image, _, sparse, mask = load_problem(shape=MP8)
-    w = sd.DEFAULT_WEIGHTS.replace(gamma=0) if mode == "quadratic" else L1_WEIGHTS
+    w = QUADRATIC_WEIGHTS if mode == "quadratic" else L1_WEIGHTS
     res, t = timed(sd.complete_depth, image, sparse, mask, weights=w)
     peak = _peak_rss_mb()
     print(json.dumps(dict(mode=mode, n=int(image.shape[0] * image.shape[1]), seconds=t, peak_mb=peak,
@@ -338,7 +345,7 @@ def main(argv=None):
     print("memory:", mem, flush=True)
     image, depth, sparse, mask = load_problem()
     quad = []
-    r = bench_quadratic(image, sparse, mask, sd.DEFAULT_WEIGHTS.replace(gamma=0), "default, γ = 0", quad)
+    r = bench_quadratic(image, sparse, mask, QUADRATIC_WEIGHTS, "13-point image-weighted, γ = 0", quad)
     print("quadratic:", r, flush=True)
     r = bench_quadratic(image, sparse, mask, PAPER_QUADRATIC, "paper's terms (5-point), γ = 0", quad,
                         run_spsolve=not args.quick)
