@@ -1,24 +1,31 @@
 """The public entry point: :func:`complete_depth` (checks, scaling, solve, clamp).
 
 May import every subpackage below the front door: :mod:`~sparsedepth.objective`,
-:mod:`~sparsedepth.solvers`, :mod:`~sparsedepth.result`, :mod:`~sparsedepth.uncertainty` and
-:mod:`sparsedepth._validation`.
+:mod:`~sparsedepth.solvers`, :mod:`~sparsedepth.linalg`, :mod:`~sparsedepth.grid`, :mod:`~sparsedepth.result`,
+:mod:`~sparsedepth.uncertainty` and :mod:`sparsedepth._validation`.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import itertools
+import math
 import time
 import warnings
 
 import numpy as np
 
 from ._validation import as_depth_and_mask, as_float_image, check_nonnegative_real, check_same_shape
+from .grid.diagonals import stencil_to_dia
 from .grid.resample import block_mean, block_sample_mean, coarse_shape, edge_aware_sweeps, upsample_bilinear
+from .grid.stencil import SymmetricStencil
+from .linalg.krylov import pcg_info
+from .linalg.preconditioners import make_preconditioner
 from .priors import align_prior
 from .objective.objective import DEFAULT_L1_SMOOTHING, build_objective
 from .result import ClampWarning, CompletionResult
 from .solvers import SOLVERS, solve_scaled, check_solver_arguments, depth_scale
+from .solvers.common import Recorder, output
 from .solvers.quadratic import DEFAULT_DEPTH_RTOL
 from .objective.weights import DEFAULT_WEIGHTS, Weights, check_weights
 from .uncertainty import MIN_OBSERVED, estimate_uncertainty, split_samples
@@ -551,9 +558,12 @@ def _complete_fast(image, sparse_depth, mask, *, weights, l1_smoothing, clip_to_
                                                     l1_smoothing, False)
     if x0 is not None:
         x0 = block_mean(np.maximum(x0, 0.0), factor)
-    out, _ = solve_scaled(objective, _starting_point(x0, coarse, objective.shape, scale), scale=scale, solver=name,
-                          tol=tol, max_iter=max_iter, callback=None, options=options, certify_result=False,
-                          objective_values=False)
+    start = _starting_point(x0, coarse, objective.shape, scale)
+    if name == "cg":
+        out = _coarse_cg(objective, start, scale=scale, tol=tol, max_iter=max_iter)
+    else:
+        out, _ = solve_scaled(objective, start, scale=scale, solver=name, tol=tol, max_iter=max_iter, callback=None,
+                              options=options, certify_result=False, objective_values=False)
     z = upsample_bilinear(out.z.reshape(objective.shape).astype(np.float32), shape, factor)
     z = edge_aware_sweeps(z, fine_image, depth, observed, smoothness=FAST_SMOOTHNESS, kappa=FAST_KAPPA,
                           sweeps=FAST_SWEEPS).astype(np.float64)
@@ -575,3 +585,31 @@ def _complete_fast(image, sparse_depth, mask, *, weights, l1_smoothing, clip_to_
         depth_range=depth_range,
         gap=float("nan"),
     )
+
+
+def _coarse_cg(objective, start, *, scale, tol, max_iter):
+    """The fast mode's coarse solve of a quadratic objective: Jacobi-preconditioned CG on ``A z = b`` from ``start``.
+
+    The iterates of ``solver="cg"`` (:func:`~sparsedepth.solvers.quadratic.solve_cg`: the same loop,
+    preconditioner, start and stop at ``‖b − A z‖ <= tol ‖b‖``), with ``A`` held as a DIA array
+    (:func:`~sparsedepth.grid.diagonals.stencil_to_dia`, whose products equal the CSR form's bit for bit) instead
+    of CSR: its set-up builds no index arrays.  No objective values are recorded and no certificate is computed
+    (the answer is an intermediate of the fast mode).  Returns a
+    :class:`~sparsedepth.solvers.common.SolverOutput` in the user's units.
+    """
+    A, b, _ = objective.normal_equations(form="stencil")
+    if isinstance(A, SymmetricStencil):  # (else the CSR array: a term with a general sparse operator)
+        A = stencil_to_dia(A)
+    recorder = Recorder(objective, None, scale, values=False)
+    recorder(0, start)
+    steps = itertools.count(1)
+
+    def record(z, _residual):
+        step = next(steps)
+        recorder(step, z, inner=step, value=math.nan)
+
+    result = pcg_info(A, b, x0=start, M=make_preconditioner(A, "jacobi"), rtol=tol, maxiter=max_iter,
+                      callback=record, callback_residual=True)
+    message = (f"relative residual {result.relative_residual:.2e} {'<=' if result.converged else '>'} tol {tol:.1e} "
+               f"after {result.iterations} CG iterations")
+    return output(result.x * scale, result.iterations, result.converged, message, recorder)

@@ -13,12 +13,14 @@ import sparsedepth as sd
 from conftest import make_scene
 from sparsedepth.completion import fast_factor
 from sparsedepth.complete import main
+from sparsedepth.grid.diagonals import stencil_to_dia
 from sparsedepth.grid.resample import (block_mean, block_sample_mean, coarse_shape, edge_aware_sweeps,
                                        upsample_bilinear)
+from test_symmetric_stencil import FIVE, THIRTEEN, random_spd
 
 
 # ----------------------------------------------------------------------------- resampling helpers
-@pytest.mark.parametrize("shape, factor", [((7, 10), 3), ((8, 8), 2), ((5, 9), 4), ((6, 4), 1)])
+@pytest.mark.parametrize("shape, factor", [((7, 10), 3), ((8, 8), 2), ((5, 9), 4), ((6, 4), 1), ((40, 37), 16)])
 def test_block_mean_and_sample_mean_equal_loops_over_the_blocks(shape, factor):
     rng = np.random.default_rng(0)
     values = rng.random(shape + (3,))
@@ -116,6 +118,38 @@ def test_edge_aware_sweeps_converge_to_the_direct_solve_of_their_model():
 def test_edge_aware_sweeps_reject_bad_parameters(kwargs, words):
     with pytest.raises(ValueError, match=words):
         edge_aware_sweeps(np.ones((3, 3)), np.zeros((3, 3, 3)), np.ones((3, 3)), np.eye(3, dtype=bool), **kwargs)
+
+
+@pytest.mark.parametrize("offsets", [FIVE, THIRTEEN], ids=["5", "13"])
+@pytest.mark.parametrize("shape", [(1, 1), (1, 6), (6, 1), (3, 2), (4, 4), (7, 9), (12, 10)])
+def test_stencil_to_dia_is_the_matrix_and_multiplies_as_csr_does(offsets, shape):
+    A, dense = random_spd(offsets, shape, seed=shape[0] * 7 + shape[1])
+    D = stencil_to_dia(A)
+    assert isinstance(D, sp.dia_array)
+    np.testing.assert_array_equal(D.toarray(), dense)
+    x = np.random.default_rng(5).standard_normal(dense.shape[0])
+    if shape[1] > 4:  # (narrower grids share flat offsets between stencil offsets: the sum order differs)
+        np.testing.assert_array_equal(D @ x, A.tocsr() @ x)  # the same sums in the same order
+    np.testing.assert_allclose(D @ x, dense @ x, rtol=1e-12, atol=1e-12)
+    with pytest.raises(TypeError, match="SymmetricStencil"):
+        stencil_to_dia(A.tocsr())
+
+
+def test_the_fast_coarse_solve_takes_the_steps_of_the_cg_solver():
+    from sparsedepth.completion import FAST_COARSE_RTOL, _coarse_cg
+    from sparsedepth.solvers import depth_scale, scaled_objective
+    from sparsedepth.solvers.core import solve_scaled
+    image, depth = make_scene(shape=(30, 36))
+    sparse, mask = sd.sample_depth(depth, fraction=0.05, seed=2)
+    objective, coarse, _ = sd.build_objective(image, sparse, mask, weights=sd.FAST_WEIGHTS)
+    scale = depth_scale(sparse[mask])
+    start = coarse.ravel() / scale
+    ours = _coarse_cg(scaled_objective(objective, scale), start, scale=scale, tol=FAST_COARSE_RTOL, max_iter=500)
+    cg, _ = solve_scaled(scaled_objective(objective, scale), start, scale=scale, solver="cg", tol=FAST_COARSE_RTOL,
+                         max_iter=500, callback=None, options=None, certify_result=False, objective_values=False)
+    assert ours.iterations == cg.iterations >= 2 and ours.converged and cg.converged
+    np.testing.assert_array_equal(ours.z, cg.z)
+    assert [h.iteration for h in ours.history] == [h.iteration for h in cg.history]
 
 
 # ----------------------------------------------------------------------------- complete_depth(quality="fast")
