@@ -18,7 +18,7 @@ import numpy as np
 from ._validation import as_depth_and_mask, as_float_image, check_nonnegative_real, check_same_shape
 from .grid.diagonals import stencil_to_dia
 from .grid.resample import block_mean, block_sample_mean, coarse_shape, edge_aware_sweeps, upsample_bilinear
-from .grid.stencil import SymmetricStencil
+from .grid.operators import StencilOperator
 from .linalg.krylov import pcg_info
 from .linalg.preconditioners import make_preconditioner
 from .priors import align_prior
@@ -591,15 +591,18 @@ def _coarse_cg(objective, start, *, scale, tol, max_iter):
     """The fast mode's coarse solve of a quadratic objective: Jacobi-preconditioned CG on ``A z = b`` from ``start``.
 
     The iterates of ``solver="cg"`` (:func:`~sparsedepth.solvers.quadratic.solve_cg`: the same loop,
-    preconditioner, start and stop at ``‖b − A z‖ <= tol ‖b‖``), with ``A`` held as a DIA array
-    (:func:`~sparsedepth.grid.diagonals.stencil_to_dia`, whose products equal the CSR form's bit for bit) instead
-    of CSR: its set-up builds no index arrays.  No objective values are recorded and no certificate is computed
-    (the answer is an intermediate of the fast mode).  Returns a
+    preconditioner, start and stop at ``‖b − A z‖ <= tol ‖b‖``), with ``A`` held as a DIA array made from the
+    objective's normal stencil (:func:`~sparsedepth.grid.diagonals.stencil_to_dia`, whose products equal those of
+    the CSR form bit for bit) instead of CSR: its set-up builds no index arrays.  An objective with a term that
+    is not a stencil operator keeps its CSR matrix.  No objective values are recorded and no certificate is
+    computed (the answer is an intermediate of the fast mode).  Returns a
     :class:`~sparsedepth.solvers.common.SolverOutput` in the user's units.
     """
-    A, b, _ = objective.normal_equations(form="stencil")
-    if isinstance(A, SymmetricStencil):  # (else the CSR array: a term with a general sparse operator)
-        A = stencil_to_dia(A)
+    if all(t.operator is None or isinstance(t.operator, StencilOperator) for t in objective.quadratic_terms):
+        A = stencil_to_dia(*objective.normal_stencil())
+        b = sum(t.normal_rhs(objective.size) for t in objective.quadratic_terms)  # as normal_equations sums it
+    else:
+        A, b, _ = objective.normal_equations()
     recorder = Recorder(objective, None, scale, values=False)
     recorder(0, start)
     steps = itertools.count(1)

@@ -1,74 +1,78 @@
-"""A symmetric grid stencil as a SciPy DIA array: one band per neighbour offset.
+"""A grid stencil as a SciPy DIA array: one band per neighbour offset.
 
 On an ``(H, W)`` grid flattened in C order, the neighbour ``(dy, dx)`` of
 pixel ``i`` is ``i + dy W + dx``, so a stencil operator is a banded matrix
-with one diagonal per offset.  :func:`stencil_to_dia` stores those diagonals
-as they are (``scipy.sparse.dia_array``): no index arrays to build, and a
-product that runs along contiguous bands.  Its products equal those of
-:meth:`~sparsedepth.grid.stencil.SymmetricStencil.tocsr` bit for bit: the
-same coefficients summed in the same order (increasing offset, which is
-increasing column).
+with one diagonal per offset.  :func:`stencil_to_dia` stores the stencil's
+coefficient images as those diagonals (``scipy.sparse.dia_array``): no index
+arrays to build, and a product that runs along contiguous bands.  Its
+products equal those of :func:`~sparsedepth.grid.stencil.stencil_to_csr` of
+the same stencil bit for bit: the same coefficients summed in the same order
+(increasing offset, which is increasing column).
 
 May import NumPy, SciPy and :mod:`.stencil`.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import scipy.sparse as sp
 
-from .stencil import SymmetricStencil
+from .stencil import _check_offsets
 
 __all__ = ["stencil_to_dia"]
 
 
-def stencil_to_dia(A: SymmetricStencil) -> sp.dia_array:
-    r"""The matrix of a :class:`~sparsedepth.grid.stencil.SymmetricStencil` as a DIA array.
+def stencil_to_dia(offsets, stencil) -> sp.dia_array:
+    r"""The matrix of a stencil as a DIA array.
 
     Parameters
     ----------
-    A : SymmetricStencil
-        On an ``(H, W)`` grid.
+    offsets : list of tuple of int
+        Distinct offsets ``(dy, dx)``, sorted lexicographically.
+    stencil : ndarray, shape (len(offsets), H, W), float32 or float64
+        ``stencil[k, y, x] = A[y W + x, (y + dy_k) W + (x + dx_k)]``, 0 where
+        the neighbour lies outside the grid (as
+        :meth:`~sparsedepth.objective.Objective.normal_stencil` gives it).
 
     Returns
     -------
-    scipy.sparse.dia_array, shape ``(H W, H W)``, the dtype of ``A``
+    scipy.sparse.dia_array, shape ``(H W, H W)``, the dtype of ``stencil``
         One diagonal per flat offset ``k = dy W + dx``, in increasing order.
 
     Raises
     ------
-    TypeError
-        If ``A`` is not a SymmetricStencil.
+    ValueError
+        For unsorted offsets or a stencil of another shape.
 
     Notes
     -----
-    For a stored offset ``o = (dy, dx) >= (0, 0)`` with image ``S_o``,
-    ``A[i, i + k] = S_o[i]`` and, by symmetry, ``A[i + k, i] = S_o[i]``: both
-    diagonals are the first ``HW − k`` entries of ``S_o``.  A coefficient
-    whose neighbour leaves the grid is 0 in ``S_o``, so a band that runs
-    past the end of an image row adds exact zeros.  On grids narrower than
-    the stencil (``W <= 2 max |dx|``) two offsets can share a flat offset;
-    their bands are added.
+    Row ``i`` of the band of offset ``k`` is ``A[i, i + k] = stencil[k, i]``
+    (flattened), so the band is the coefficient image itself, the rows whose
+    column ``i + k`` falls outside ``[0, HW)`` left out.  A band that runs
+    past the end of an image row multiplies the next row's pixels by the
+    coefficients of the pixels whose neighbour leaves the grid: exact zeros.
+    On grids narrower than the stencil (``W <= 2 max |dx|``) two offsets can
+    share a flat offset; their bands are added.
 
     Examples
     --------
-    >>> import numpy as np
-    >>> A = SymmetricStencil([(0, -1), (0, 0), (0, 1)], [np.array([[2.0, 2.0, 2.0]]), np.array([[-1.0, -1.0, 0.0]])])
-    >>> stencil_to_dia(A).toarray()
-    array([[ 2., -1.,  0.],
-           [-1.,  2., -1.],
-           [ 0., -1.,  2.]])
+    >>> S = np.array([[[1.0, 1.0]], [[2.0, 2.0]], [[3.0, 3.0]]])  # 1x2 grid
+    >>> stencil_to_dia([(0, -1), (0, 0), (0, 1)], S).toarray()
+    array([[2., 3.],
+           [1., 2.]])
     """
-    if not isinstance(A, SymmetricStencil):
-        raise TypeError(f"A must be a SymmetricStencil, got {type(A).__name__}")
-    H, W = A.grid_shape
+    offsets = _check_offsets(offsets)
+    stencil = np.asarray(stencil)
+    if stencil.ndim != 3 or stencil.shape[0] != len(offsets):
+        raise ValueError(f"stencil must have shape (len(offsets), H, W) = ({len(offsets)}, H, W), got {stencil.shape}")
+    H, W = stencil.shape[1:]
     n = H * W
-    bands = {}
-    for (dy, dx), image in zip(A.upper, A.images):
+    bands = {}  # flat offset -> the coefficients of rows max(0, -k) .. min(n, n - k) - 1 (diags_array's convention)
+    for (dy, dx), image in zip(offsets, stencil):
         k = dy * W + dx
-        if k >= n:  # the neighbour is outside every grid row
+        if abs(k) >= n:  # the neighbour is outside the grid for every pixel
             continue
-        band = image.reshape(-1)[:n - k]
-        for offset in ((0,) if k == 0 else (-k, k)):
-            bands[offset] = bands[offset] + band if offset in bands else band
-    offsets = sorted(bands)
-    return sp.diags_array([bands[k] for k in offsets], offsets=offsets, shape=(n, n), dtype=A.dtype)
+        band = image.reshape(-1)[max(0, -k):n - max(0, k)]
+        bands[k] = bands[k] + band if k in bands else band
+    flat = sorted(bands)
+    return sp.diags_array([bands[k] for k in flat], offsets=flat, shape=(n, n), dtype=stencil.dtype)
