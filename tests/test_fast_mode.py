@@ -138,7 +138,7 @@ def test_stencil_to_dia_is_the_matrix_and_multiplies_as_csr_does(offsets, shape)
         stencil_to_dia(offsets, stencil[1:])
 
 
-def test_the_fast_coarse_solve_takes_the_steps_of_the_cg_solver():
+def test_the_fast_coarse_solve_meets_its_residual_in_double_precision_and_ends_near_the_cg_solver():
     from sparsedepth.completion import FAST_COARSE_RTOL, _coarse_cg
     from sparsedepth.solvers import depth_scale, scaled_objective
     from sparsedepth.solvers.core import solve_scaled
@@ -146,13 +146,16 @@ def test_the_fast_coarse_solve_takes_the_steps_of_the_cg_solver():
     sparse, mask = sd.sample_depth(depth, fraction=0.05, seed=2)
     objective, coarse, _ = sd.build_objective(image, sparse, mask, weights=sd.FAST_WEIGHTS)
     scale = depth_scale(sparse[mask])
+    scaled = scaled_objective(objective, scale)
     start = coarse.ravel() / scale
-    ours = _coarse_cg(scaled_objective(objective, scale), start, scale=scale, tol=FAST_COARSE_RTOL, max_iter=500)
+    ours = _coarse_cg(scaled, start, scale=scale, tol=FAST_COARSE_RTOL, max_iter=500)
+    A, b, _ = scaled_objective(objective, scale).normal_equations()  # float64 CSR, assembled independently
+    relative_residual = np.linalg.norm(b - A @ (ours.z / scale)) / np.linalg.norm(b)
+    assert ours.converged and relative_residual <= 1.01 * FAST_COARSE_RTOL
+    assert ours.iterations >= 2 and len(ours.history) == ours.iterations + 1
     cg, _ = solve_scaled(scaled_objective(objective, scale), start, scale=scale, solver="cg", tol=FAST_COARSE_RTOL,
                          max_iter=500, callback=None, options=None, certify_result=False, objective_values=False)
-    assert ours.iterations == cg.iterations >= 2 and ours.converged and cg.converged
-    np.testing.assert_array_equal(ours.z, cg.z)
-    assert [h.iteration for h in ours.history] == [h.iteration for h in cg.history]
+    np.testing.assert_allclose(ours.z, cg.z, rtol=1e-3)  # float32 products: the same path to about 1e-5 here
 
 
 # ----------------------------------------------------------------------------- complete_depth(quality="fast")

@@ -22,7 +22,7 @@ from .stencil import _check_offsets
 __all__ = ["stencil_to_dia"]
 
 
-def stencil_to_dia(offsets, stencil) -> sp.dia_array:
+def stencil_to_dia(offsets, stencil, *, dtype=None) -> sp.dia_array:
     r"""The matrix of a stencil as a DIA array.
 
     Parameters
@@ -33,10 +33,13 @@ def stencil_to_dia(offsets, stencil) -> sp.dia_array:
         ``stencil[k, y, x] = A[y W + x, (y + dy_k) W + (x + dx_k)]``, 0 where
         the neighbour lies outside the grid (as
         :meth:`~sparsedepth.objective.Objective.normal_stencil` gives it).
+    dtype : numpy dtype, optional
+        Type of the stored bands (default that of ``stencil``; float32 for
+        single-precision products).
 
     Returns
     -------
-    scipy.sparse.dia_array, shape ``(H W, H W)``, the dtype of ``stencil``
+    scipy.sparse.dia_array, shape ``(H W, H W)``, of ``dtype``
         One diagonal per flat offset ``k = dy W + dx``, in increasing order.
 
     Raises
@@ -75,4 +78,5 @@ def stencil_to_dia(offsets, stencil) -> sp.dia_array:
         band = image.reshape(-1)[max(0, -k):n - max(0, k)]
         bands[k] = bands[k] + band if k in bands else band
     flat = sorted(bands)
-    return sp.diags_array([bands[k] for k in flat], offsets=flat, shape=(n, n), dtype=stencil.dtype)
+    return sp.diags_array([bands[k] for k in flat], offsets=flat, shape=(n, n),
+                          dtype=stencil.dtype if dtype is None else dtype)
