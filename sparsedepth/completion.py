@@ -231,8 +231,9 @@ def complete_depth(
     of ``f x f`` pixels (:func:`fast_factor`: ``f = 4`` up to one
     observation per 16 pixels, 3 up to one per 9, 2 above), solves the
     objective of ``weights`` (:data:`FAST_WEIGHTS` for the defaults) on the ``f`` times coarser grid (no duality gap is
-    computed; Jacobi-preconditioned CG to a relative residual of
-    :data:`FAST_COARSE_RTOL` for γ = 0), interpolates the
+    computed; for γ = 0 Jacobi-preconditioned CG, its products by the
+    normal matrix in float32, to a relative residual of
+    :data:`FAST_COARSE_RTOL`), interpolates the
     solution bilinearly between the block centres and refines it by
     :data:`FAST_SWEEPS` red-black sweeps of
     :func:`~sparsedepth.grid.resample.edge_aware_sweeps` with the
