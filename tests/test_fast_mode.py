@@ -68,6 +68,17 @@ def test_upsample_bilinear_reproduces_a_plane_between_the_centres_and_checks_the
         upsample_bilinear(coarse, (17, 24), factor)
 
 
+@pytest.mark.parametrize("channels, dtype, rtol", [(3, np.float64, 1e-13), (3, np.float32, 1e-6), (1, np.float64, 1e-15)])
+def test_pair_distances_are_the_channel_norms_of_neighbour_differences(channels, dtype, rtol):
+    from sparsedepth.grid.edges import pair_distances
+    image = np.random.default_rng(6).random((5, 7, channels)).astype(dtype)
+    across, down = pair_distances(image)
+    assert across.dtype == down.dtype == dtype and across.shape == (5, 6) and down.shape == (4, 7)
+    wide = image.astype(np.float64)
+    np.testing.assert_allclose(across, np.linalg.norm(wide[:, 1:] - wide[:, :-1], axis=2), rtol=rtol)
+    np.testing.assert_allclose(down, np.linalg.norm(wide[1:] - wide[:-1], axis=2), rtol=rtol)
+
+
 def _sweep_model(start, image, depth, observed, smoothness, kappa):
     """The minimiser of the sweeps' model by a sparse direct solve (observed pixels eliminated)."""
     H, W = start.shape
