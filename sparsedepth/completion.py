@@ -595,10 +595,10 @@ def _coarse_cg(objective, start, *, scale, tol, max_iter):
     (:func:`~sparsedepth.solvers.quadratic.solve_cg`), with the products by ``A`` in single precision: ``A`` is
     held as a float32 DIA array made from the objective's normal stencil
     (:func:`~sparsedepth.grid.diagonals.stencil_to_dia`; no index arrays to build, half the bytes to stream per
-    product), the vectors and the preconditioner ``diag(A)⁻¹`` stay in float64.  Each product is then exact to a
-    relative 1e-7 instead of 1e-16, far below the stopping residual.  An objective with a term that is not a
-    stencil operator keeps its float64 CSR matrix.  No objective values are recorded and no certificate is
-    computed (the answer is an intermediate of the fast mode).  Returns a
+    product), the vectors and the preconditioner ``diag(A)⁻¹`` stay in float64.  Each product then carries
+    float32 rounding (relative 1e-7) instead of float64's, far below the stopping residual.  An objective with a
+    term that is not a stencil operator keeps its float64 CSR matrix.  No objective values are recorded and no
+    certificate is computed (the answer is an intermediate of the fast mode).  Returns a
     :class:`~sparsedepth.solvers.common.SolverOutput` in the user's units.
     """
     if all(t.operator is None or isinstance(t.operator, StencilOperator) for t in objective.quadratic_terms):
