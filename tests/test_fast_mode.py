@@ -149,13 +149,14 @@ def test_stencil_to_dia_is_the_matrix_and_multiplies_as_csr_does(offsets, shape)
         stencil_to_dia(offsets, stencil[1:])
 
 
-def test_the_fast_coarse_solve_meets_its_residual_in_double_precision_and_ends_near_the_cg_solver():
+@pytest.mark.parametrize("weights", ["FAST_WEIGHTS", "DEFAULT_WEIGHTS"])  # (the second: a local-linear term, CSR)
+def test_the_fast_coarse_solve_meets_its_residual_in_double_precision_and_ends_near_the_cg_solver(weights):
     from sparsedepth.completion import FAST_COARSE_RTOL, _coarse_cg
     from sparsedepth.solvers import depth_scale, scaled_objective
     from sparsedepth.solvers.core import solve_scaled
     image, depth = make_scene(shape=(30, 36))
     sparse, mask = sd.sample_depth(depth, fraction=0.05, seed=2)
-    objective, coarse, _ = sd.build_objective(image, sparse, mask, weights=sd.FAST_WEIGHTS)
+    objective, coarse, _ = sd.build_objective(image, sparse, mask, weights=getattr(sd, weights))
     scale = depth_scale(sparse[mask])
     scaled = scaled_objective(objective, scale)
     start = coarse.ravel() / scale
