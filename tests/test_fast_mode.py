@@ -13,12 +13,15 @@ import sparsedepth as sd
 from conftest import make_scene
 from sparsedepth.completion import fast_factor
 from sparsedepth.complete import main
+from sparsedepth.grid.diagonals import stencil_to_dia
 from sparsedepth.grid.resample import (block_mean, block_sample_mean, coarse_shape, edge_aware_sweeps,
                                        upsample_bilinear)
+from sparsedepth.grid.stencil import stencil_to_csr
+from test_symmetric_stencil import FIVE, THIRTEEN, full_stencil, random_spd
 
 
 # ----------------------------------------------------------------------------- resampling helpers
-@pytest.mark.parametrize("shape, factor", [((7, 10), 3), ((8, 8), 2), ((5, 9), 4), ((6, 4), 1)])
+@pytest.mark.parametrize("shape, factor", [((7, 10), 3), ((8, 8), 2), ((5, 9), 4), ((6, 4), 1), ((40, 37), 16)])
 def test_block_mean_and_sample_mean_equal_loops_over_the_blocks(shape, factor):
     rng = np.random.default_rng(0)
     values = rng.random(shape + (3,))
@@ -63,6 +66,17 @@ def test_upsample_bilinear_reproduces_a_plane_between_the_centres_and_checks_the
     np.testing.assert_allclose(fine[inside], (5.0 + 0.3 * y - 0.2 * x)[inside], rtol=1e-12)
     with pytest.raises(ValueError, match="coarse has shape"):
         upsample_bilinear(coarse, (17, 24), factor)
+
+
+@pytest.mark.parametrize("channels, dtype, rtol", [(3, np.float64, 1e-13), (3, np.float32, 1e-6), (1, np.float64, 1e-15)])
+def test_pair_distances_are_the_channel_norms_of_neighbour_differences(channels, dtype, rtol):
+    from sparsedepth.grid.edges import pair_distances
+    image = np.random.default_rng(6).random((5, 7, channels)).astype(dtype)
+    across, down = pair_distances(image)
+    assert across.dtype == down.dtype == dtype and across.shape == (5, 6) and down.shape == (4, 7)
+    wide = image.astype(np.float64)
+    np.testing.assert_allclose(across, np.linalg.norm(wide[:, 1:] - wide[:, :-1], axis=2), rtol=rtol)
+    np.testing.assert_allclose(down, np.linalg.norm(wide[1:] - wide[:-1], axis=2), rtol=rtol)
 
 
 def _sweep_model(start, image, depth, observed, smoothness, kappa):
@@ -116,6 +130,44 @@ def test_edge_aware_sweeps_converge_to_the_direct_solve_of_their_model():
 def test_edge_aware_sweeps_reject_bad_parameters(kwargs, words):
     with pytest.raises(ValueError, match=words):
         edge_aware_sweeps(np.ones((3, 3)), np.zeros((3, 3, 3)), np.ones((3, 3)), np.eye(3, dtype=bool), **kwargs)
+
+
+@pytest.mark.parametrize("offsets", [FIVE, THIRTEEN], ids=["5", "13"])
+@pytest.mark.parametrize("shape", [(1, 1), (1, 6), (6, 1), (3, 2), (4, 4), (7, 9), (12, 10)])
+def test_stencil_to_dia_is_the_matrix_and_multiplies_as_csr_does(offsets, shape):
+    _, dense = random_spd(offsets, shape, seed=shape[0] * 7 + shape[1])
+    dense[np.nonzero(dense)] += np.random.default_rng(3).random(np.count_nonzero(dense))  # not symmetric
+    stencil = full_stencil(dense, offsets, shape)
+    D = stencil_to_dia(offsets, stencil)
+    assert isinstance(D, sp.dia_array)
+    np.testing.assert_array_equal(D.toarray(), dense)
+    x = np.random.default_rng(5).standard_normal(dense.shape[0])
+    if shape[1] > 4:  # (narrower grids share flat offsets between stencil offsets: the sum order differs)
+        np.testing.assert_array_equal(D @ x, stencil_to_csr(offsets, stencil) @ x)  # the same sums in the same order
+    np.testing.assert_allclose(D @ x, dense @ x, rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError, match="stencil must have shape"):
+        stencil_to_dia(offsets, stencil[1:])
+
+
+@pytest.mark.parametrize("weights", ["FAST_WEIGHTS", "DEFAULT_WEIGHTS"])  # (the second: a local-linear term, CSR)
+def test_the_fast_coarse_solve_meets_its_residual_in_double_precision_and_ends_near_the_cg_solver(weights):
+    from sparsedepth.completion import FAST_COARSE_RTOL, _coarse_cg
+    from sparsedepth.solvers import depth_scale, scaled_objective
+    from sparsedepth.solvers.core import solve_scaled
+    image, depth = make_scene(shape=(30, 36))
+    sparse, mask = sd.sample_depth(depth, fraction=0.05, seed=2)
+    objective, coarse, _ = sd.build_objective(image, sparse, mask, weights=getattr(sd, weights))
+    scale = depth_scale(sparse[mask])
+    scaled = scaled_objective(objective, scale)
+    start = coarse.ravel() / scale
+    ours = _coarse_cg(scaled, start, scale=scale, tol=FAST_COARSE_RTOL, max_iter=500)
+    A, b, _ = scaled_objective(objective, scale).normal_equations()  # float64 CSR, assembled independently
+    relative_residual = np.linalg.norm(b - A @ (ours.z / scale)) / np.linalg.norm(b)
+    assert ours.converged and relative_residual <= 1.01 * FAST_COARSE_RTOL
+    assert ours.iterations >= 2 and len(ours.history) == ours.iterations + 1
+    cg, _ = solve_scaled(scaled_objective(objective, scale), start, scale=scale, solver="cg", tol=FAST_COARSE_RTOL,
+                         max_iter=500, callback=None, options=None, certify_result=False, objective_values=False)
+    np.testing.assert_allclose(ours.z, cg.z, rtol=1e-3)  # float32 products: the same path to about 1e-5 here
 
 
 # ----------------------------------------------------------------------------- complete_depth(quality="fast")

@@ -109,12 +109,17 @@ def pair_distances(image):
 
 
 def _channel_norm(first, second):
-    """``‖first − second‖`` over the last axis, summed channel by channel (faster than a reduction along it)."""
-    difference = np.subtract(first, second)
-    difference *= difference
-    total = difference[..., 0].copy()
-    for channel in range(1, difference.shape[-1]):
-        total += difference[..., channel]
+    """``‖first − second‖`` over the last axis, summed channel by channel (faster than a reduction along it).
+
+    Each channel's difference is formed, squared and added in turn: no ``(…, C)`` temporary.
+    """
+    total = np.subtract(first[..., 0], second[..., 0])
+    total *= total
+    difference = np.empty_like(total)
+    for channel in range(1, first.shape[-1]):
+        np.subtract(first[..., channel], second[..., channel], out=difference)
+        difference *= difference
+        total += difference
     return np.sqrt(total, out=total)
 
 

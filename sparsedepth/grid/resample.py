@@ -31,18 +31,29 @@ def coarse_shape(shape, factor: int) -> tuple[int, int]:
 
 
 def _block_sums(values, factor):
-    """Sums over each ``f x f`` block (zero-padded on the bottom and right), leading axes ``(h, w)``."""
-    H, W = values.shape[:2]
-    h, w = coarse_shape((H, W), factor)
-    padded = np.zeros((h * factor, w * factor) + values.shape[2:], dtype=values.dtype)
-    padded[:H, :W] = values
-    rows = padded[0::factor].copy()  # strided adds: faster than a reduction over a middle axis
+    """Sums over each ``f x f`` block (the partial blocks of the last row and column included), leading axes ``(h, w)``.
+
+    Strided adds (faster than a reduction over a middle axis): the rows ``y ≡ o (mod f)`` are added offset by
+    offset, then the columns; an offset with one row or column fewer adds to all blocks but the last.
+    """
+    rows = values[0::factor].copy()
     for offset in range(1, factor):
-        rows += padded[offset::factor]
+        part = values[offset::factor]
+        rows[:part.shape[0]] += part
     out = rows[:, 0::factor].copy()
     for offset in range(1, factor):
-        out += rows[:, offset::factor]
+        part = rows[:, offset::factor]
+        out[:, :part.shape[1]] += part
     return out
+
+
+def _block_counts(shape, factor):
+    """The number of pixels of each ``f x f`` block of an ``(H, W)`` grid (``f²`` but in the last row and column)."""
+    H, W = shape
+    h, w = coarse_shape((H, W), factor)
+    rows = np.minimum(factor, H - factor * np.arange(h))
+    columns = np.minimum(factor, W - factor * np.arange(w))
+    return np.multiply.outer(rows, columns).astype(np.float64)
 
 
 def block_mean(values, factor: int) -> np.ndarray:
@@ -56,7 +67,7 @@ def block_mean(values, factor: int) -> np.ndarray:
     values = np.asarray(values)
     if not np.issubdtype(values.dtype, np.floating):
         values = values.astype(np.float64)
-    counts = _block_sums(np.ones(values.shape[:2]), factor)
+    counts = _block_counts(values.shape[:2], factor)
     sums = _block_sums(values, factor).astype(np.float64)
     return sums / (counts if values.ndim == 2 else counts[..., None])
 
@@ -78,10 +89,11 @@ def block_sample_mean(depth, observed, factor: int):
     coarse_observed : ndarray of bool
     """
     observed = np.asarray(observed, dtype=bool)
-    counts = _block_sums(observed.astype(np.float64), factor)
+    factor = check_count(factor, name="factor")
+    counts = _block_sums(observed.astype(np.uint8 if factor < 16 else np.int64), factor)  # exact: <= f² per block
     sums = _block_sums(np.where(observed, depth, 0.0), factor)
     coarse_observed = counts > 0
-    return np.where(coarse_observed, sums / np.maximum(counts, 1.0), 0.0), coarse_observed
+    return np.where(coarse_observed, sums / np.maximum(counts, 1), 0.0), coarse_observed
 
 
 def _linear_taps(n_fine, n_coarse, factor):
@@ -172,7 +184,7 @@ def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa
     observed = np.asarray(observed, dtype=bool)
     prior = np.asarray(start, dtype=np.float32)
     z = prior.copy()
-    z[observed] = np.asarray(depth)[observed]
+    np.copyto(z, np.asarray(depth), where=observed, casting="unsafe")  # the samples in float32
     if sweeps == 0 or smoothness == 0:
         return z
     image = np.asarray(image)
