@@ -190,6 +190,26 @@ def test_normal_equations_stencil_form(weights):
         obj.normal_equations(form="dense")
 
 
+@pytest.mark.parametrize("grey", [False, True], ids=["colour", "grey"])
+def test_stencil_form_is_the_upper_half_of_the_full_assembly_with_and_without_row_weights(grey):
+    """Every stencil term (identity, row-weighted differences, local-linear) written once into the stored half."""
+    image, sparse, mask = _problem((11, 13), seed=3)
+    if grey:
+        image = image.mean(axis=2).astype(np.uint8)
+    obj, _, _ = sd.build_objective(image, sparse, mask, weights=sd.DEFAULT_WEIGHTS.replace(gamma=0))
+    assert {t.name for t in obj.quadratic_terms} >= {"smooth_image", "second_order_image", "local_linear"}
+    offsets, full = obj.normal_stencil()
+    S, _, _ = obj.normal_equations(form="stencil")
+    assert S.offsets == offsets and len(offsets) == 25
+    np.testing.assert_array_equal(S.data, full[[offsets.index(o) for o in S.upper]])
+    dense = np.zeros((obj.size, obj.size))
+    for t in obj.quadratic_terms:  # Σ weight · Kᵀ diag(r) K from the explicit matrices
+        K = sp.identity(obj.size) if t.operator is None else t.operator.tocsr()
+        r = np.ones(K.shape[0]) if t.row_weights is None else np.asarray(t.row_weights, dtype=float)
+        dense += t.weight * (K.T @ sp.diags(r) @ K).toarray()
+    np.testing.assert_allclose(S.toarray(), dense, rtol=0, atol=1e-12 * np.abs(dense).max())
+
+
 def test_normal_equations_stencil_form_falls_back_to_csr_for_general_operators():
     image, sparse, mask = _problem((12, 10))
     obj, _, _ = sd.build_objective(image, sparse, mask, weights=sd.DEFAULT_WEIGHTS.replace(gamma=0))

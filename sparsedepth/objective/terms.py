@@ -82,11 +82,22 @@ class QuadraticTerm:
                 work -= self.target[rows]
             yield rows, work
 
+    def _residual_pieces(self, z):
+        """``(rows, K_rows z − d_rows)`` in the pieces of the operator's ``row_pieces`` (a StencilOperator)."""
+        K = self.operator
+        if not isinstance(K, StencilOperator):
+            yield slice(None), self.residual(z)
+            return
+        for rows, values in K.row_pieces(z):
+            if self.target is not None:
+                values -= self.target[rows]
+            yield rows, values
+
     def value(self, z) -> float:
         if self.weight == 0:
             return 0.0
         total = 0.0
-        for rows, res in self._block_residuals(z):
+        for rows, res in self._residual_pieces(z):
             sq = res * res
             if self.row_weights is not None:
                 sq *= self.row_weights[rows]
