@@ -142,3 +142,21 @@ def test_nearest_fill_keeps_observations():
     out = nearest_fill(sparse, mask)
     np.testing.assert_array_equal(out[mask], sparse[mask])
     assert np.all(np.isfinite(out))
+
+
+def test_second_order_edge_weights_read_block_by_block_equal_the_array():
+    from sparsedepth.grid.edges import SecondOrderEdgeWeights, pair_edge_weights, second_order_edge_weights
+
+    rng = np.random.default_rng(8)
+    shape = (5, 7)
+    pair = pair_edge_weights(rng.random(shape + (3,)), 3.0)
+    full = second_order_edge_weights(pair, shape)
+    lazy = SecondOrderEdgeWeights(pair, shape)
+    assert lazy.shape == full.shape and len(lazy) == full.size and lazy.dtype == full.dtype
+    np.testing.assert_array_equal(np.asarray(lazy), full)
+    n = shape[0] * shape[1]
+    for key in (slice(0, n), slice(n, 2 * n), slice(2 * n, 3 * n), slice(n + 3, 2 * n - 1), slice(n - 2, n + 2),
+                slice(None, None, 2), np.array([0, 40, 104])):
+        np.testing.assert_array_equal(lazy[key], full[key])
+    with pytest.raises(ValueError, match="pair_weights must have shape"):
+        SecondOrderEdgeWeights(pair[:-1], shape)

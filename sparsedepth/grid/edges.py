@@ -7,7 +7,8 @@ forward differences (:func:`image_differences`, the rows of
 * :func:`image_gradient_magnitude` - ``‖∇I‖`` per pixel;
 * :func:`edge_weights` - the reference paper's per-pixel ``exp(−κ ‖∇I‖)``;
 * :func:`pair_edge_weights` - one weight per pixel pair (per gradient row);
-* :func:`second_order_edge_weights` - the weights of the second-difference rows;
+* :func:`second_order_edge_weights` - the weights of the second-difference rows
+  (:class:`SecondOrderEdgeWeights`: the same, one block at a time on request);
 * :func:`smoothed_image` - the image blurred by a Gaussian before any of the above (``Weights.edge_sigma``).
 
 May import NumPy, :mod:`scipy.ndimage` and :mod:`sparsedepth._validation`.
@@ -27,6 +28,7 @@ __all__ = [
     "pair_distances",
     "pair_edge_weights",
     "second_order_edge_weights",
+    "SecondOrderEdgeWeights",
     "smoothed_image",
 ]
 
@@ -165,13 +167,80 @@ def second_order_edge_weights(pair_weights, shape) -> np.ndarray:
     ndarray, shape (3*H*W,)
     """
     H, W = check_grid_shape(shape)
+    return np.concatenate([_second_order_block(pair_weights, (H, W), b) for b in range(3)])
+
+
+def _second_order_block(pair_weights, shape, block):
+    """Block ``block`` (0: ``∂xx``, 1: ``∂yy``, 2: ``∂xy``) of :func:`second_order_edge_weights`, flat."""
+    H, W = shape
     wx = np.asarray(pair_weights[: H * W]).reshape(H, W)
     wy = np.asarray(pair_weights[H * W :]).reshape(H, W)
-    wxx = wx.copy()
-    wxx[:, 1:] = np.minimum(wx[:, 1:], wx[:, :-1])
-    wyy = wy.copy()
-    wyy[1:, :] = np.minimum(wy[1:, :], wy[:-1, :])
+    if block == 0:
+        wxx = wx.copy()
+        wxx[:, 1:] = np.minimum(wx[:, 1:], wx[:, :-1])
+        return wxx.ravel()
+    if block == 1:
+        wyy = wy.copy()
+        wyy[1:, :] = np.minimum(wy[1:, :], wy[:-1, :])
+        return wyy.ravel()
     wxy = np.minimum(wx, wy)
     wxy[:-1, :] = np.minimum(wxy[:-1, :], wx[1:, :])
     wxy[:, :-1] = np.minimum(wxy[:, :-1], wy[:, 1:])
-    return np.concatenate([wxx.ravel(), wyy.ravel(), wxy.ravel()])
+    return wxy.ravel()
+
+
+class SecondOrderEdgeWeights:
+    """:func:`second_order_edge_weights` of ``pair_weights`` as row weights that are computed when read.
+
+    A term's rows are read a block at a time (``weights[b*H*W:(b+1)*H*W]``, or
+    a part of one block): such a slice is computed from the pair weights on
+    request, so nothing but the pair weights (which the first-order image term
+    keeps anyway) is held (8 MP: 190 MB less).  ``np.asarray(weights)`` and any
+    other index give the whole array of :func:`second_order_edge_weights`; the
+    numbers are the same either way.
+
+    Parameters
+    ----------
+    pair_weights : ndarray, shape (2*H*W,)
+        From :func:`pair_edge_weights` (kept by reference, not copied).
+    shape : tuple of int
+        ``(H, W)``.
+
+    Attributes
+    ----------
+    shape : tuple of int
+        ``(3*H*W,)``.
+    ndim : int
+    dtype : numpy.dtype
+    """
+
+    ndim = 1
+
+    def __init__(self, pair_weights, shape):
+        self.grid_shape = check_grid_shape(shape)
+        n = self.grid_shape[0] * self.grid_shape[1]
+        self.pair_weights = np.asarray(pair_weights)
+        if self.pair_weights.shape != (2 * n,):
+            raise ValueError(f"pair_weights must have shape ({2 * n},) for a grid of shape {self.grid_shape}, got "
+                             f"{self.pair_weights.shape}")
+        self.shape = (3 * n,)
+        self.dtype = self.pair_weights.dtype
+
+    def __len__(self):
+        return self.shape[0]
+
+    def __array__(self, dtype=None, copy=None):
+        out = second_order_edge_weights(self.pair_weights, self.grid_shape)
+        return out if dtype is None else out.astype(dtype, copy=False)
+
+    def __getitem__(self, key):
+        n = self.shape[0] // 3
+        if isinstance(key, slice) and key.step in (None, 1):
+            start, stop, _ = key.indices(self.shape[0])
+            if stop > start and start // n == (stop - 1) // n:  # within one block
+                block = start // n
+                return _second_order_block(self.pair_weights, self.grid_shape, block)[start - block * n:stop - block * n]
+        return np.asarray(self)[key]
+
+    def __repr__(self):
+        return f"SecondOrderEdgeWeights(grid_shape={self.grid_shape})"

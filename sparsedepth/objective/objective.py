@@ -34,8 +34,8 @@ import scipy.sparse as sp
 from .._validation import as_depth_and_mask, as_float_image, check_positive_real, check_same_shape
 from ..baselines import nearest_fill
 from ..grid.affinity import local_linear_operator
-from ..grid.edges import (edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights,
-                          smoothed_image)
+from ..grid.edges import (SecondOrderEdgeWeights, edge_weights, image_gradient_magnitude, pair_edge_weights,
+                          second_order_edge_weights, smoothed_image)
 from ..grid.geodesic import geodesic_fill
 from ..grid.operators import StencilOperator, gradient_stencil, hessian_stencil
 from ..grid.stencil import SymmetricStencil, stencil_to_csr
@@ -369,7 +369,8 @@ def build_objective(
         pair = pair * factor
     G = gradient_stencil(shape)
     hessian = hessian_stencil(shape) if (weights.beta_second > 0 or weights.beta_second_image > 0) else None
-    w2 = None if weights.beta_second_image == 0 else second_order_edge_weights(pair, shape)
+    # computed from the pair weights block by block when read: not held beside them
+    w2 = None if weights.beta_second_image == 0 else SecondOrderEdgeWeights(pair, shape)
     terms = [
         QuadraticTerm("data", weights.alpha, None, observed.reshape(-1), depth.ravel()),  # bool weights: 1/8 memory
         QuadraticTerm("smooth", weights.beta, G),
