@@ -52,7 +52,7 @@ PINV_CUTOFF = 1e-10
 _BAND_PIXELS = 1 << 16
 
 
-def local_linear_operator(image, eps: float) -> "LocalLinearOperator":
+def local_linear_operator(image, eps: float, *, copy: bool = True) -> "LocalLinearOperator":
     """The operator ``K`` with ``Kᵀ K`` the 3x3-window matting Laplacian of ``image``.
 
     Parameters
@@ -64,6 +64,10 @@ def local_linear_operator(image, eps: float) -> "LocalLinearOperator":
         ``ε >= 0``, the ridge weight of the slope ``a`` (in squared image units: [0, 1]²).  Large ``ε`` makes
         every window fit a constant (``L`` becomes the sum of the windows' centring matrices); ``ε = 0`` uses
         the pseudo-inverse of the window covariance (eigenvalues at or below :data:`PINV_CUTOFF` dropped).
+    copy : bool, default True
+        False: a float64 ``(H, W, C)`` image already scaled to [0, 1] is kept as it is (a view of contiguous
+        channel planes, ``np.moveaxis(planes, 0, -1)``, without a copy); any other image is converted as with
+        True.
 
     Returns
     -------
@@ -81,7 +85,9 @@ def local_linear_operator(image, eps: float) -> "LocalLinearOperator":
     0.0089
     """
     eps = check_nonnegative_real(eps, name="local_linear_eps")
-    return LocalLinearOperator(as_float_image(image), eps)
+    array = np.asarray(image)
+    keep = not copy and array.dtype == np.float64 and array.ndim == 3
+    return LocalLinearOperator(array if keep else as_float_image(image), eps)
 
 
 def _window_sum(array, rows):

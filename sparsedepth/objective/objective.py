@@ -34,8 +34,8 @@ import scipy.sparse as sp
 from .._validation import as_depth_and_mask, as_float_image, check_positive_real, check_same_shape
 from ..baselines import nearest_fill
 from ..grid.affinity import local_linear_operator
-from ..grid.edges import (SecondOrderEdgeWeights, edge_weights, image_gradient_magnitude, pair_edge_weights,
-                          second_order_edge_weights, smoothed_image)
+from ..grid.edges import (PairEdgeWeights, SecondOrderEdgeWeights, edge_weights, image_gradient_magnitude,
+                          pair_edge_weights, second_order_edge_weights, smoothed_image)
 from ..grid.geodesic import geodesic_fill
 from ..grid.operators import StencilOperator, gradient_stencil, hessian_stencil
 from ..grid.stencil import SymmetricStencil, stencil_to_csr
@@ -360,13 +360,18 @@ def build_objective(
     else:
         coarse = nearest_fill(depth, observed)
     w = edge_weights(img, weights.kappa).ravel() if weights.gamma > 0 else None
-    pair = pair_edge_weights(img, weights.kappa) if (weights.beta_image > 0 or weights.beta_second_image > 0) else None
+    # with the local-linear term, the blurred image is kept once, as the channel planes that term reads, and the
+    # pair weights are computed from them when read (PairEdgeWeights: the numbers of pair_edge_weights)
+    planes = np.ascontiguousarray(np.moveaxis(img, -1, 0)) if weights.beta_local_linear > 0 else None
+    pair = None
+    if weights.beta_image > 0 or weights.beta_second_image > 0:
+        pair = pair_edge_weights(img, weights.kappa) if planes is None else PairEdgeWeights(planes, weights.kappa)
     if pair is not None and pair_factor is not None:
         factor = np.asarray(pair_factor, dtype=np.float64)
         if factor.shape != pair.shape or not np.all((factor >= 0) & (factor <= 1)):
             raise ValueError(f"pair_factor must be {pair.shape[0]} values in [0, 1] (one per pixel pair); got shape "
                              f"{factor.shape}")
-        pair = pair * factor
+        pair = pair * factor if planes is None else PairEdgeWeights(planes, weights.kappa, factor)
     G = gradient_stencil(shape)
     hessian = hessian_stencil(shape) if (weights.beta_second > 0 or weights.beta_second_image > 0) else None
     # computed from the pair weights block by block when read: not held beside them
@@ -382,7 +387,8 @@ def build_objective(
     ]
     if weights.beta_local_linear > 0:  # no term at weight 0: the objective and its term list stay as without it
         terms.append(QuadraticTerm("local_linear", weights.beta_local_linear,
-                                   local_linear_operator(img, weights.local_linear_eps)))
+                                   local_linear_operator(np.moveaxis(planes, 0, -1), weights.local_linear_eps,
+                                                         copy=False)))
     quad_smooth = (weights.beta > 0 or weights.beta_image > 0 or weights.beta_second > 0
                    or weights.beta_second_image > 0 or weights.beta_local_linear > 0)
     if weights.delta == 0 and (weights.alpha == 0 or not (quad_smooth or weights.gamma > 0)):
