@@ -11,7 +11,7 @@ import scipy.sparse.linalg as spla
 
 import sparsedepth as sd
 from sparsedepth.grid.affinity import PINV_CUTOFF, WINDOW_OFFSETS, local_linear_operator
-from sparsedepth.grid.stencil import stencil_to_csr
+from sparsedepth.grid.stencil import SymmetricStencil, stencil_to_csr
 from sparsedepth.linalg.multigrid import GridMultigrid
 from sparsedepth.objective.objective import build_objective
 from sparsedepth.objective.weights import MODEL_FIELDS
@@ -109,6 +109,35 @@ def test_adjoint_and_block_products(channels, eps):
         np.testing.assert_allclose(K.block_matvec(z, b), Kd[b * n:(b + 1) * n] @ z, rtol=0, atol=1e-12)
         K.block_rmatvec_add(total, b, v[b * n:(b + 1) * n])
     np.testing.assert_allclose(total, KTv, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("channels, eps", [(1, 1e-3), (3, 1e-5), (3, 0.0)])
+@pytest.mark.parametrize("band_pixels", [1, 16, 1 << 16], ids=["row bands", "two-row bands", "one band"])
+def test_symmetric_half_and_row_pieces_band_by_band(monkeypatch, channels, eps, band_pixels):
+    """The stored half equals those images of the 25-image stencil and of Kᵀ K; the pieces are K z, any band."""
+    from sparsedepth.grid import affinity
+
+    monkeypatch.setattr(affinity, "_BAND_PIXELS", band_pixels)
+    rng = np.random.default_rng(30 + channels)
+    image = rng.random((9, 8, channels))
+    image[2:6, 1:5] = 0.3  # flat windows
+    K = local_linear_operator(image if channels > 1 else image[..., 0], eps)
+    offsets = K.offsets()
+    full = np.zeros((len(offsets),) + K.grid_shape)
+    K.add_normal_stencil(full, offsets, scale=0.7)
+    upper = [o for o in offsets if o >= (0, 0)]
+    half = np.zeros((len(upper),) + K.grid_shape)
+    K.add_normal_stencil(half, upper, scale=0.7, symmetric=True)
+    np.testing.assert_array_equal(half, full[[offsets.index(o) for o in upper]])
+    Kd = K.tocsr().toarray()
+    dense = SymmetricStencil(offsets, half).toarray()
+    np.testing.assert_allclose(dense, 0.7 * Kd.T @ Kd, rtol=0, atol=1e-11)
+    z = rng.standard_normal(K.shape[1])
+    pieced = np.full(K.shape[0], np.nan)
+    for rows, values in K.row_pieces(z):
+        assert np.all(np.isnan(pieced[rows]))  # every row once
+        pieced[rows] = values
+    np.testing.assert_allclose(pieced, Kd @ z, rtol=0, atol=1e-12)
 
 
 def test_affine_functions_of_the_image_cost_nothing_without_ridge_and_constants_never():

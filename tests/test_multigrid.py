@@ -623,3 +623,48 @@ def test_operator_prolongation_by_classes_equals_its_dense_matrix(shape):
         np.testing.assert_allclose(P.add_prolonged(out.copy(), x), out + dense @ x, atol=1e-14)
         np.testing.assert_allclose(P.T @ out, dense.T @ out, atol=1e-13)
         np.testing.assert_array_equal(P.toarray(), dense)
+
+
+@pytest.mark.parametrize("shape", [(1, 5), (2, 3), (7, 6), (12, 9), (13, 16)])
+@pytest.mark.parametrize("band_pixels", [1, 20, 1 << 16], ids=["two-row bands", "a few rows", "one band"])
+def test_separable_prolongation_band_by_band_equals_its_csr_form(monkeypatch, shape, band_pixels):
+    """P x and Pᵀ r, a band of rows at a time: the same bits for every band height, and the CSR product."""
+    from sparsedepth.linalg.multigrid import transfer
+
+    P = transfer.SeparableProlongation(shape)
+    csr = P.tocsr()
+    rng = np.random.default_rng(9)
+    for dtype in (np.float64, np.float32):
+        x = rng.standard_normal(P.shape[1]).astype(dtype)
+        r = rng.standard_normal(P.shape[0]).astype(dtype)
+        out = rng.standard_normal(P.shape[0]).astype(dtype)
+        whole = (P.add_prolonged(out.copy(), x), P.T @ r)
+        monkeypatch.setattr(transfer, "_BAND_PIXELS", band_pixels)
+        banded = (P.add_prolonged(out.copy(), x), P.T @ r)
+        monkeypatch.setattr(transfer, "_BAND_PIXELS", 1 << 16)
+        for ours, ref in zip(banded, whole):
+            assert ours.dtype == dtype
+            np.testing.assert_array_equal(ours, ref)
+        tol = 1e-5 if dtype == np.float32 else 1e-12
+        np.testing.assert_allclose(banded[0], out + csr @ x, rtol=tol, atol=tol)
+        np.testing.assert_allclose(banded[1], csr.T @ r, rtol=tol, atol=tol)
+
+
+@pytest.mark.parametrize("shape", [(1, 5), (2, 3), (7, 6), (12, 9), (13, 16)])
+def test_restriction_of_rows_handed_out_band_by_band_equals_the_whole_product(monkeypatch, shape):
+    from sparsedepth.linalg.multigrid import transfer
+
+    monkeypatch.setattr(transfer, "_BAND_PIXELS", 20)
+    P = transfer.SeparableProlongation(shape)
+    rng = np.random.default_rng(10)
+    for dtype in (np.float64, np.float32):
+        r = rng.standard_normal(shape).astype(dtype)
+        read = []
+
+        def rows_of(y0, y1):
+            read.append((y0, y1))
+            return r[y0:y1].copy()
+
+        ours = P.restrict_rows(rows_of, dtype)
+        assert ours.dtype == dtype and len(read) > (1 if shape[0] > 4 else 0)
+        np.testing.assert_array_equal(ours, P.T @ r.ravel())

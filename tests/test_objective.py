@@ -142,3 +142,67 @@ def test_nearest_fill_keeps_observations():
     out = nearest_fill(sparse, mask)
     np.testing.assert_array_equal(out[mask], sparse[mask])
     assert np.all(np.isfinite(out))
+
+
+def test_second_order_edge_weights_read_block_by_block_equal_the_array():
+    from sparsedepth.grid.edges import SecondOrderEdgeWeights, pair_edge_weights, second_order_edge_weights
+
+    rng = np.random.default_rng(8)
+    shape = (5, 7)
+    pair = pair_edge_weights(rng.random(shape + (3,)), 3.0)
+    full = second_order_edge_weights(pair, shape)
+    lazy = SecondOrderEdgeWeights(pair, shape)
+    assert lazy.shape == full.shape and len(lazy) == full.size and lazy.dtype == full.dtype
+    np.testing.assert_array_equal(np.asarray(lazy), full)
+    n = shape[0] * shape[1]
+    for key in (slice(0, n), slice(n, 2 * n), slice(2 * n, 3 * n), slice(n + 3, 2 * n - 1), slice(n - 2, n + 2),
+                slice(None, None, 2), np.array([0, 40, 104])):
+        np.testing.assert_array_equal(lazy[key], full[key])
+    with pytest.raises(ValueError, match="pair_weights must have shape"):
+        SecondOrderEdgeWeights(pair[:-1], shape)
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_pair_edge_weights_of_channel_planes_read_block_by_block_equal_the_array(channels):
+    from sparsedepth.grid.edges import PairEdgeWeights, SecondOrderEdgeWeights, pair_edge_weights, \
+        second_order_edge_weights
+
+    rng = np.random.default_rng(11)
+    shape = (6, 5)
+    image = rng.random(shape + (channels,))
+    planes = np.ascontiguousarray(np.moveaxis(image, -1, 0))
+    full = pair_edge_weights(image, 7.0)
+    factor = rng.random(full.shape)
+    n = shape[0] * shape[1]
+    for lazy, ref in ((PairEdgeWeights(planes, 7.0), full), (PairEdgeWeights(planes, 7.0, factor), full * factor)):
+        assert lazy.shape == ref.shape and len(lazy) == ref.size
+        np.testing.assert_array_equal(np.asarray(lazy), ref)
+        for key in (slice(0, n), slice(n, 2 * n), slice(3, n - 1), slice(n - 2, n + 2), np.array([0, 31, 59])):
+            np.testing.assert_array_equal(lazy[key], ref[key])
+        # the second-order weights read the pair weights a block at a time
+        np.testing.assert_array_equal(np.asarray(SecondOrderEdgeWeights(lazy, shape)),
+                                      second_order_edge_weights(ref, shape))
+    with pytest.raises(ValueError, match="factor must have shape"):
+        PairEdgeWeights(planes, 7.0, factor[:-1])
+    with pytest.raises(ValueError, match="planes must have shape"):
+        PairEdgeWeights(image[..., 0], 7.0)
+    with pytest.raises(ValueError, match="kappa"):
+        PairEdgeWeights(planes, -1.0)
+
+
+def test_objective_with_the_local_linear_term_keeps_one_image_for_it_and_the_pair_weights():
+    from sparsedepth.grid.edges import PairEdgeWeights, pair_edge_weights, smoothed_image
+
+    rng = np.random.default_rng(12)
+    image = rng.integers(0, 256, (9, 11, 3)).astype(np.uint8)
+    sparse = np.where(rng.random((9, 11)) < 0.2, 1.0 + rng.random((9, 11)), 0.0)
+    w = Weights().replace(gamma=0)
+    obj, _, _ = build_objective(image, sparse, weights=w)
+    pair = obj.term("smooth_image").row_weights
+    assert isinstance(pair, PairEdgeWeights)
+    assert np.shares_memory(pair.planes, obj.term("local_linear").operator._image)  # one copy of the blurred image
+    np.testing.assert_array_equal(pair, pair_edge_weights(smoothed_image(image, w.edge_sigma), w.kappa))
+    z = rng.random(99)
+    without = build_objective(image, sparse, weights=w.replace(beta_local_linear=0.0))[0]
+    for name in ("smooth_image", "second_order_image"):
+        assert obj.term(name).value(z) == without.term(name).value(z)

@@ -76,6 +76,9 @@ def test_product_equals_csr_and_dense(offsets, shape):
         x32 = x.astype(np.float32)
         A32 = A.astype(np.float32)
         np.testing.assert_array_equal(A32 @ x32, A32.tocsr() @ x32)
+        H = shape[0]
+        for y0, y1 in [(0, H), (0, (H + 1) // 2), (H // 3, H)]:  # rows of the product: those of the whole
+            np.testing.assert_array_equal(A.matvec_rows(x, y0, y1), (A @ x).reshape(shape)[y0:y1])
     np.testing.assert_array_equal(A.diagonal(), np.diag(dense))
 
 
@@ -126,6 +129,33 @@ def test_banded_sweeps_and_products_equal_the_csr_kernel(monkeypatch, rows, offs
         b = rng.standard_normal(A.shape[0]).astype(dtype)
         np.testing.assert_array_equal(banded @ x, csr @ x)
         ours, ref = x.copy(), x.copy()
+        gauss_seidel_forward(banded, ours, b, 2)
+        gauss_seidel_forward(csr, ref, b, 2)
+        np.testing.assert_array_equal(ours, ref)
+        gauss_seidel_backward(banded, ours, b, 1)
+        gauss_seidel_backward(csr, ref, b, 1)
+        np.testing.assert_array_equal(ours, ref)
+
+
+@pytest.mark.parametrize("rows", [None, 1, 3])
+@pytest.mark.parametrize("offsets", [THIRTEEN, TWENTY_FIVE], ids=["13", "25"])
+@pytest.mark.parametrize("shape", [(1, 7), (2, 9), (13, 8), (30, 21)])
+def test_full_stencil_sweeps_and_products_equal_the_csr_kernel(monkeypatch, rows, offsets, shape):
+    """A FullStencil (every image, not symmetric) cycles like its CSR form, bit for bit."""
+    if rows is not None:
+        monkeypatch.setattr(bands, "_BAND_VALUES", rows * shape[1] * len(offsets))
+    rng = np.random.default_rng(7)
+    S = rng.uniform(-1.0, 1.0, (len(offsets),) + shape)
+    S[offsets.index((0, 0))] = 2.0 * len(offsets) + rng.random(shape)
+    for dtype in (np.float64, np.float32):
+        full, csr = bands.FullStencil(offsets, S, dtype), stencil_to_csr(offsets, S, dtype=dtype)
+        assert full.nnz == csr.nnz and (full.tocsr() != csr).nnz == 0
+        np.testing.assert_array_equal(full.diagonal(), csr.diagonal())
+        x = rng.standard_normal(csr.shape[0]).astype(dtype)
+        b = rng.standard_normal(csr.shape[0]).astype(dtype)
+        np.testing.assert_array_equal(full @ x, csr @ x)
+        ours, ref = x.copy(), x.copy()
+        banded = BandedStencil(full, dtype)
         gauss_seidel_forward(banded, ours, b, 2)
         gauss_seidel_forward(csr, ref, b, 2)
         np.testing.assert_array_equal(ours, ref)
@@ -190,6 +220,26 @@ def test_normal_equations_stencil_form(weights):
         obj.normal_equations(form="dense")
 
 
+@pytest.mark.parametrize("grey", [False, True], ids=["colour", "grey"])
+def test_stencil_form_is_the_upper_half_of_the_full_assembly_with_and_without_row_weights(grey):
+    """Every stencil term (identity, row-weighted differences, local-linear) written once into the stored half."""
+    image, sparse, mask = _problem((11, 13), seed=3)
+    if grey:
+        image = image.mean(axis=2).astype(np.uint8)
+    obj, _, _ = sd.build_objective(image, sparse, mask, weights=sd.DEFAULT_WEIGHTS.replace(gamma=0))
+    assert {t.name for t in obj.quadratic_terms} >= {"smooth_image", "second_order_image", "local_linear"}
+    offsets, full = obj.normal_stencil()
+    S, _, _ = obj.normal_equations(form="stencil")
+    assert S.offsets == offsets and len(offsets) == 25
+    np.testing.assert_array_equal(S.data, full[[offsets.index(o) for o in S.upper]])
+    dense = np.zeros((obj.size, obj.size))
+    for t in obj.quadratic_terms:  # Σ weight · Kᵀ diag(r) K from the explicit matrices
+        K = sp.identity(obj.size) if t.operator is None else t.operator.tocsr()
+        r = np.ones(K.shape[0]) if t.row_weights is None else np.asarray(t.row_weights, dtype=float)
+        dense += t.weight * (K.T @ sp.diags(r) @ K).toarray()
+    np.testing.assert_allclose(S.toarray(), dense, rtol=0, atol=1e-12 * np.abs(dense).max())
+
+
 def test_normal_equations_stencil_form_falls_back_to_csr_for_general_operators():
     image, sparse, mask = _problem((12, 10))
     obj, _, _ = sd.build_objective(image, sparse, mask, weights=sd.DEFAULT_WEIGHTS.replace(gamma=0))
@@ -215,19 +265,28 @@ def test_solve_through_the_stencil_form_equals_spsolve(kind):
     assert np.linalg.norm(z - ref) <= residual / weights.delta * (1 + 1e-6) + 1e-12 * np.linalg.norm(ref)
 
 
+@pytest.mark.parametrize("layout", ["symmetric", "full", "full, read class by class"])
 @pytest.mark.parametrize("shape", [(33, 47), (64, 50)])
-def test_banded_coarse_levels_equal_the_csr_hierarchy(monkeypatch, shape):
-    """The large-frame layout (fine float64 bands, float32 symmetric coarse levels) cycles like the CSR one."""
+def test_banded_coarse_levels_equal_the_csr_hierarchy(monkeypatch, shape, layout):
+    """The large-frame layout (fine float64 bands, float32 stencil coarse levels) cycles like the CSR one."""
     from sparsedepth.linalg.multigrid import hierarchy
+
+    from sparsedepth.linalg.multigrid import transfer
 
     monkeypatch.setattr(hierarchy, "_SINGLE_FINE_VALUES", 0)  # every fine operator counts as large
     monkeypatch.setattr(hierarchy, "_BANDED_COARSE_PIXELS", 64)
+    monkeypatch.setattr(transfer, "_BAND_PIXELS", 100)  # the fine residual restricted a few rows at a time
+    if layout.startswith("full"):  # as if no coarse level were exactly symmetric in float32
+        monkeypatch.setattr(SymmetricStencil, "from_stencil", classmethod(lambda cls, *args, **kwargs: None))
+    if layout.endswith("by class"):  # the 8-MP set-up: every level read one parity class at a time
+        monkeypatch.setattr(hierarchy, "_KEEP_STENCIL_PIXELS", 0)
     image, sparse, mask = _problem(shape, seed=2)
     obj, coarse, _ = sd.build_objective(image, sparse, mask, weights=sd.DEFAULT_WEIGHTS.replace(gamma=0))
     S, b, _ = obj.normal_equations(form="stencil")
     ours = GridMultigrid(S, shape, coarse_precision="single")
     ref = GridMultigrid(S.tocsr(), shape, coarse_precision="single")
-    assert isinstance(ours.levels[1].A, SymmetricStencil) and ours.levels[1].A.dtype == np.float32
+    kind = SymmetricStencil if layout == "symmetric" else bands.FullStencil
+    assert isinstance(ours.levels[1].A, kind) and ours.levels[1].A.dtype == np.float32
     assert ours.fine_dtype == ref.fine_dtype == np.float64
     for seed in range(3):
         r = np.random.default_rng(seed).standard_normal(b.size)

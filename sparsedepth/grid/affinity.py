@@ -47,9 +47,12 @@ __all__ = ["LocalLinearOperator", "local_linear_operator", "WINDOW_OFFSETS", "PI
 WINDOW_OFFSETS = tuple((dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1))
 #: With ``ε = 0``, eigenvalues of a window's colour covariance at or below this (in [0, 1]² units) count as 0.
 PINV_CUTOFF = 1e-10
+#: pixels per band of the band-wise computations (the normal stencil, the term's value): their work arrays
+#: stay a few megabytes whatever the frame size
+_BAND_PIXELS = 1 << 16
 
 
-def local_linear_operator(image, eps: float) -> "LocalLinearOperator":
+def local_linear_operator(image, eps: float, *, copy: bool = True) -> "LocalLinearOperator":
     """The operator ``K`` with ``Kᵀ K`` the 3x3-window matting Laplacian of ``image``.
 
     Parameters
@@ -61,6 +64,10 @@ def local_linear_operator(image, eps: float) -> "LocalLinearOperator":
         ``ε >= 0``, the ridge weight of the slope ``a`` (in squared image units: [0, 1]²).  Large ``ε`` makes
         every window fit a constant (``L`` becomes the sum of the windows' centring matrices); ``ε = 0`` uses
         the pseudo-inverse of the window covariance (eigenvalues at or below :data:`PINV_CUTOFF` dropped).
+    copy : bool, default True
+        False: a float64 ``(H, W, C)`` image already scaled to [0, 1] is kept as it is (a view of contiguous
+        channel planes, ``np.moveaxis(planes, 0, -1)``, without a copy); any other image is converted as with
+        True.
 
     Returns
     -------
@@ -78,14 +85,21 @@ def local_linear_operator(image, eps: float) -> "LocalLinearOperator":
     0.0089
     """
     eps = check_nonnegative_real(eps, name="local_linear_eps")
-    return LocalLinearOperator(as_float_image(image), eps)
+    array = np.asarray(image)
+    keep = not copy and array.dtype == np.float64 and array.ndim == 3
+    return LocalLinearOperator(array if keep else as_float_image(image), eps)
 
 
-def _window_sum(array, H, W):
-    """Σ over the 3x3 window of every interior pixel of the last two axes: shape ``array.shape[:-2] + (H-2, W-2)``."""
-    out = np.zeros(array.shape[:-2] + (H - 2, W - 2))
+def _window_sum(array, rows):
+    """Σ over the 3x3 window of the interior pixels of window rows ``rows = (k0, k1)`` (grid rows ``k0+1 .. k1``).
+
+    ``array`` has the grid on its last two axes; the result has shape ``array.shape[:-2] + (k1 - k0, W - 2)``.
+    """
+    k0, k1 = rows
+    W = array.shape[-1]
+    out = np.zeros(array.shape[:-2] + (k1 - k0, W - 2))
     for dy, dx in WINDOW_OFFSETS:
-        out += array[..., 1 + dy:H - 1 + dy, 1 + dx:W - 1 + dx]
+        out += array[..., k0 + 1 + dy:k1 + 1 + dy, 1 + dx:W - 1 + dx]
     return out
 
 
@@ -153,23 +167,44 @@ class LocalLinearOperator(StencilOperator):
         self.blocks = (window,) * (9 + C)
         self._windows = H >= 3 and W >= 3
         self._interior = (slice(1, H - 1), slice(1, W - 1)) if self._windows else (slice(0, 0), slice(0, 0))
+        self._planes = None
         self._fit_cache = None
-        if not self._windows:
-            return
-        mean = _window_sum(self._image, H, W) / 9.0
+
+    # -- the fit of every window ---------------------------------------------
+    def _band_rows(self):
+        """Window rows per band of the band-wise computations (about :data:`_BAND_PIXELS` pixels)."""
+        return max(1, _BAND_PIXELS // self.grid_shape[1])
+
+    def _window_planes(self, k0, k1):
+        """``(μ, P)`` of the windows centred on grid rows ``k0+1 .. k1``: shapes ``(C, k1-k0, W-2)``, ``(C, C, ...)``.
+
+        ``P = (Σ + ε/9 · 1)^{-1}`` (the pseudo-inverse for ``ε = 0``); ``M = P / 9`` is the ``(G + ε)^{-1}`` of
+        the class notes.  Every entry depends on its own window only, so a band gives the same numbers as the
+        whole grid.
+        """
+        C = self.channels
+        rows = (k0, k1)
+        mean = _window_sum(self._image, rows) / 9.0
+        band = self._image[:, k0:k1 + 2]  # the grid rows the windows cover
         cov = np.empty((C, C) + mean.shape[1:])
         for c in range(C):
             for d in range(c, C):
-                cov[c, d] = _window_sum(self._image[c] * self._image[d], H, W) / 9.0 - mean[c] * mean[d]
+                cov[c, d] = _window_sum(band[c] * band[d], (0, k1 - k0)) / 9.0 - mean[c] * mean[d]
                 cov[d, c] = cov[c, d]
-        self._mean = mean
-        self._inverse = self._regularised_inverse(cov)
+        return mean, self._regularised_inverse(cov)
+
+    def _whole_planes(self):
+        """:meth:`_window_planes` of every window, kept for the products with ``K`` and ``Kᵀ`` (15 planes).
+
+        Only :meth:`block_matvec` and the adjoint use them; the normal stencil and the term's value
+        (:meth:`row_pieces`) work band by band and keep nothing.
+        """
+        if self._planes is None:
+            self._planes = self._window_planes(0, self.grid_shape[0] - 2)
+        return self._planes
 
     def _regularised_inverse(self, cov):
-        """``P = (Σ + ε/9 · 1)^{-1}`` per window (the pseudo-inverse for ``ε = 0``), shape ``(C, C, H-2, W-2)``.
-
-        ``M = P / 9`` is the ``(G + ε)^{-1}`` of the class notes.
-        """
+        """``P = (Σ + ε/9 · 1)^{-1}`` per window (the pseudo-inverse for ``ε = 0``), shape ``(C, C, h, w)``."""
         C = self.channels
         if self.eps > 0:
             for c in range(C):
@@ -180,36 +215,44 @@ class LocalLinearOperator(StencilOperator):
         inv_values = np.where(keep, 1.0 / np.where(keep, values, 1.0), 0.0)
         return np.einsum("...ik,...k,...jk->ij...", vectors, inv_values, vectors)
 
-    # -- the fit of every window ---------------------------------------------
-    def _shifted(self, array, o):
-        """The ``(..., H-2, W-2)`` view of ``array`` at the window pixel ``o`` of every interior centre."""
+    def _shifted(self, array, o, rows=None):
+        """The view of ``array`` at the window pixel ``o`` of the windows of rows ``rows`` (default all)."""
         H, W = self.grid_shape
-        return array[..., 1 + o[0]:H - 1 + o[0], 1 + o[1]:W - 1 + o[1]]
+        k0, k1 = (0, H - 2) if rows is None else rows
+        return array[..., k0 + 1 + o[0]:k1 + 1 + o[0], 1 + o[1]:W - 1 + o[1]]
+
+    def _fit_rows(self, img, rows, planes):
+        """Every block of ``K z`` on the windows of ``rows``, shape ``(9 + C, k1 - k0, W - 2)``.
+
+        ``img`` is ``z`` as an ``(H, W)`` image, ``planes`` the :meth:`_window_planes` of those windows.
+        """
+        mean, inverse = planes
+        C = self.channels
+        zbar = _window_sum(img, rows) / 9.0
+        cross = np.zeros(mean.shape)
+        product = np.empty(mean.shape)
+        for o in WINDOW_OFFSETS:
+            np.multiply(self._shifted(self._image, o, rows), self._shifted(img, o, rows), out=product)
+            cross += product
+        cross /= 9.0
+        cross -= mean * zbar  # the covariance of image and depth in each window
+        a = _apply(inverse, cross)
+        intercept = zbar - _dot(a, mean)
+        out = np.empty((9 + C,) + zbar.shape)
+        for j, o in enumerate(WINDOW_OFFSETS):
+            row = out[j]
+            np.subtract(self._shifted(img, o, rows), intercept, out=row)
+            for c in range(C):
+                np.multiply(a[c], self._shifted(self._image[c], o, rows), out=product[0])
+                row -= product[0]
+        np.multiply(a, np.sqrt(self.eps), out=out[9:])
+        return out
 
     def _rows(self, z):
         """Every block of ``K z`` on the interior pixels, shape ``(9 + C, H-2, W-2)`` (cached for the last ``z``)."""
         if self._fit_cache is not None and np.array_equal(self._fit_cache[0], z):
             return self._fit_cache[1]
-        img = self._as_image(z)
-        C = self.channels
-        zbar = _window_sum(img, *self.grid_shape) / 9.0
-        cross = np.zeros(self._mean.shape)
-        product = np.empty(self._mean.shape)
-        for o in WINDOW_OFFSETS:
-            np.multiply(self._shifted(self._image, o), self._shifted(img, o), out=product)
-            cross += product
-        cross /= 9.0
-        cross -= self._mean * zbar  # the covariance of image and depth in each window
-        a = _apply(self._inverse, cross)
-        intercept = zbar - _dot(a, self._mean)
-        rows = np.empty((9 + C,) + zbar.shape)
-        for j, o in enumerate(WINDOW_OFFSETS):
-            row = rows[j]
-            np.subtract(self._shifted(img, o), intercept, out=row)
-            for c in range(C):
-                np.multiply(a[c], self._shifted(self._image[c], o), out=product[0])
-                row -= product[0]
-        np.multiply(a, np.sqrt(self.eps), out=rows[9:])
+        rows = self._fit_rows(self._as_image(z), (0, self.grid_shape[0] - 2), self._whole_planes())
         self._fit_cache = (np.array(z, dtype=np.float64, copy=True), rows)
         return rows
 
@@ -222,6 +265,26 @@ class LocalLinearOperator(StencilOperator):
         if self._windows:
             out[self._interior] = self._rows(img.reshape(-1))[b]
         return out.reshape(-1)
+
+    def row_pieces(self, z):
+        """``K z`` a band of grid rows at a time: ``(rows, values)``, each block's rows of the band.
+
+        The fit of a band's windows is computed for the band only (no per-pixel plane is kept), so a pass
+        over ``K z`` (the term's value) needs a few band-sized arrays.
+        """
+        img = self._as_image(z)
+        H, W = self.grid_shape
+        n = H * W
+        step = self._band_rows()
+        for y0 in range(0, H, step):
+            y1 = min(H, y0 + step)
+            k0, k1 = max(y0 - 1, 0), min(y1 - 1, H - 2)  # the windows centred on grid rows y0 .. y1 - 1
+            band = np.zeros((len(self.blocks), y1 - y0, W))
+            if self._windows and k1 > k0:
+                rows = (k0, k1)
+                band[:, k0 + 1 - y0:k1 + 1 - y0, 1:W - 1] = self._fit_rows(img, rows, self._window_planes(*rows))
+            for b in range(len(self.blocks)):
+                yield slice(b * n + y0 * W, b * n + y1 * W), band[b].reshape(-1)
 
     def block_rmatvec_add(self, out, b, v):
         """``out += K_bᵀ v`` for the rows ``v`` (length ``H * W``) of block ``b``; returns ``out``."""
@@ -243,20 +306,21 @@ class LocalLinearOperator(StencilOperator):
         """``out += Kᵀ [v_0; ...; v_8; u_0; ...]`` with ``rows`` the ``9 + C`` row images (None for zero rows)."""
         if not self._windows:
             return out
+        mean, inverse = self._whole_planes()
         target = out.reshape(self.grid_shape)
         interior = self._interior
-        shape = self._mean.shape[1:]
+        shape = mean.shape[1:]
         v = [np.zeros(shape) if r is None else r[interior] for r in rows[:9]]
         u = np.stack([np.zeros(shape) if r is None else r[interior] for r in rows[9:]])
         vsum = np.zeros(shape)
-        xv = np.zeros(self._mean.shape)
+        xv = np.zeros(mean.shape)
         for o, vj in zip(WINDOW_OFFSETS, v):
             vsum += vj
             xv += self._shifted(self._image, o) * vj
-        xv -= self._mean * vsum  # Xᵀ v
-        g = _apply(self._inverse, np.sqrt(self.eps) * u - xv) / 9.0  # M (√ε u − Xᵀ v)
+        xv -= mean * vsum  # Xᵀ v
+        g = _apply(inverse, np.sqrt(self.eps) * u - xv) / 9.0  # M (√ε u − Xᵀ v)
         vbar = vsum / 9.0
-        offset = _dot(self._mean, g)
+        offset = _dot(mean, g)
         for o, vj in zip(WINDOW_OFFSETS, v):
             self._shifted(target, o)[...] += vj - vbar - offset + _dot(self._shifted(self._image, o), g)
         return out
@@ -265,48 +329,86 @@ class LocalLinearOperator(StencilOperator):
         """The 25 offsets ``|dy|, |dx| <= 2`` of ``Kᵀ K``, sorted."""
         return [(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3)]
 
-    def add_normal_stencil(self, stencil, offsets, row_weights=None, scale=1.0):
+    def add_normal_stencil(self, stencil, offsets, row_weights=None, scale=1.0, *, symmetric=False):
         r"""Accumulate ``scale · L`` (``L = Kᵀ K``, the matting Laplacian) into stencil images, in place.
 
         Window ``p``'s entry ``L_w[i, j] = δ_ij − (1 + (I_i − μ)ᵀ P (I_j − μ)) / 9`` (``P = (Σ + ε/9)^{-1}``)
         is the coupling of pixel ``p + o_i`` with ``p + o_j``: it goes to the image of offset ``o_j − o_i`` at
-        pixel ``p + o_i``, one whole-array operation per pair ``(i, j)``.
+        pixel ``p + o_i`` and, for ``i ≠ j``, to the image of ``o_i − o_j`` at ``p + o_j``.
+
+        Parameters
+        ----------
+        stencil : ndarray, shape (len(offsets), H, W)
+            Updated in place.
+        offsets : list of tuple of int
+            The offsets of the images of ``stencil``; all 25 of :meth:`offsets`, or with ``symmetric`` the 13
+            ``>= (0, 0)``.
+        row_weights : None
+            The term has no per-row weights.
+        scale : float
+        symmetric : bool, default False
+            Write only the couplings at offsets ``>= (0, 0)`` (the stored half of a
+            :class:`~sparsedepth.grid.stencil.SymmetricStencil`); the others are their mirrors.
 
         Raises
         ------
         ValueError
             If ``row_weights`` is given (the term has no per-row weights).
+
+        Notes
+        -----
+        The grid is processed a band of stencil rows at a time: the windows that touch the band (its rows and
+        one more on each side) get their ``μ`` and ``P`` (:meth:`_window_planes`), then every pair ``(i, j)``
+        its coupling, one whole-band operation per pair.  Each stencil entry receives its terms in the order
+        of the pairs, as in one pass over the whole grid, so the images do not depend on the band height;
+        nothing per pixel is kept.
         """
         if row_weights is not None:
             raise ValueError("the local-linear term takes no row_weights (its rows are the windows' fit residuals)")
         if not self._windows:
             return stencil
+        H, W = self.grid_shape
         slot = {o: k for k, o in enumerate(offsets)}
         C = self.channels
         constant = -scale / 9.0
-        # I_j − μ is recomputed for each pair instead of kept for all nine j: C planes instead of 9 C (an 8-MP
-        # colour frame: 190 MB instead of 1.7 GB), the same operations in the same order
-        centred = np.empty((C,) + self._mean.shape[1:])
-        coupling = np.empty(self._mean.shape[1:])
-        product = np.empty(self._mean.shape[1:])
+        # per pair, where its coupling goes: (offset, window pixel it is written at)
+        writes = {}
         for i, oi in enumerate(WINDOW_OFFSETS):
-            np.subtract(self._shifted(self._image, oi), self._mean, out=centred)
-            projected = _apply(self._inverse, centred)
-            projected *= constant  # -(scale / 9) P (I_i - mu)
             for j in range(i, 9):
                 oj = WINDOW_OFFSETS[j]
-                np.subtract(self._shifted(self._image, oj), self._mean, out=centred)
-                np.multiply(projected[0], centred[0], out=coupling)
-                for c in range(1, C):
-                    np.multiply(projected[c], centred[c], out=product)
-                    coupling += product
-                coupling += constant + scale if i == j else constant
                 if i == j:
-                    self._shifted(stencil[slot[(0, 0)]], oi)[...] += coupling
-                    continue
-                # L is symmetric: the pair (i, j) is the coupling of p + o_i with p + o_j and of p + o_j with p + o_i
-                self._shifted(stencil[slot[(oj[0] - oi[0], oj[1] - oi[1])]], oi)[...] += coupling
-                self._shifted(stencil[slot[(oi[0] - oj[0], oi[1] - oj[1])]], oj)[...] += coupling
+                    places = [((0, 0), oi)]
+                else:
+                    places = [((oj[0] - oi[0], oj[1] - oi[1]), oi), ((oi[0] - oj[0], oi[1] - oj[1]), oj)]
+                writes[i, j] = [(o, a) for o, a in places if not symmetric or o >= (0, 0)]
+        step = self._band_rows()
+        for y0 in range(0, H, step):
+            y1 = min(H, y0 + step)
+            k0, k1 = max(y0 - 2, 0), min(y1, H - 2)  # the windows with a pixel on grid rows y0 .. y1 - 1
+            if k1 <= k0:
+                continue
+            rows = (k0, k1)
+            mean, inverse = self._window_planes(*rows)
+            centred = np.empty((C,) + mean.shape[1:])
+            coupling = np.empty(mean.shape[1:])
+            product = np.empty(mean.shape[1:])
+            for i, oi in enumerate(WINDOW_OFFSETS):
+                np.subtract(self._shifted(self._image, oi, rows), mean, out=centred)
+                projected = _apply(inverse, centred)
+                projected *= constant  # -(scale / 9) P (I_i - mu)
+                for j in range(i, 9):
+                    np.subtract(self._shifted(self._image, WINDOW_OFFSETS[j], rows), mean, out=centred)
+                    np.multiply(projected[0], centred[0], out=coupling)
+                    for c in range(1, C):
+                        np.multiply(projected[c], centred[c], out=product)
+                        coupling += product
+                    coupling += constant + scale if i == j else constant
+                    for o, a in writes[i, j]:
+                        # windows whose pixel p + a lies on the band's rows
+                        lo, hi = max(k0, y0 - 1 - a[0]), min(k1, y1 - 1 - a[0])
+                        if hi > lo:
+                            stencil[slot[o]][lo + 1 + a[0]:hi + 1 + a[0], 1 + a[1]:W - 1 + a[1]] += \
+                                coupling[lo - k0:hi - k0]
         return stencil
 
     def tocsr(self):

@@ -6,8 +6,10 @@ forward differences (:func:`image_differences`, the rows of
 
 * :func:`image_gradient_magnitude` - ``‖∇I‖`` per pixel;
 * :func:`edge_weights` - the reference paper's per-pixel ``exp(−κ ‖∇I‖)``;
-* :func:`pair_edge_weights` - one weight per pixel pair (per gradient row);
-* :func:`second_order_edge_weights` - the weights of the second-difference rows;
+* :func:`pair_edge_weights` - one weight per pixel pair (per gradient row)
+  (:class:`PairEdgeWeights`: the same, one block at a time on request);
+* :func:`second_order_edge_weights` - the weights of the second-difference rows
+  (:class:`SecondOrderEdgeWeights`: the same, one block at a time on request);
 * :func:`smoothed_image` - the image blurred by a Gaussian before any of the above (``Weights.edge_sigma``).
 
 May import NumPy, :mod:`scipy.ndimage` and :mod:`sparsedepth._validation`.
@@ -26,7 +28,9 @@ __all__ = [
     "edge_weights",
     "pair_distances",
     "pair_edge_weights",
+    "PairEdgeWeights",
     "second_order_edge_weights",
+    "SecondOrderEdgeWeights",
     "smoothed_image",
 ]
 
@@ -150,6 +154,100 @@ def pair_edge_weights(image, kappa: float) -> np.ndarray:
     return np.exp(-kappa * np.concatenate([dx.ravel(), dy.ravel()]))
 
 
+class PairEdgeWeights:
+    """:func:`pair_edge_weights` of an image given as channel planes, computed a block at a time when read.
+
+    The weights of the horizontal pairs (rows ``0 .. H W − 1``) or of the
+    vertical ones (the next ``H W``) are computed on request from the planes,
+    which the caller keeps anyway (the local-linear term's image), so the
+    ``2 H W`` weights are not held (8 MP: 120 MB).  A slice within one block
+    is that block's part; ``np.asarray(weights)`` and any other index give
+    the whole array.  The numbers are those of :func:`pair_edge_weights` of
+    the ``(H, W, C)`` image, times ``factor`` when given.
+
+    Parameters
+    ----------
+    planes : ndarray, shape (C, H, W)
+        The [0, 1]-scaled image, one channel per plane (kept by reference).
+    kappa : float
+        ``κ >= 0``.
+    factor : ndarray, shape (2*H*W,), optional
+        Multiplies the weights (``Weights.depth_jump``'s pair factors).
+
+    Attributes
+    ----------
+    shape : tuple of int
+        ``(2*H*W,)``.
+    ndim : int
+    dtype : numpy.dtype
+    """
+
+    ndim = 1
+    dtype = np.dtype(np.float64)
+
+    def __init__(self, planes, kappa, factor=None):
+        self.planes = np.asarray(planes, dtype=np.float64)
+        if self.planes.ndim != 3:
+            raise ValueError(f"planes must have shape (C, H, W), got {self.planes.shape}")
+        self.kappa = check_nonnegative_real(kappa, name="kappa")
+        H, W = self.grid_shape = self.planes.shape[1:]
+        self.shape = (2 * H * W,)
+        self.factor = None if factor is None else np.asarray(factor, dtype=np.float64)
+        if self.factor is not None and self.factor.shape != self.shape:
+            raise ValueError(f"factor must have shape {self.shape}, got {self.factor.shape}")
+
+    def __len__(self):
+        return self.shape[0]
+
+    def _block(self, block):
+        """Block 0 (horizontal pairs) or 1 (vertical pairs), flat."""
+        H, W = self.grid_shape
+        planes = self.planes
+        weights = np.zeros((H, W))  # the distances; the last column / row: no pair, distance 0, weight 1
+        if block == 0:
+            weights[:, :-1] = _plane_norm(planes[:, :, 1:], planes[:, :, :-1])
+        else:
+            weights[:-1] = _plane_norm(planes[:, 1:], planes[:, :-1])
+        weights *= -self.kappa
+        np.exp(weights, out=weights)
+        weights = weights.ravel()
+        if self.factor is not None:
+            n = H * W
+            weights *= self.factor[block * n:(block + 1) * n]
+        return weights
+
+    def __array__(self, dtype=None, copy=None):
+        out = np.concatenate([self._block(0), self._block(1)])
+        return out if dtype is None else out.astype(dtype, copy=False)
+
+    def __getitem__(self, key):
+        n = self.shape[0] // 2
+        if isinstance(key, slice) and key.step in (None, 1):
+            start, stop, _ = key.indices(self.shape[0])
+            if stop > start and start // n == (stop - 1) // n:  # within one block
+                block = start // n
+                return self._block(block)[start - block * n:stop - block * n]
+        return np.asarray(self)[key]
+
+    def __repr__(self):
+        return f"PairEdgeWeights(grid_shape={self.grid_shape}, kappa={self.kappa})"
+
+
+def _plane_norm(first, second):
+    """``‖first − second‖`` over the first axis (channel planes), summed channel by channel as :func:`_channel_norm`.
+
+    One channel's difference at a time (two images of work, whatever the number of channels).
+    """
+    total = np.subtract(first[0], second[0])
+    total *= total
+    difference = np.empty_like(total)
+    for channel in range(1, first.shape[0]):
+        np.subtract(first[channel], second[channel], out=difference)
+        difference *= difference
+        total += difference
+    return np.sqrt(total, out=total)
+
+
 def second_order_edge_weights(pair_weights, shape) -> np.ndarray:
     """Row weights for :func:`~sparsedepth.grid.operators.hessian_operator` from pair weights.
 
@@ -170,13 +268,82 @@ def second_order_edge_weights(pair_weights, shape) -> np.ndarray:
     ndarray, shape (3*H*W,)
     """
     H, W = check_grid_shape(shape)
-    wx = np.asarray(pair_weights[: H * W]).reshape(H, W)
+    return np.concatenate([_second_order_block(pair_weights, (H, W), b) for b in range(3)])
+
+
+def _second_order_block(pair_weights, shape, block):
+    """Block ``block`` (0: ``∂xx``, 1: ``∂yy``, 2: ``∂xy``) of :func:`second_order_edge_weights`, flat."""
+    H, W = shape
+    if block == 0:
+        wx = np.asarray(pair_weights[: H * W]).reshape(H, W)
+        wxx = wx.copy()
+        wxx[:, 1:] = np.minimum(wx[:, 1:], wx[:, :-1])
+        return wxx.ravel()
     wy = np.asarray(pair_weights[H * W :]).reshape(H, W)
-    wxx = wx.copy()
-    wxx[:, 1:] = np.minimum(wx[:, 1:], wx[:, :-1])
-    wyy = wy.copy()
-    wyy[1:, :] = np.minimum(wy[1:, :], wy[:-1, :])
+    if block == 1:
+        wyy = wy.copy()
+        wyy[1:, :] = np.minimum(wy[1:, :], wy[:-1, :])
+        return wyy.ravel()
+    wx = np.asarray(pair_weights[: H * W]).reshape(H, W)
     wxy = np.minimum(wx, wy)
     wxy[:-1, :] = np.minimum(wxy[:-1, :], wx[1:, :])
     wxy[:, :-1] = np.minimum(wxy[:, :-1], wy[:, 1:])
-    return np.concatenate([wxx.ravel(), wyy.ravel(), wxy.ravel()])
+    return wxy.ravel()
+
+
+class SecondOrderEdgeWeights:
+    """:func:`second_order_edge_weights` of ``pair_weights`` as row weights that are computed when read.
+
+    A term's rows are read a block at a time (``weights[b*H*W:(b+1)*H*W]``, or
+    a part of one block): such a slice is computed from the pair weights on
+    request, so nothing but the pair weights (which the first-order image term
+    keeps anyway) is held (8 MP: 190 MB less).  ``np.asarray(weights)`` and any
+    other index give the whole array of :func:`second_order_edge_weights`; the
+    numbers are the same either way.
+
+    Parameters
+    ----------
+    pair_weights : ndarray or PairEdgeWeights, shape (2*H*W,)
+        From :func:`pair_edge_weights` (kept by reference, not copied), or a
+        :class:`PairEdgeWeights` (read a block at a time).
+    shape : tuple of int
+        ``(H, W)``.
+
+    Attributes
+    ----------
+    shape : tuple of int
+        ``(3*H*W,)``.
+    ndim : int
+    dtype : numpy.dtype
+    """
+
+    ndim = 1
+
+    def __init__(self, pair_weights, shape):
+        self.grid_shape = check_grid_shape(shape)
+        n = self.grid_shape[0] * self.grid_shape[1]
+        self.pair_weights = pair_weights if isinstance(pair_weights, PairEdgeWeights) else np.asarray(pair_weights)
+        if self.pair_weights.shape != (2 * n,):
+            raise ValueError(f"pair_weights must have shape ({2 * n},) for a grid of shape {self.grid_shape}, got "
+                             f"{self.pair_weights.shape}")
+        self.shape = (3 * n,)
+        self.dtype = self.pair_weights.dtype
+
+    def __len__(self):
+        return self.shape[0]
+
+    def __array__(self, dtype=None, copy=None):
+        out = second_order_edge_weights(self.pair_weights, self.grid_shape)
+        return out if dtype is None else out.astype(dtype, copy=False)
+
+    def __getitem__(self, key):
+        n = self.shape[0] // 3
+        if isinstance(key, slice) and key.step in (None, 1):
+            start, stop, _ = key.indices(self.shape[0])
+            if stop > start and start // n == (stop - 1) // n:  # within one block
+                block = start // n
+                return _second_order_block(self.pair_weights, self.grid_shape, block)[start - block * n:stop - block * n]
+        return np.asarray(self)[key]
+
+    def __repr__(self):
+        return f"SecondOrderEdgeWeights(grid_shape={self.grid_shape})"

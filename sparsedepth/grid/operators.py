@@ -273,6 +273,16 @@ class StencilOperator:
             target[_shifted(region, offset)] += coef * src
         return out
 
+    def row_pieces(self, z):
+        """``K z`` in pieces ``(rows, values)`` that cover every row once (``rows`` a slice): here one block each.
+
+        ``values`` is a work array the next piece reuses (copy it to keep it).
+        """
+        n = self.shape[1]
+        work = np.empty(n)
+        for b in range(len(self.blocks)):
+            yield slice(b * n, (b + 1) * n), self.block_matvec(z, b, out=work)
+
     def matvec(self, z):
         """``K z`` for a vector of length ``H * W``; returns length ``n_blocks * H * W``."""
         n = self.shape[1]
@@ -304,7 +314,7 @@ class StencilOperator:
                     out.add((ok[0] - oi[0], ok[1] - oi[1]))
         return sorted(out)
 
-    def add_normal_stencil(self, stencil, offsets, row_weights=None, scale=1.0):
+    def add_normal_stencil(self, stencil, offsets, row_weights=None, scale=1.0, *, symmetric=False):
         r"""Accumulate ``scale · Kᵀ diag(r) K`` into stencil images, in place.
 
         Row ``p`` of block ``b`` contributes
@@ -319,10 +329,14 @@ class StencilOperator:
             ``stencil[j, y, x]`` is the coupling of pixel ``(y, x)`` with
             ``(y, x) + offsets[j]``; updated in place.
         offsets : list of tuple of int
-            Must contain :meth:`offsets`.
+            Must contain :meth:`offsets` (with ``symmetric``: those ``>= (0, 0)``).
         row_weights : ndarray, shape (n_blocks * H * W,), optional
             ``r`` (default ones).
         scale : float
+        symmetric : bool, default False
+            Write only the couplings at offsets ``>= (0, 0)`` (the stored half
+            of a :class:`~sparsedepth.grid.stencil.SymmetricStencil`); the
+            others are their mirrors (the pair of taps taken the other way round).
         """
         slot = {o: j for j, o in enumerate(offsets)}
         H, W = self.grid_shape
@@ -333,7 +347,10 @@ class StencilOperator:
             for oi, ci in block:
                 target = _shifted(region, oi)
                 for ok, ck in block:
-                    view = stencil[slot[(ok[0] - oi[0], ok[1] - oi[1])]][target]
+                    offset = (ok[0] - oi[0], ok[1] - oi[1])
+                    if symmetric and offset < (0, 0):
+                        continue
+                    view = stencil[slot[offset]][target]
                     if rb is None:
                         view += scale * ci * ck
                     else:

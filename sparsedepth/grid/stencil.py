@@ -436,18 +436,33 @@ class SymmetricStencil:
         H, W = self.grid_shape
         ny, nx = len(range(py, H, 2)), len(range(px, W, 2))
         out = np.zeros((len(self.offsets), ny, nx), dtype=self.dtype)
-        for k, (dy, dx) in enumerate(self.offsets):
-            iy = _class_range(py, H, dy)
-            ix = _class_range(px, W, dx)
-            if iy is None or ix is None:
-                continue
-            ys = slice(py + 2 * iy.start, py + 2 * (iy.stop - 1) + 1, 2)
-            xs = slice(px + 2 * ix.start, px + 2 * (ix.stop - 1) + 1, 2)
-            if _upper((dy, dx)):
-                out[k, iy, ix] = self.images[self._slot[(dy, dx)]][ys, xs]
-            else:
-                src = self.images[self._slot[(-dy, -dx)]]
-                out[k, iy, ix] = src[ys.start + dy:ys.stop + dy:2, xs.start + dx:xs.stop + dx:2]
+        for k, offset in enumerate(self.offsets):
+            self.class_image(offset, py, px, out=out[k])
+        return out
+
+    def class_image(self, offset, py, px, out=None):
+        """Coefficients of ``offset`` on the pixels ``(py::2, px::2)`` (0 where the neighbour is outside).
+
+        Without ``out``, a view of the stored image for an offset ``>= (0, 0)`` (no copy: its entries outside
+        the grid are 0), else a new array.
+        """
+        H, W = self.grid_shape
+        dy, dx = offset
+        if out is None and _upper(offset):
+            return self.images[self._slot[offset]][py::2, px::2]
+        if out is None:
+            out = np.zeros((len(range(py, H, 2)), len(range(px, W, 2))), dtype=self.dtype)
+        iy = _class_range(py, H, dy)
+        ix = _class_range(px, W, dx)
+        if iy is None or ix is None:
+            return out
+        ys = slice(py + 2 * iy.start, py + 2 * (iy.stop - 1) + 1, 2)
+        xs = slice(px + 2 * ix.start, px + 2 * (ix.stop - 1) + 1, 2)
+        if _upper(offset):
+            out[iy, ix] = self.images[self._slot[offset]][ys, xs]
+        else:
+            src = self.images[self._slot[(-dy, -dx)]]
+            out[iy, ix] = src[ys.start + dy:ys.stop + dy:2, xs.start + dx:xs.stop + dx:2]
         return out
 
     def diagonal(self):
@@ -456,29 +471,48 @@ class SymmetricStencil:
 
     def matvec(self, x, out=None):
         """``A x`` for a vector of ``H W`` values (in the precision of ``x`` and the images combined)."""
-        x = np.asarray(x)
-        if x.ndim != 1 or x.shape[0] != self.shape[1]:
-            raise ValueError(f"expected a vector of length {self.shape[1]} (grid {self.grid_shape}), got shape "
-                             f"{x.shape}")
+        img = self._as_image(x)
         H, W = self.grid_shape
-        dtype = np.result_type(self.dtype, x.dtype)
+        dtype = np.result_type(self.dtype, img.dtype)
         y = np.zeros(H * W, dtype=dtype) if out is None else out
-        img = x.reshape(H, W)
         res = y.reshape(H, W)
         if out is not None:
             res[...] = 0
         tmp = np.empty((min(self._band, H), W), dtype=dtype)
         for y0 in range(0, H, self._band):
             y1 = min(H, y0 + self._band)
-            for o in self.offsets:
-                pair = _pair_slices(o, self.grid_shape, (y0, y1))
-                if pair is None:
-                    continue
-                target, source = pair
-                t = tmp[:target[0].stop - target[0].start, :target[1].stop - target[1].start]
-                np.multiply(self.coefficients(o, target), img[source], out=t)
-                res[target] += t
+            self._add_rows_product(img, y0, y1, res[y0:y1], tmp)
         return y
+
+    def matvec_rows(self, x, y0, y1):
+        """Image rows ``y0:y1`` of ``A x``, shape ``(y1 − y0, W)`` (the same numbers as those rows of :meth:`matvec`)."""
+        img = self._as_image(x)
+        W = self.grid_shape[1]
+        dtype = np.result_type(self.dtype, img.dtype)
+        out = np.zeros((y1 - y0, W), dtype=dtype)
+        tmp = np.empty((min(self._band, y1 - y0), W), dtype=dtype)
+        for b0 in range(y0, y1, self._band):
+            b1 = min(y1, b0 + self._band)
+            self._add_rows_product(img, b0, b1, out[b0 - y0:b1 - y0], tmp)
+        return out
+
+    def _as_image(self, x):
+        x = np.asarray(x)
+        if x.ndim != 1 or x.shape[0] != self.shape[1]:
+            raise ValueError(f"expected a vector of length {self.shape[1]} (grid {self.grid_shape}), got shape "
+                             f"{x.shape}")
+        return x.reshape(self.grid_shape)
+
+    def _add_rows_product(self, img, y0, y1, rows, tmp):
+        """``rows += (A x)[y0:y1]`` (``rows`` the ``(y1 − y0, W)`` result rows), one offset after the other."""
+        for o in self.offsets:
+            pair = _pair_slices(o, self.grid_shape, (y0, y1))
+            if pair is None:
+                continue
+            target, source = pair
+            t = tmp[:target[0].stop - target[0].start, :target[1].stop - target[1].start]
+            np.multiply(self.coefficients(o, target), img[source], out=t)
+            rows[target[0].start - y0:target[0].stop - y0, target[1]] += t
 
     def __matmul__(self, x):
         if np.ndim(x) == 2 and np.shape(x)[1] == 1:

@@ -201,9 +201,9 @@ def _cg_cycle(A, x, r, prec, target2, maxiter, norms, notify, stop=None):
         if not pq > 0:
             return False
         step = rz / pq
-        x += step * p
         q *= step
         r -= q
+        x += np.multiply(p, step, out=q)  # q's buffer holds step p: no work vector of its own
         del q
         rr = dot(r, r)
         norms.append(math.sqrt(rr))

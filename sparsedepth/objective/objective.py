@@ -34,8 +34,8 @@ import scipy.sparse as sp
 from .._validation import as_depth_and_mask, as_float_image, check_positive_real, check_same_shape
 from ..baselines import nearest_fill
 from ..grid.affinity import local_linear_operator
-from ..grid.edges import (edge_weights, image_gradient_magnitude, pair_edge_weights, second_order_edge_weights,
-                          smoothed_image)
+from ..grid.edges import (PairEdgeWeights, SecondOrderEdgeWeights, edge_weights, image_gradient_magnitude,
+                          pair_edge_weights, second_order_edge_weights, smoothed_image)
 from ..grid.geodesic import geodesic_fill
 from ..grid.operators import StencilOperator, gradient_stencil, hessian_stencil
 from ..grid.stencil import SymmetricStencil, stencil_to_csr
@@ -181,20 +181,24 @@ class Objective:
             multiply by ``A`` and precondition it
             (:func:`~sparsedepth.linalg.krylov.pcg`,
             :func:`~sparsedepth.linalg.preconditioners.make_preconditioner`);
-            the CSR array instead when it is already cached, when a term's
-            operator is a general sparse matrix, or when the assembled stencil
-            is not exactly (bit for bit) symmetric.
+            the CSR array instead when it is already cached or when a term's
+            operator is a general sparse matrix.
 
         Notes
         -----
         ``A`` is assembled as a stencil (:meth:`normal_stencil`: one
         coefficient image per neighbour offset, one whole-array operation per
-        pair of taps of each term's operator) and converted once to CSR in
-        the full in-grid pattern of :func:`~sparsedepth.grid.stencil.stencil_to_csr`,
-        which the multigrid set-up reads back without sparse diagonal
-        extraction.  Terms whose operator is a general sparse matrix are
-        added as ``K^T diag(r) K`` products.  Both forms multiply a vector
-        bit for bit alike.  One form is cached: asking for ``"csr"`` after
+        pair of taps of each term's operator).  The CSR form is that stencil
+        converted once to the full in-grid pattern of
+        :func:`~sparsedepth.grid.stencil.stencil_to_csr`, which the multigrid
+        set-up reads back without sparse diagonal extraction; terms whose
+        operator is a general sparse matrix are added as ``K^T diag(r) K``
+        products.  The stencil form is assembled directly as the images of the
+        offsets ``>= (0, 0)`` (each term writes only the couplings it stores:
+        13 images of the 25-point system, not 25): the same numbers as those
+        images of the full stencil.  Every term writes a coupling with the same
+        value at its two places (the full stencil is exactly symmetric), so
+        both forms multiply a vector bit for bit alike.  One form is cached: asking for ``"csr"`` after
         ``"stencil"`` converts the cached stencil and caches the CSR array
         instead.
         """
@@ -206,11 +210,10 @@ class Objective:
                 self._normal = (A.tocsr(), b, c)
             return self._normal
         n = self.size
-        offsets, stencil, general = self._stencil_parts(separate=form == "stencil")
-        A = None
+        offsets, stencil, general = self._stencil_parts(symmetric=form == "stencil")
         if form == "stencil" and not general:
-            A = SymmetricStencil.from_stencil(offsets, stencil, copy=False)
-        if A is None:
+            A = SymmetricStencil(offsets, stencil)
+        else:
             A = stencil_to_csr(offsets, stencil)
         del stencil
         for t in general:
@@ -257,11 +260,11 @@ class Objective:
             raise ValueError(f"terms {[t.name for t in general]} have general sparse operators; no stencil form")
         return offsets, stencil
 
-    def _stencil_parts(self, separate=False):
+    def _stencil_parts(self, symmetric=False):
         """Stencil of the stencil-form terms, and the list of the other quadratic terms.
 
-        With ``separate`` the stencil is a list of ``(H, W)`` images instead of one array, so that the images a
-        caller no longer needs can be freed one by one.
+        With ``symmetric`` and no other terms, the stencil holds only the images of the offsets ``>= (0, 0)``
+        (the stored half of a :class:`~sparsedepth.grid.stencil.SymmetricStencil`), written directly.
         """
         offsets = {(0, 0)}
         stencil_terms, general = [], []
@@ -274,17 +277,18 @@ class Objective:
             else:
                 general.append(t)
         offsets = sorted(offsets)
-        if separate:
-            stencil = [np.zeros(self.shape) for _ in offsets]
-        else:
-            stencil = np.zeros((len(offsets),) + self.shape)
-        centre = offsets.index((0, 0))
+        symmetric = symmetric and not general
+        stored = [o for o in offsets if o >= (0, 0)] if symmetric else offsets
+        stencil = np.zeros((len(stored),) + self.shape)
+        centre = stored.index((0, 0))
         for t in stencil_terms:
             if t.operator is None:
                 r = 1.0 if t.row_weights is None else np.asarray(t.row_weights).reshape(self.shape)
                 stencil[centre] += t.weight * r
+            elif symmetric:
+                t.operator.add_normal_stencil(stencil, stored, t.row_weights, t.weight, symmetric=True)
             else:
-                t.operator.add_normal_stencil(stencil, offsets, t.row_weights, t.weight)
+                t.operator.add_normal_stencil(stencil, stored, t.row_weights, t.weight)
         return offsets, stencil, general
 
     def _flat(self, z):
@@ -356,16 +360,22 @@ def build_objective(
     else:
         coarse = nearest_fill(depth, observed)
     w = edge_weights(img, weights.kappa).ravel() if weights.gamma > 0 else None
-    pair = pair_edge_weights(img, weights.kappa) if (weights.beta_image > 0 or weights.beta_second_image > 0) else None
+    # with the local-linear term, the blurred image is kept once, as the channel planes that term reads, and the
+    # pair weights are computed from them when read (PairEdgeWeights: the numbers of pair_edge_weights)
+    planes = np.ascontiguousarray(np.moveaxis(img, -1, 0)) if weights.beta_local_linear > 0 else None
+    pair = None
+    if weights.beta_image > 0 or weights.beta_second_image > 0:
+        pair = pair_edge_weights(img, weights.kappa) if planes is None else PairEdgeWeights(planes, weights.kappa)
     if pair is not None and pair_factor is not None:
         factor = np.asarray(pair_factor, dtype=np.float64)
         if factor.shape != pair.shape or not np.all((factor >= 0) & (factor <= 1)):
             raise ValueError(f"pair_factor must be {pair.shape[0]} values in [0, 1] (one per pixel pair); got shape "
                              f"{factor.shape}")
-        pair = pair * factor
+        pair = pair * factor if planes is None else PairEdgeWeights(planes, weights.kappa, factor)
     G = gradient_stencil(shape)
     hessian = hessian_stencil(shape) if (weights.beta_second > 0 or weights.beta_second_image > 0) else None
-    w2 = None if weights.beta_second_image == 0 else second_order_edge_weights(pair, shape)
+    # computed from the pair weights block by block when read: not held beside them
+    w2 = None if weights.beta_second_image == 0 else SecondOrderEdgeWeights(pair, shape)
     terms = [
         QuadraticTerm("data", weights.alpha, None, observed.reshape(-1), depth.ravel()),  # bool weights: 1/8 memory
         QuadraticTerm("smooth", weights.beta, G),
@@ -377,7 +387,8 @@ def build_objective(
     ]
     if weights.beta_local_linear > 0:  # no term at weight 0: the objective and its term list stay as without it
         terms.append(QuadraticTerm("local_linear", weights.beta_local_linear,
-                                   local_linear_operator(img, weights.local_linear_eps)))
+                                   local_linear_operator(np.moveaxis(planes, 0, -1), weights.local_linear_eps,
+                                                         copy=False)))
     quad_smooth = (weights.beta > 0 or weights.beta_image > 0 or weights.beta_second > 0
                    or weights.beta_second_image > 0 or weights.beta_local_linear > 0)
     if weights.delta == 0 and (weights.alpha == 0 or not (quad_smooth or weights.gamma > 0)):

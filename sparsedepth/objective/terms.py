@@ -52,7 +52,10 @@ class QuadraticTerm:
         stencil.
     row_weights : ndarray of shape (m,), or None
         ``r >= 0`` (float, or bool for a 0/1 selection such as the data
-        term's observation mask); ``None`` means all ones.
+        term's observation mask); ``None`` means all ones.  An object with
+        ``shape``, slicing and ``__array__`` (e.g.
+        :class:`~sparsedepth.grid.edges.PairEdgeWeights`, computed when read)
+        serves as well: the term reads it a block of rows at a time.
     target : ndarray of shape (m,), or None
         ``d``; ``None`` means zeros.
     """
@@ -82,12 +85,27 @@ class QuadraticTerm:
                 work -= self.target[rows]
             yield rows, work
 
+    def _residual_pieces(self, z):
+        """``(rows, K_rows z − d_rows)`` in the pieces of the operator's ``row_pieces`` (a StencilOperator).
+
+        Every piece is an array the caller may overwrite.
+        """
+        K = self.operator
+        if not isinstance(K, StencilOperator):
+            residual = self.residual(z)
+            yield slice(None), (residual.copy() if np.shares_memory(residual, z) else residual)
+            return
+        for rows, values in K.row_pieces(z):
+            if self.target is not None:
+                values -= self.target[rows]
+            yield rows, values
+
     def value(self, z) -> float:
         if self.weight == 0:
             return 0.0
         total = 0.0
-        for rows, res in self._block_residuals(z):
-            sq = res * res
+        for rows, res in self._residual_pieces(z):
+            sq = np.multiply(res, res, out=res)  # each piece is a work array of its own: squared in place
             if self.row_weights is not None:
                 sq *= self.row_weights[rows]
             total += float(np.sum(sq))
@@ -100,7 +118,7 @@ class QuadraticTerm:
         if not isinstance(self.operator, StencilOperator):
             res = self.residual(z)
             if self.row_weights is not None:
-                res = res * self.row_weights
+                res = res * np.asarray(self.row_weights)
             return 2.0 * self.weight * _apply_adjoint(self.operator, res)
         grad = np.zeros(self.operator.shape[1])
         for b, (rows, res) in enumerate(self._block_residuals(z)):
@@ -112,7 +130,8 @@ class QuadraticTerm:
 
     def normal_matrix(self, n: int) -> sp.csr_matrix:
         """Half the Hessian: ``weight · Kᵀ diag(r) K`` (sparse, ``(n, n)``)."""
-        r = np.ones(n if self.operator is None else self.operator.shape[0]) if self.row_weights is None else self.row_weights
+        r = (np.ones(n if self.operator is None else self.operator.shape[0]) if self.row_weights is None
+             else np.asarray(self.row_weights))
         if self.operator is None:
             return sp.diags(self.weight * r, format="csr")
         K = self.operator
@@ -127,7 +146,7 @@ class QuadraticTerm:
         """``weight · Kᵀ (r ⊙ d)``: the right-hand side contribution."""
         if self.target is None or self.weight == 0:
             return np.zeros(n)
-        d = self.target if self.row_weights is None else self.row_weights * self.target
+        d = self.target if self.row_weights is None else np.asarray(self.row_weights) * self.target
         return self.weight * _apply_adjoint(self.operator, d)
 
     def constant(self) -> float:
@@ -136,7 +155,7 @@ class QuadraticTerm:
             return 0.0
         d2 = self.target**2
         if self.row_weights is not None:
-            d2 = d2 * self.row_weights
+            d2 = d2 * np.asarray(self.row_weights)
         return float(self.weight * np.sum(d2))
 
 

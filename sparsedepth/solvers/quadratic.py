@@ -145,6 +145,7 @@ def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner, depth_
     rule = None if depth_tol is None else RemainingChange(b.size, depth_tol)
     z, n, converged, rel = pcg(A, b, x0=x0, M=M, rtol=tol, maxiter=max_iter, callback=cb, callback_residual=True,
                                stop=rule)
+    del M  # the hierarchy goes before the objective is evaluated: peak memory of 8-MP frames
     if values and recorder.history and recorder.history[-1].iteration == n and n > 0:
         recorder.set_last_value(objective.value(z))
     residual = f"relative residual {rel:.2e} {'<=' if converged else '>'} tol {tol:.1e}"

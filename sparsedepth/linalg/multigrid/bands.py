@@ -23,20 +23,87 @@ import numpy as np
 import scipy.sparse as sp
 from pyamg import amg_core
 
-from ...grid.stencil import SymmetricStencil
+from ...grid.stencil import SymmetricStencil, stencil_to_csr
 
-__all__ = ["BandedStencil"]
+__all__ = ["BandedStencil", "FullStencil"]
 
 #: values per band buffer (rows x columns x offsets): 1 MB in float64, a few rows of a large image
 _BAND_VALUES = 1 << 17
 
 
-class BandedStencil:
-    """A :class:`~sparsedepth.grid.stencil.SymmetricStencil` applied in precision ``dtype`` through band-wise CSR.
+class FullStencil:
+    """A grid operator stored as the coefficient images of all its offsets (see :mod:`sparsedepth.grid.stencil`).
+
+    The form of a large coarse level whose coefficients are not exactly
+    symmetric once rounded to its precision (so that
+    :class:`~sparsedepth.grid.stencil.SymmetricStencil` cannot hold it): the
+    values of its CSR form without the index arrays (a 25-point float32 level
+    of 2 megapixels: 200 MB instead of 400 MB), swept and multiplied band by
+    band by :class:`BandedStencil`.
 
     Parameters
     ----------
-    A : SymmetricStencil
+    offsets : list of tuple of int
+        Distinct offsets, sorted.
+    stencil : ndarray (len(offsets), H, W) or list of (H, W) arrays
+        One image per offset; entries whose neighbour lies outside the grid
+        are ignored (stored as 0).  A list is consumed: each entry is set to
+        None once stored, so that its image can be freed.
+    dtype : numpy dtype
+        Precision of the stored images.
+
+    Attributes
+    ----------
+    offsets : list of tuple of int
+    data : ndarray (len(offsets), H, W)
+    grid_shape, shape : tuple of int
+    dtype : numpy.dtype
+    nnz : int
+        Entries of the full in-grid pattern (what :meth:`tocsr` stores).
+    """
+
+    format = "stencil"
+
+    def __init__(self, offsets, stencil, dtype):
+        self.offsets = [(int(dy), int(dx)) for dy, dx in offsets]
+        H, W = self.grid_shape = tuple(np.shape(stencil[0]))
+        self.data = np.empty((len(self.offsets), H, W), dtype=dtype)
+        for k, (dy, dx) in enumerate(self.offsets):
+            inside = np.zeros((H, W), dtype=bool)
+            inside[max(0, -dy):max(0, H - dy), max(0, -dx):max(0, W - dx)] = True
+            np.copyto(self.data[k], stencil[k], casting="unsafe")
+            self.data[k][~inside] = 0
+            if isinstance(stencil, list):
+                stencil[k] = None
+        self.dtype = self.data.dtype
+        self.shape = (H * W, H * W)
+
+    @property
+    def nnz(self):
+        H, W = self.grid_shape
+        return sum(max(0, H - abs(dy)) * max(0, W - abs(dx)) for dy, dx in self.offsets)
+
+    def diagonal(self):
+        """The main diagonal as a new ``(H W,)`` array."""
+        return self.data[self.offsets.index((0, 0))].reshape(-1).copy()
+
+    def tocsr(self, dtype=None):
+        """The CSR form in the full in-grid pattern of :func:`~sparsedepth.grid.stencil.stencil_to_csr`."""
+        return stencil_to_csr(self.offsets, self.data, dtype=self.dtype if dtype is None else dtype)
+
+    def __matmul__(self, x):
+        return BandedStencil(self, self.dtype) @ x
+
+    def __repr__(self):
+        return f"FullStencil(grid_shape={self.grid_shape}, offsets={len(self.offsets)}, dtype={self.dtype})"
+
+
+class BandedStencil:
+    """A :class:`~sparsedepth.grid.stencil.SymmetricStencil` or :class:`FullStencil` applied through band-wise CSR.
+
+    Parameters
+    ----------
+    A : SymmetricStencil or FullStencil
         The operator; its images are read (and cast) band by band, never copied whole.
     dtype : numpy dtype
         Precision of the sweeps and products (float32 or float64).
@@ -50,8 +117,8 @@ class BandedStencil:
     """
 
     def __init__(self, A, dtype):
-        if not isinstance(A, SymmetricStencil):
-            raise TypeError(f"`A` must be a SymmetricStencil, got {type(A).__name__}")
+        if not isinstance(A, (SymmetricStencil, FullStencil)):
+            raise TypeError(f"`A` must be a SymmetricStencil or a FullStencil, got {type(A).__name__}")
         self.stencil = A
         self.dtype = np.dtype(dtype)
         self.shape = A.shape
@@ -98,12 +165,16 @@ class BandedStencil:
         """
         A = self.stencil
         H, W = self.grid_shape
-        lead = self.radius * (W + 1)  # the farthest a lower offset reaches back
+        symmetric = isinstance(A, SymmetricStencil)
+        lead = self.radius * (W + 1) if symmetric else 0  # the farthest a lower offset reaches back
         start = y0 * W - lead
         key = (y1 - y0, None if start >= 0 else y0)
         if key not in self._gathers:
-            slot = np.array([A._slot[o] if o >= (0, 0) else A._slot[(-o[0], -o[1])] for o in A.offsets])
-            shift = np.array([0 if o >= (0, 0) else o[0] * W + o[1] for o in A.offsets])
+            if symmetric:
+                slot = np.array([A._slot[o] if o >= (0, 0) else A._slot[(-o[0], -o[1])] for o in A.offsets])
+                shift = np.array([0 if o >= (0, 0) else o[0] * W + o[1] for o in A.offsets])
+            else:  # every offset has its own image
+                slot, shift = np.arange(len(A.offsets)), np.zeros(len(A.offsets), dtype=int)
             base = slot * (H * W) + shift + lead + (0 if start >= 0 else start)
             r = np.arange(y1 - y0)[:, None, None]
             x = np.arange(W)[None, :, None]
@@ -134,22 +205,34 @@ class BandedStencil:
 
     # ---- operations ---------------------------------------------------------
     def gauss_seidel(self, x, b, sweeps=1, *, backward=False):
-        """``sweeps`` Gauss--Seidel sweeps on ``A x = b`` (forward, or last row first), updating ``x`` in place."""
+        """``sweeps`` Gauss--Seidel sweeps on ``A x = b`` (forward, or last row first), updating ``x`` in place.
+
+        Each band copies its rows of ``b`` and its rows of ``x`` with ``R`` more on each side into a small
+        zero-padded buffer, is swept there and copied back before the next band reads ``x``: the same
+        operations as a sweep over whole padded copies, without them.
+        """
         H, W = self.grid_shape
         R, wp = self.radius, self._wp
-        xp = self._padded(x)
-        bp = self._padded(b)
+        xg, bg = x.reshape(H, W), b.reshape(H, W)
+        xp = np.zeros((self._rows + 2 * R, wp), dtype=self.dtype)
+        bp = np.zeros_like(xp)
         for _ in range(sweeps):
             for y0, y1 in self._bands(reverse=backward):
                 indptr, indices, _ = self._pattern(y1 - y0)
                 data = self._fill(y0, y1)
+                rows = y1 - y0 + 2 * R
+                lo, hi = max(0, y0 - R), min(H, y1 + R)  # the grid rows of x the band reads
+                xb, bb = xp[:rows], bp[:rows]
+                xb[...] = 0
+                xb[lo - y0 + R:hi - y0 + R, R:R + W] = xg[lo:hi]
+                bb[R:R + y1 - y0, R:R + W] = bg[y0:y1]
                 first, stop = R * wp, (R + y1 - y0) * wp
-                xv, bv = self._view(xp, y0, y1), self._view(bp, y0, y1)
+                xv, bv = xb.reshape(-1), bb.reshape(-1)
                 if backward:
                     amg_core.gauss_seidel(indptr, indices, data, xv, bv, stop - 1, first - 1, -1)
                 else:
                     amg_core.gauss_seidel(indptr, indices, data, xv, bv, first, stop, 1)
-        x.reshape(H, W)[...] = xp[R:R + H, R:R + W]
+                xg[y0:y1] = xb[R:R + y1 - y0, R:R + W]
         return x
 
     def matvec(self, x):
@@ -165,7 +248,7 @@ class BandedStencil:
         if x.shape[0] != self.shape[1]:
             raise ValueError(f"expected a vector of length {self.shape[1]} (grid {self.grid_shape}), got "
                              f"{x.shape[0]}")
-        if x.dtype == self.dtype == self.stencil.dtype:
+        if x.dtype == self.dtype == self.stencil.dtype and isinstance(self.stencil, SymmetricStencil):
             return self.stencil.matvec(x)
         xp = self._padded(x)
         out = np.empty((H, W), dtype=self.dtype)

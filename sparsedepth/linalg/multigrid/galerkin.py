@@ -30,8 +30,12 @@ def galerkin_offsets(offsets):
     return sorted(out)
 
 
-def galerkin_stencil(offsets, source, interp, shape, coarse_offsets):
+def galerkin_stencil(offsets, source, interp, shape, coarse_offsets, *, as_list=False):
     r"""Coarse stencil of :math:`P^\top A P` by parity-class stencil arithmetic.
+
+    Returns an array ``(len(coarse_offsets), hc, wc)``, or with ``as_list`` a
+    list of ``(hc, wc)`` images, each its own allocation (a caller that
+    converts them one by one can free each once converted).
 
     For a fine pixel :math:`i = (2Y+p_y, 2X+p_x)`, neighbour offset
     :math:`o = (d_y, d_x)` and parents :math:`e, f \in \{0,1\}^2`,
@@ -58,7 +62,10 @@ def galerkin_stencil(offsets, source, interp, shape, coarse_offsets):
     pad = (radius + 1) // 2
     slot = {d: i for i, d in enumerate(coarse_offsets)}
     separable = interp.full is None
-    acc = np.zeros((len(coarse_offsets), hc + 1, wc + 1))
+    if as_list:
+        acc = [np.zeros((hc + 1, wc + 1)) for _ in coarse_offsets]
+    else:
+        acc = np.zeros((len(coarse_offsets), hc + 1, wc + 1))
     padded = {}
     for ry in (0, 1):
         for rx in (0, 1):
@@ -72,7 +79,9 @@ def galerkin_stencil(offsets, source, interp, shape, coarse_offsets):
             # parent (0, 0) of a class-(0, 0) pixel is the pixel itself: weight 1
             own = {(ey, ex): (None if py == px == 0 else interp.cls(ey, ex, py, px))
                    for ey in range(py + 1) for ex in range(px + 1)}
-            _add_class(acc, slot, source.parity_class(py, px), terms, own, padded, pad, separable)
+            _add_class(acc, slot, source.class_images(py, px), terms, own, padded, pad, separable)
+    if as_list:
+        return [image[:hc, :wc] for image in acc]
     return acc[:, :hc, :wc]
 
 
@@ -113,7 +122,7 @@ def _add_class(acc, slot, Ssub, terms, own, padded, pad, separable):
             if n_term:
                 ap += tmp
         for (ey, ex), we in own.items():
-            view = acc[slot[(Ey - ey, Ex - ex)], ey: ey + ny, ex: ex + nx]
+            view = acc[slot[(Ey - ey, Ex - ex)]][ey: ey + ny, ex: ex + nx]
             if we is None:
                 view += ap
             else:

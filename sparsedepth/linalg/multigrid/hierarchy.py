@@ -19,7 +19,7 @@ import scipy.sparse.linalg as spla
 
 from ..._validation import as_grid_operator, check_grid_shape
 from ...grid.stencil import SymmetricStencil, full_pattern_offsets, stencil_to_csr
-from .bands import BandedStencil
+from .bands import BandedStencil, FullStencil
 from .galerkin import galerkin_offsets, galerkin_stencil
 from .iteration import preconditioned_cg, prepare_rhs, vcycle_iteration
 from .interpolation import bilinear_weights, operator_weights
@@ -43,8 +43,9 @@ _SINGLE_FINE_VALUES = 1 << 26
 # time, which keeps the 8-MP set-up's memory low but reads most classes twice.
 _KEEP_STENCIL_PIXELS = 1 << 21
 #: With a fine SymmetricStencil smoothed in float64 (above _SINGLE_FINE_VALUES: the frames whose memory counts),
-#: coarse levels of at least this many pixels are kept as float32 symmetric stencils and swept band by band
-#: (:mod:`.bands`) when their float32 coefficients are exactly symmetric; smaller levels stay CSR.
+#: coarse levels of at least this many pixels are kept as float32 stencils and swept band by band (:mod:`.bands`):
+#: symmetric ones when their float32 coefficients are exactly symmetric, else all their images; smaller levels
+#: stay CSR.
 _BANDED_COARSE_PIXELS = 1 << 18
 
 
@@ -80,7 +81,10 @@ class GridMultigrid:
         for bit alike; when its fine level is smoothed in float64 (see
         `fine_precision`) the fine sweeps read the stencil band by band and
         the coarse levels of at least ``2**18`` pixels are kept as float32
-        symmetric stencils (8 MP: about 1.2 GB less than the CSR forms).
+        stencils: symmetric ones, or all the images of a level whose float32
+        coefficients are not exactly symmetric
+        (:class:`~sparsedepth.linalg.multigrid.bands.FullStencil`), swept
+        band by band like the fine level (8 MP: about 1.2 GB less than the CSR forms).
     shape : tuple of int
         Grid shape ``(H, W)`` with ``H * W == N``.
     interpolation : {"bilinear", "operator", "auto"}, default "bilinear"
@@ -298,15 +302,22 @@ class GridMultigrid:
                 interp = bilinear_weights(fine.shape)
                 if refill_p:
                     fine.P = SeparableProlongation(fine.shape)
-            S = galerkin_stencil(fine.offsets, source, interp, fine.shape, coarse.offsets)
+            banded = self._banded and coarse.shape[0] * coarse.shape[1] >= _BANDED_COARSE_PIXELS
+            # a banded level is stored image by image from a list, each float64 image freed once stored
+            S = galerkin_stencil(fine.offsets, source, interp, fine.shape, coarse.offsets, as_list=banded)
             del source
-            symmetric = None
-            if self._banded and coarse.shape[0] * coarse.shape[1] >= _BANDED_COARSE_PIXELS:
-                symmetric = SymmetricStencil.from_stencil(coarse.offsets, S, dtype=self.coarse_dtype)
+            symmetric = (SymmetricStencil.from_stencil(coarse.offsets, S, dtype=self.coarse_dtype, copy=False)
+                         if banded else None)
             if symmetric is not None:
                 # symmetric once stored: half the images, no index arrays (8 MP: 100 MB instead of 400 MB)
                 coarse.A = symmetric
                 source = StencilSource(coarse.offsets, coarse.shape, symmetric=symmetric)
+                del S
+                continue
+            if banded:
+                # not exactly symmetric in its precision: every image, still no index arrays (half the CSR form)
+                coarse.A = FullStencil(coarse.offsets, S, self.coarse_dtype)
+                source = StencilSource(coarse.offsets, coarse.shape, array=coarse.A.data)
                 del S
                 continue
             coarse.A = stencil_to_csr(coarse.offsets, S, dtype=self.coarse_dtype)
@@ -330,7 +341,7 @@ class GridMultigrid:
                 (A.data.astype(self.fine_dtype), A.indices, A.indptr), shape=A.shape)
         # the operator each smoothed level is cycled with: the fine one in the cycle's precision, stencils band-wise
         self._cycle_ops = [self._fine_cycle_A] + [
-            BandedStencil(lvl.A, lvl.A.dtype) if isinstance(lvl.A, SymmetricStencil) else lvl.A
+            BandedStencil(lvl.A, lvl.A.dtype) if isinstance(lvl.A, (SymmetricStencil, FullStencil)) else lvl.A
             for lvl in levels[1:-1]]
         for lvl in levels[:-1]:
             self._setup_smoother(lvl)
@@ -342,7 +353,7 @@ class GridMultigrid:
 
     def _factor_coarsest(self):
         Ac = self.levels[-1].A
-        if isinstance(Ac, SymmetricStencil):  # a one-level hierarchy of a stencil
+        if isinstance(Ac, (SymmetricStencil, FullStencil)):  # a one-level hierarchy of a stencil, or a large level
             Ac = Ac.tocsr()
         self._pinv = None
         self._lu = None
@@ -438,12 +449,9 @@ class GridMultigrid:
                 gauss_seidel_forward(A, x, b, nu)
             else:
                 self._jacobi(lvl, x, b, A)
-            r = A @ x
-            np.subtract(b, r, out=r)
             xs.append(x)
             bs.append(b)
-            b = (lvl.P.T @ r).astype(self.coarse_dtype, copy=False)
-            del r  # work vectors go as soon as possible: peak memory of 8-MP frames
+            b = _restricted_residual(A, lvl.P, x, b).astype(self.coarse_dtype, copy=False)
         x = self._coarse_solve(b.astype(np.float64, copy=False)).astype(self.coarse_dtype, copy=False)
         for lvl, A, xf, bf in zip(levels[-2::-1], cycle_ops[::-1], xs[::-1], bs[::-1]):
             lvl.P.add_prolonged(xf, x)
@@ -530,7 +538,7 @@ class GridMultigrid:
         pyamg_levels = []
         for lvl in self.levels:
             L = MultilevelSolver.Level()
-            L.A = (lvl.A.tocsr(dtype=np.float64) if isinstance(lvl.A, SymmetricStencil)
+            L.A = (lvl.A.tocsr(dtype=np.float64) if isinstance(lvl.A, (SymmetricStencil, FullStencil))
                    else lvl.A.astype(np.float64, copy=False))
             if lvl.P is not None:
                 L.P = (lvl.P if sp.issparse(lvl.P) else lvl.P.tocsr()).astype(np.float64, copy=False)
@@ -589,6 +597,27 @@ class _CoarseSolve:
 
     def __repr__(self):
         return "splu" if self._mg._lu is not None else "pinv"
+
+
+def _restricted_residual(A, P, x, b):
+    """``Pᵀ (b − A x)``, the right-hand side of the next coarser level.
+
+    For the bilinear ``P`` and a symmetric stencil in its own precision (the fine level of large frames) it is
+    summed a band of rows at a time, without the fine residual (the same numbers); else through the whole
+    residual.
+    """
+    if (isinstance(P, SeparableProlongation) and isinstance(A, BandedStencil)
+            and isinstance(A.stencil, SymmetricStencil) and x.dtype == b.dtype == A.stencil.dtype):
+        rhs = b.reshape(A.grid_shape)
+
+        def residual_rows(y0, y1):
+            r = A.stencil.matvec_rows(x, y0, y1)
+            return np.subtract(rhs[y0:y1], r, out=r)
+
+        return P.restrict_rows(residual_rows, x.dtype)
+    r = A @ x
+    np.subtract(b, r, out=r)
+    return P.T @ r
 
 
 def _as_fine_operator(A, shape):

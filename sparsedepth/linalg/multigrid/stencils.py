@@ -225,12 +225,36 @@ class StencilSource:
             out[slot[o]] = part[k]
         return out
 
+    def class_images(self, py, px):
+        """:meth:`parity_class` for reading offset by offset: ``S[k]`` and ``S.shape`` as of that array.
+
+        A symmetric source hands out each image on request (:meth:`SymmetricStencil.class_image`: a view of
+        the stored images for the offsets ``>= (0, 0)``), so the class is never held whole (8 MP, 25-point: one
+        15 MB image at a time instead of 380 MB); other sources give the array.
+        """
+        if self.array is None and self.symmetric is not None and self.csr_offsets == self.offsets:
+            return _ClassImages(self.symmetric, py, px)
+        return self.parity_class(py, px)
+
     def read_whole(self):
         """Read a CSR source into one array now (the set-up asks for most classes twice)."""
         if self.array is None:
             self.array = self.parity_class(None, None)
             self.csr = self.symmetric = None
         return self
+
+
+class _ClassImages:
+    """The images of one parity class of a :class:`SymmetricStencil`, each made when it is indexed (float64)."""
+
+    def __init__(self, stencil, py, px):
+        H, W = stencil.grid_shape
+        self._stencil, self._py, self._px = stencil, py, px
+        self.shape = (len(stencil.offsets), len(range(py, H, 2)), len(range(px, W, 2)))
+
+    def __getitem__(self, k):
+        image = self._stencil.class_image(self._stencil.offsets[k], self._py, self._px)
+        return image.astype(np.float64, copy=False)
 
 
 def _pattern_offsets(A, shape, radius=None):

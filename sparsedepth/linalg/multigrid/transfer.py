@@ -19,6 +19,9 @@ from .interpolation import linear_weights_1d
 
 __all__ = ["SeparableProlongation", "ClassProlongation"]
 
+#: fine pixels per band of the band-wise transfers of :class:`SeparableProlongation`
+_BAND_PIXELS = 1 << 16
+
 
 def _interp_matrix_1d(weights):
     """``(n, nc)`` CSR matrix of 1-D interpolation weights ``(2, n)`` (parents ``i//2`` and ``i//2 + 1``)."""
@@ -72,32 +75,75 @@ class SeparableProlongation:
     def __matmul__(self, x):
         return self.add_prolonged(np.zeros(self.shape[0]), x)
 
+    def _rows_per_band(self, even=False):
+        """Rows per band of the band-wise transfers (about :data:`_BAND_PIXELS` fine pixels; even if asked)."""
+        rows = max(2, _BAND_PIXELS // self.fine_shape[1])
+        return rows - rows % 2 if even else rows
+
     def add_prolonged(self, out, x):
-        """``out += P @ x`` without an ``N``-long temporary (``out`` is C-contiguous), in ``out``'s precision."""
+        """``out += P @ x`` without an ``N``-long temporary (``out`` is C-contiguous), in ``out``'s precision.
+
+        A band of fine rows at a time: its rows interpolated from the coarse rows, then its columns.
+        """
         X = np.asarray(x, dtype=out.dtype).reshape(self.coarse_shape)
         O = out.reshape(self.fine_shape)
         (h, w), (hc, wc) = self.fine_shape, self.coarse_shape
-        T = _interpolate_linear_rows(X, h)  # (h, wc)
-        O[:, 0::2] += T  # columns at coarse points
-        mid = wc - 1  # columns between two coarse points: 1, 3, ..., 2 wc - 3
-        if mid:
-            between = T[:, :-1] + T[:, 1:]
-            between *= 0.5
-            O[:, 1:2 * mid:2] += between
-        if w % 2 == 0:  # the last column has one coarse point to its left only
-            O[:, w - 1] += T[:, wc - 1]
+        step = self._rows_per_band(even=True)
+        for y0 in range(0, h, step):  # y0 even: fine row y0 is coarse row y0 / 2
+            y1 = min(h, y0 + step)
+            # the band's rows of the whole interpolation: the last band ends the grid, the others are interior
+            T = (_interpolate_linear_rows(X[y0 // 2:], h - y0) if y1 == h
+                 else _interpolate_linear_rows(X[y0 // 2:y1 // 2 + 1], y1 - y0 + 1)[:y1 - y0])
+            band = O[y0:y1]
+            band[:, 0::2] += T  # columns at coarse points
+            mid = wc - 1  # columns between two coarse points: 1, 3, ..., 2 wc - 3
+            if mid:
+                between = T[:, :-1] + T[:, 1:]
+                between *= 0.5
+                band[:, 1:2 * mid:2] += between
+            if w % 2 == 0:  # the last column has one coarse point to its left only
+                band[:, w - 1] += T[:, wc - 1]
         return out
 
     def rmatvec(self, r):
-        """``Pᵀ r`` as a new array, float32 for a float32 ``r``, else float64."""
+        """``Pᵀ r`` as a new array, float32 for a float32 ``r``, else float64.
+
+        A band of coarse rows at a time (the same sums: each coarse row is its own sparse product).
+        """
         R = np.asarray(r)
         if R.dtype == np.float32:
             PyT, PxT = self._single
         else:
             PyT, PxT = self.PyT, self.PxT
             R = R.astype(np.float64, copy=False)
-        T = (PyT @ R.reshape(self.fine_shape)).T  # (w, hc)
-        return np.ascontiguousarray((PxT @ T).T).reshape(-1)
+        R = R.reshape(self.fine_shape)
+        (h, w), (hc, wc) = self.fine_shape, self.coarse_shape
+        out = np.empty((hc, wc), dtype=R.dtype)
+        step = max(1, self._rows_per_band() // 2)
+        for Y0 in range(0, hc, step):
+            Y1 = min(hc, Y0 + step)
+            T = (PyT[Y0:Y1] @ R).T  # (w, Y1 - Y0)
+            out[Y0:Y1] = (PxT @ T).T
+        return out.reshape(-1)
+
+    def restrict_rows(self, rows_of, dtype):
+        """``Pᵀ r`` (float64 or float32 ``dtype``) for an ``r`` handed out a few rows at a time: never held whole.
+
+        ``rows_of(y0, y1)`` returns the fine rows ``y0:y1`` of ``r`` as a ``(y1 − y0, W)`` array in ``dtype``.
+        Each band of coarse rows reads the fine rows its weights reach (one more on each side) and sums them
+        as :meth:`rmatvec` does (the same numbers).
+        """
+        single = np.dtype(dtype) == np.float32
+        PyT, PxT = self._single if single else (self.PyT, self.PxT)
+        (h, w), (hc, wc) = self.fine_shape, self.coarse_shape
+        out = np.empty((hc, wc), dtype=np.float32 if single else np.float64)
+        step = max(1, self._rows_per_band() // 2)
+        for Y0 in range(0, hc, step):
+            Y1 = min(hc, Y0 + step)
+            f0, f1 = max(0, 2 * Y0 - 1), min(h, 2 * Y1)  # the fine rows of coarse rows Y0 .. Y1 - 1
+            T = (PyT[Y0:Y1, f0:f1] @ rows_of(f0, f1)).T  # (w, Y1 - Y0)
+            out[Y0:Y1] = (PxT @ T).T
+        return out.reshape(-1)
 
     @property
     def T(self):
