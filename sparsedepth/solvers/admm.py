@@ -135,9 +135,10 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     F`` (default 2e-7) AND the duality gap of the best polished point
     (:class:`~sparsedepth.solvers.certificate.Certificate`; its dual point on
     the rows with ``|(Kz)_k| <=`` :data:`TIE_BAND` is ``ρλ`` corrected by
-    :data:`DUAL_FIT_STEPS` CG steps of a least-squares fit on those rows) is at most ``gap_tol · max(F, 1e-7 F(0))`` (option
-    ``gap_tol``, default 1e-6).  The agreement alone is a heuristic (two
-    polishes can land on the same wrong tied set); when the certificate
+    :data:`DUAL_FIT_STEPS` CG steps of a least-squares fit on those rows) is
+    at most ``gap_tol · max(F, 1e-7 F(0))`` (option ``gap_tol``, default
+    1e-6).  The agreement alone is a heuristic (two polishes can land on the
+    same wrong tied set); when the certificate
     refuses it, ADMM goes on iterating and polishing until it passes or
     ``max_iter``, and the message says so.  The best polished point is returned if it is below the
     last ADMM iterate, so the reported ``F`` is exact and ``z >= 0``.  With
