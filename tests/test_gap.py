@@ -11,7 +11,8 @@ from scipy.sparse.linalg import spsolve
 
 import sparsedepth as sd
 from sparsedepth import Weights, build_objective
-from sparsedepth.solvers.certificate import curvature_lower_bound, duality_gap
+from sparsedepth.objective.l1 import StackedL1
+from sparsedepth.solvers.certificate import Certificate, curvature_lower_bound, duality_gap
 from sparsedepth.solvers import SOLVER_OPTIONS, check_solver_arguments, solve
 
 from conftest import make_problem
@@ -109,6 +110,25 @@ def test_dual_point_from_admm_multiplier_and_the_nonnegativity_multiplier():
     gap = duality_gap(obj, z)
     assert gap >= obj.value(z) - F_ref
     assert curvature_lower_bound(obj) == pytest.approx(L1.delta)
+
+
+@pytest.mark.parametrize("eps", [0.0, 1e-4, 1e-2])
+def test_dual_fit_correcting_a_start_keeps_the_bound(eps):
+    """The least-squares correction of a given dual start (ADMM's polished-point certificate): still a bound."""
+    image, sparse, mask, _ = make_problem((10, 11))
+    obj, coarse, _ = build_objective(image, sparse, mask, weights=L1)
+    F_ref = _reference(obj, coarse)
+    out, _ = solve(obj, coarse.ravel(), solver="admm")
+    c = StackedL1(obj).weights
+    rng = np.random.default_rng(4)
+    cert = Certificate(obj, fit_steps=0, fit_max_iter=30, fit_correction=True)
+    points = [out.z, np.maximum(out.z + 1e-3 * rng.standard_normal(obj.size), 0.0),
+              np.maximum(coarse.ravel() + 0.3 * rng.standard_normal(obj.size), 0.0)]
+    for z in points:
+        for p in (np.zeros_like(c), c * rng.uniform(-1.0, 1.0, c.size), 3.0 * c):
+            gap = cert.gap(z, p=p, eps=eps)
+            assert np.isfinite(gap) and gap >= 0.0
+            assert gap >= obj.value(z) - F_ref - 1e-12 * F_ref, (eps, gap, obj.value(z) - F_ref)
 
 
 def test_false_convergence_example_is_no_longer_reported_converged():

@@ -26,6 +26,12 @@ from .common import gap_threshold, objective_floor, output, refuse_robust, relat
 __all__ = ["solve_admm", "finish_from", "default_rho", "combine", "RHO_REFERENCE_PIXELS"]
 
 
+#: Rows with ``|(Kz)_k|`` at most this (solver units: the depth divided by its scale, about 1) count as tied in
+#: the duality gap of a polished point (:class:`~sparsedepth.solvers.certificate.Certificate`, ``eps``).
+TIE_BAND = 1e-4
+#: CG steps of the least-squares correction of ``ρλ`` on the tied rows in the duality gap of a polished point.
+DUAL_FIT_STEPS = 30
+
 #: The pixel count at which :func:`default_rho` was tuned (a 640x480 frame); ρ grows with the side length above it.
 RHO_REFERENCE_PIXELS = 640 * 480
 
@@ -127,10 +133,12 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     a slowly converging run is not dominated by polishes); the solver stops
     when a polish changes the best polished ``F`` by at most ``check_rtol ·
     F`` (default 2e-7) AND the duality gap of the best polished point
-    (:class:`~sparsedepth.solvers.certificate.Certificate`, dual point ``ρλ`` on the
-    tied rows) is at most ``gap_tol · max(F, 1e-7 F(0))`` (option
-    ``gap_tol``, default 1e-6).  The agreement alone is a heuristic (two
-    polishes can land on the same wrong tied set); when the certificate
+    (:class:`~sparsedepth.solvers.certificate.Certificate`; its dual point on
+    the rows with ``|(Kz)_k| <=`` :data:`TIE_BAND` is ``ρλ`` corrected by
+    :data:`DUAL_FIT_STEPS` CG steps of a least-squares fit on those rows) is
+    at most ``gap_tol · max(F, 1e-7 F(0))`` (option ``gap_tol``, default
+    1e-6).  The agreement alone is a heuristic (two polishes can land on the
+    same wrong tied set); when the certificate
     refuses it, ADMM goes on iterating and polishing until it passes or
     ``max_iter``, and the message says so.  The best polished point is returned if it is below the
     last ADMM iterate, so the reported ``F`` is exact and ``z >= 0``.  With
@@ -316,14 +324,17 @@ class _AdmmRun:
     def _new_certificate(self):
         """The duality-gap certificate of this run (one multigrid hierarchy of ``A`` for all its checks).
 
-        The dual point on the tied rows is ``ρλ`` clipped to ``[−c, c]``; a
-        polished point's is used as it is (``fit_steps=0``: the projected-gradient
-        fit costs as much as the rest of a check and did not change a decision
-        of the checks on the frames of ``bench/admm_scale.py``), an unpolished
-        iterate's is improved by the certificate's default fit.
+        The dual point on the tied rows is ``ρλ`` clipped to ``[−c, c]``.  For
+        a polished point the tied rows are those with ``|(Kz)_k| <=``
+        :data:`TIE_BAND` and the start is corrected by the certificate's
+        least-squares fit (:data:`DUAL_FIT_STEPS` CG steps, ``fit_correction``;
+        no projected-gradient steps); an unpolished iterate's is improved by
+        the certificate's default projected-gradient fit.
         """
-        fit = {"fit_steps": 0} if self.polish else {}
-        return Certificate(self.objective, nonnegative=True, fit_max_iter=0, **fit)
+        if self.polish:
+            return Certificate(self.objective, nonnegative=True, fit_steps=0, fit_max_iter=DUAL_FIT_STEPS,
+                               fit_correction=True)
+        return Certificate(self.objective, nonnegative=True, fit_max_iter=0)
 
     def stop_on_residuals(self, tol):
         """Plain ADMM's stop: converged when the duality gap (tied rows: ``u = 0``) passes ``gap_tol`` too."""
@@ -374,7 +385,7 @@ class _AdmmRun:
         gap_tol = options.gap_tol
         if self.certificate is None:
             self.certificate = self._new_certificate()
-        gap = self.certificate.gap(best[1], p=self.rho * self.lam)
+        gap = self.certificate.gap(best[1], p=self.rho * self.lam, eps=TIE_BAND)
         self.certified = (best[1], gap)
         if np.isnan(gap) or gap <= gap_threshold(objective, best[0], gap_tol):
             self.converged = True
@@ -430,5 +441,5 @@ class _AdmmRun:
         else:
             if self.certificate is None:
                 self.certificate = self._new_certificate()
-            gap = self.certificate.gap(z, p=self.rho * self.lam)
+            gap = self.certificate.gap(z, p=self.rho * self.lam, eps=TIE_BAND if self.polish else 0.0)
         return output(z, k, self.converged, self.message, recorder, gap=gap)

@@ -54,6 +54,13 @@ class Certificate:
     fit_steps : int
         Accelerated projected-gradient steps that fit the dual point on the
         tied rows of ``K`` (see Notes of :func:`duality_gap`).
+    fit_max_iter : int
+        CG steps of the least-squares fit on the tied rows at most
+        (:meth:`_least_squares_fit`; 0 skips it).
+    fit_correction : bool
+        False: the least-squares fit replaces the start's tied rows; True: it
+        corrects them (for a start that is close already, such as ADMM's
+        multiplier).
 
     Attributes
     ----------
@@ -64,8 +71,10 @@ class Certificate:
         left out and the gap is an estimate (accurate to the PCG tolerance).
     """
 
-    def __init__(self, objective, *, nonnegative=True, rtol=1e-10, fit_steps=20, fit_max_iter=100):
+    def __init__(self, objective, *, nonnegative=True, rtol=1e-10, fit_steps=20, fit_max_iter=100,
+                 fit_correction=False):
         self.objective = objective
+        self.fit_correction = bool(fit_correction)
         self.nonnegative = bool(nonnegative)
         self.rtol = float(rtol)
         self.fit_steps = int(fit_steps)
@@ -103,8 +112,9 @@ class Certificate:
         (``c_k sign(t_k)`` for ``eps = 0``); ``tie = max(eps, 1e-12 (1 +
         max|z|))``.  On the others and on the rows where ``tied`` is True
         (the tied rows) the start is ``p`` clipped to ``[−c, c]`` (without
-        ``p``: the same formula), replaced by the clipped least-squares fit of
-        :meth:`_least_squares_fit` where that lowers ``‖g + Kᵀp‖`` (at most
+        ``p``: the same formula), replaced (``fit_correction``: corrected) by the
+        clipped least-squares fit of :meth:`_least_squares_fit` where that
+        lowers ``‖g + Kᵀp‖`` (at most
         ``fit_max_iter`` CG steps, 0 skips it), then improved by
         ``fit_steps`` accelerated projected-gradient (FISTA) steps on ``‖g +
         Kᵀp‖²`` over the box.
@@ -144,16 +154,19 @@ class Certificate:
     def _least_squares_fit(self, q, free, g):
         r"""``q`` with its tied rows ``T`` replaced by the clipped least-squares fit of ``min ‖g + Kᵀq‖²``.
 
-        Unconstrained, ``q_T = K_T w`` with ``K_Tᵀ K_T w = −(h − h̄)``, ``h = g +
-        Kᵀq`` with ``q_T = 0`` and ``h̄`` its mean over each component of the
-        pixels joined by tied rows (the system is consistent; CG with the
-        Jacobi preconditioner, at most ``fit_max_iter`` steps).  The fit is
-        kept only if it lowers ``‖g + Kᵀq‖``.
+        Unconstrained, ``q_T = q⁰_T + K_T w`` with ``K_Tᵀ K_T w = −(h − h̄)``,
+        ``h = g + Kᵀq⁰`` and ``h̄`` its mean over each component of the pixels
+        joined by tied rows (the system is consistent; CG with the Jacobi
+        preconditioner, at most ``fit_max_iter`` steps); ``q⁰`` is ``q`` with
+        ``q⁰_T = 0``, or ``q`` itself with ``fit_correction`` (the fit then
+        corrects the start on the tied rows).  The fit is kept only if it
+        lowers ``‖g + Kᵀq‖``.
         """
         l1 = self.l1
         c_free = l1.weights[free]
         base = q.copy()
-        base[free] = 0.0
+        if not self.fit_correction:
+            base[free] = 0.0
         h = g + l1.adjoint(base)
         labels, count = l1.tied_components(free)
         sizes = np.bincount(labels, minlength=count)
@@ -171,7 +184,7 @@ class Certificate:
                                      dtype=np.float64)
         w, _, _, _ = pcg(L, rhs, M=lambda v: inv * v, rtol=1e-10, maxiter=self.fit_max_iter)
         cand = q.copy()
-        cand[free] = np.clip(l1.apply(w)[free], -c_free, c_free)
+        cand[free] = np.clip(base[free] + l1.apply(w)[free], -c_free, c_free)
         if _norm_sq(g + l1.adjoint(cand)) <= _norm_sq(g + l1.adjoint(q)):
             return cand
         return q
