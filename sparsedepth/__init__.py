@@ -94,7 +94,7 @@ from .objective.robust import PENALTIES, RobustPenalty, robust_penalty
 from .result import ClampWarning, CompletionResult, IterationRecord, SolverState, UncertaintyCalibration
 from .sampling import sample_depth, sample_mask, valid_depth_mask
 from .solvers import SOLVER_OPTIONS, SOLVERS
-from .objective.weights import DEFAULT_WEIGHTS, Weights
+from .objective.weights import DEFAULT_SCHEDULE, DEFAULT_WEIGHTS, DensitySchedule, Weights, default_weights
 from .datasets import (
     Frame,
     list_embedded_frames,
@@ -113,6 +113,9 @@ __all__ = [
     "choose_solver",
     "Weights",
     "DEFAULT_WEIGHTS",
+    "DensitySchedule",
+    "DEFAULT_SCHEDULE",
+    "default_weights",
     "FAST_WEIGHTS",
     "CompletionResult",
     "ClampWarning",

@@ -5,12 +5,14 @@ May import :mod:`sparsedepth._validation` and :mod:`.robust`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, fields, replace
 
-from .._validation import check_nonnegative_real, check_positive_real
+from .._validation import check_nonnegative_real, check_positive_real, is_real
 from .robust import PENALTIES
 
-__all__ = ["Weights", "DEFAULT_WEIGHTS", "check_weights", "EDGE_PENALTIES", "EDGE_PENALTY_FIELDS",
+__all__ = ["Weights", "DEFAULT_WEIGHTS", "DensitySchedule", "DENSITY_FIELDS", "DEFAULT_SCHEDULE", "default_weights",
+           "check_weights", "EDGE_PENALTIES", "EDGE_PENALTY_FIELDS",
            "DEFAULT_EDGE_SCALE", "MODEL_FIELDS"]
 
 #: The penalties of the edge term: ``"l1"`` (``|t|``) or a robust penalty of :mod:`sparsedepth.objective.robust`.
@@ -243,10 +245,117 @@ class Weights:
 
 DEFAULT_WEIGHTS = Weights()
 
-
 def check_weights(weights, *, name: str = "weights") -> None:
     """Raise ``TypeError`` unless ``weights`` is a :class:`sparsedepth.Weights`."""
     if not isinstance(weights, Weights):
         hint = "use sd.Weights(**d)" if isinstance(weights, dict) else "use sd.Weights(alpha=..., gamma=...)"
         raise TypeError(f"{name} must be a sparsedepth.Weights; got {type(weights).__name__}: {hint}")
 
+
+#: The fields of :class:`Weights` a :class:`DensitySchedule` sets (the others come from its base).
+DENSITY_FIELDS = ("delta", "kappa", "beta_image", "beta_second", "beta_second_image", "beta_local_linear",
+                  "local_linear_eps")
+
+
+@dataclass(frozen=True)
+class DensitySchedule:
+    """Weights that depend on the observed fraction of pixels: anchors interpolated in log-density.
+
+    Parameters
+    ----------
+    anchors : sequence of (float, mapping)
+        ``(fraction, {field: value})`` pairs, fractions in (0, 1] strictly
+        increasing; each mapping gives every field of :data:`DENSITY_FIELDS`.
+    base : Weights
+        The weights of every other field (default :data:`DEFAULT_WEIGHTS`).
+
+    Raises
+    ------
+    ValueError
+        No anchor, fractions not increasing or outside (0, 1], a missing or
+        unknown field, or a value :class:`Weights` rejects.
+    TypeError
+        ``base`` not a :class:`Weights` or a fraction not a real number.
+
+    Notes
+    -----
+    With anchors ``f_0 < f_1 < ... < f_n`` and the observed fraction ``f``
+    (observed pixels / all pixels), a field of value ``v_i`` at ``f_i`` gets
+    ``v = v_i^(1-t) v_(i+1)^t`` with ``t = log(f / f_i) / log(f_(i+1) / f_i)``
+    for ``f_i <= f <= f_(i+1)`` (linear interpolation instead of geometric
+    when either value is 0), and the nearest anchor's value outside
+    ``[f_0, f_n]``.  The sample density is what the weights have to suit: the
+    denser the samples, the more the prior ``z_c`` (the fill between close
+    samples) can be trusted and the less the image has to carry.
+
+    Examples
+    --------
+    >>> schedule = DensitySchedule.from_weights(((0.01, DEFAULT_WEIGHTS.replace(delta=1e-4)),
+    ...                                          (0.1, DEFAULT_WEIGHTS.replace(delta=1e-3))))
+    >>> round(schedule.weights(0.01 * 10 ** 0.5).delta, 12)
+    0.000316227766
+    """
+
+    anchors: tuple
+    base: Weights = DEFAULT_WEIGHTS
+
+    def __post_init__(self):
+        check_weights(self.base, name="base")
+        anchors = tuple((check_positive_real(f, name="anchor fraction"), dict(values)) for f, values in self.anchors)
+        if not anchors:
+            raise ValueError("a DensitySchedule needs at least one anchor")
+        fractions = [f for f, _ in anchors]
+        if fractions[-1] > 1 or any(b <= a for a, b in zip(fractions, fractions[1:])):
+            raise ValueError(f"anchor fractions must increase strictly within (0, 1]; got {fractions}")
+        for _, values in anchors:
+            if set(values) != set(DENSITY_FIELDS):
+                raise ValueError(f"each anchor gives exactly the fields {list(DENSITY_FIELDS)}; got {sorted(values)}")
+            self.base.replace(**values)  # the values Weights accepts
+        object.__setattr__(self, "anchors", anchors)
+
+    @classmethod
+    def from_weights(cls, anchors, base: Weights = DEFAULT_WEIGHTS) -> "DensitySchedule":
+        """The schedule through ``(fraction, Weights)`` anchors (their :data:`DENSITY_FIELDS` are used)."""
+        for _, weights in anchors:
+            check_weights(weights, name="anchor weights")
+        return cls(tuple((f, {name: getattr(w, name) for name in DENSITY_FIELDS}) for f, w in anchors), base)
+
+    def weights(self, fraction) -> Weights:
+        """The :class:`Weights` for an observed ``fraction`` of the pixels (a real number in (0, 1])."""
+        if not is_real(fraction):
+            raise TypeError(f"fraction must be a real number; got {type(fraction).__name__}")
+        fraction = float(fraction)
+        if not 0 < fraction <= 1:
+            raise ValueError(f"fraction must be in (0, 1]; got {fraction!r}")
+        fractions = [f for f, _ in self.anchors]
+        if fraction <= fractions[0] or len(fractions) == 1:
+            return self.base.replace(**self.anchors[0][1])
+        if fraction >= fractions[-1]:
+            return self.base.replace(**self.anchors[-1][1])
+        i = max(k for k, f in enumerate(fractions) if f <= fraction)
+        (f0, low), (f1, high) = self.anchors[i], self.anchors[i + 1]
+        t = math.log(fraction / f0) / math.log(f1 / f0)
+        return self.base.replace(**{name: _between(low[name], high[name], t) for name in DENSITY_FIELDS})
+
+    def as_dict(self) -> dict:
+        """``{"fraction": {field: value}}`` of the anchors (for reports and fingerprints)."""
+        return {f"{f:g}": dict(values) for f, values in self.anchors}
+
+
+def _between(a: float, b: float, t: float) -> float:
+    """Geometric interpolation of two non-negative values (linear when either is 0), ``t`` in [0, 1]."""
+    if a == b:
+        return a
+    if a > 0 and b > 0:
+        return math.exp((1 - t) * math.log(a) + t * math.log(b))
+    return (1 - t) * a + t * b
+
+
+#: The schedule the library uses when no weights are given (:func:`default_weights`).
+DEFAULT_SCHEDULE = DensitySchedule.from_weights(((0.01, DEFAULT_WEIGHTS), (0.05, DEFAULT_WEIGHTS),
+                                                 (0.10, DEFAULT_WEIGHTS)))
+
+
+def default_weights(fraction) -> Weights:
+    """The library's default weights for an observed ``fraction`` of the pixels (:data:`DEFAULT_SCHEDULE`)."""
+    return DEFAULT_SCHEDULE.weights(fraction)

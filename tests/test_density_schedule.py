@@ -1,0 +1,68 @@
+"""DensitySchedule: log-density interpolation of weights, checked against hand computations."""
+
+import math
+
+import pytest
+
+import sparsedepth as sd
+from sparsedepth.objective.weights import DENSITY_FIELDS
+
+
+def _schedule():
+    low = sd.DEFAULT_WEIGHTS.replace(delta=1e-4, kappa=10.0, beta_local_linear=0.0)
+    high = sd.DEFAULT_WEIGHTS.replace(delta=1e-2, kappa=40.0, beta_local_linear=0.02)
+    return sd.DensitySchedule.from_weights(((0.01, low), (0.1, high)))
+
+
+def test_anchor_values_are_returned_at_and_beyond_the_anchors():
+    schedule = _schedule()
+    assert schedule.weights(0.01).delta == 1e-4
+    assert schedule.weights(0.001).delta == 1e-4
+    assert schedule.weights(0.1).kappa == 40.0
+    assert schedule.weights(1.0).kappa == 40.0
+
+
+def test_interpolation_is_geometric_in_log_density_and_linear_through_zero():
+    schedule = _schedule()
+    f = 0.01 * 10 ** 0.25  # a quarter of the way in log-density
+    w = schedule.weights(f)
+    assert w.delta == pytest.approx(1e-4 * (1e-2 / 1e-4) ** 0.25, rel=1e-12)
+    assert w.kappa == pytest.approx(math.exp(0.75 * math.log(10.0) + 0.25 * math.log(40.0)), rel=1e-12)
+    assert w.beta_local_linear == pytest.approx(0.25 * 0.02, rel=1e-12)
+
+
+def test_fields_outside_the_schedule_come_from_the_base():
+    base = sd.DEFAULT_WEIGHTS.replace(gamma=0.3, edge_sigma=2.0)
+    schedule = sd.DensitySchedule(_schedule().anchors, base)
+    w = schedule.weights(0.03)
+    assert (w.gamma, w.edge_sigma, w.alpha) == (0.3, 2.0, base.alpha)
+
+
+def test_the_default_schedule_gives_every_density_field():
+    for fraction in (0.002, 0.01, 0.03, 0.07, 0.5):
+        w = sd.default_weights(fraction)
+        assert isinstance(w, sd.Weights)
+        for name in DENSITY_FIELDS:
+            values = [values[name] for _, values in sd.DEFAULT_SCHEDULE.anchors]
+            assert min(values) <= getattr(w, name) <= max(values)
+
+
+@pytest.mark.parametrize("fraction, error", [(0.0, ValueError), (1.5, ValueError), (-0.1, ValueError),
+                                             (float("nan"), ValueError), ("0.1", TypeError)])
+def test_bad_fractions_are_rejected(fraction, error):
+    with pytest.raises(error):
+        sd.default_weights(fraction)
+
+
+def test_bad_anchors_are_rejected():
+    values = {name: getattr(sd.DEFAULT_WEIGHTS, name) for name in DENSITY_FIELDS}
+    with pytest.raises(ValueError, match="at least one"):
+        sd.DensitySchedule(())
+    with pytest.raises(ValueError, match="increase"):
+        sd.DensitySchedule(((0.1, values), (0.05, values)))
+    with pytest.raises(ValueError, match="fields"):
+        sd.DensitySchedule(((0.1, dict(values, gamma=1.0)),))
+    with pytest.raises(ValueError):
+        sd.DensitySchedule(((0.1, dict(values, delta=-1.0)),))
+    with pytest.raises(TypeError):
+        sd.DensitySchedule(((0.1, values),), base={"alpha": 1.0})
