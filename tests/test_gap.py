@@ -258,3 +258,28 @@ def test_irls_finish_none_is_newton_steps_only(l1_problem):
 @given(problem=_problems())
 def test_irls_at_gap_tol_1e6_is_within_its_gap_of_lbfgsb(problem):
     _check_within_gap_of_lbfgsb(problem, "irls", {"gap_tol": 1e-6})
+
+
+def test_certificate_of_a_general_sparse_operator_with_gradient_steps():
+    """A non-gradient L1 operator (the Hessian rows): the FISTA steps' ‖K‖² bound and the gap bound both hold."""
+    from sparsedepth.grid.operators import hessian_operator
+    from sparsedepth.objective import AbsTerm, Objective, QuadraticTerm
+
+    shape = (6, 7)
+    n = shape[0] * shape[1]
+    rng = np.random.default_rng(7)
+    K = sp.csr_matrix(hessian_operator(shape))
+    data = rng.random(n) < 0.3
+    obj = Objective(shape, [QuadraticTerm("data", 1.0, None, data, np.where(data, 1.0 + rng.random(n), 0.0)),
+                            QuadraticTerm("prior", 0.05, None, None, 1.0 + rng.random(n)),
+                            AbsTerm("edge", 0.3, K, rng.random(K.shape[0]))])
+    cert = Certificate(obj, fit_steps=20)
+    assert not cert.l1.grid_gradient
+    assert cert._k_norm_sq() >= np.linalg.norm(K.toarray(), 2) ** 2 * (1 - 1e-12)
+    # any feasible point's value bounds F* from above: the best of two long ADMM runs
+    runs = [solve(obj, np.ones(n), solver="admm", tol=1e-10, max_iter=20000, options={"polish": False})[0],
+            solve(obj, np.ones(n), solver="admm", options={"polish_rtol": 1e-12})[0]]
+    F_ref = min(obj.value(out.z) for out in runs)
+    for z in (np.ones(n), 1.0 + rng.random(n)):
+        gap = cert.gap(z)
+        assert np.isfinite(gap) and gap >= obj.value(z) - F_ref - 1e-12 * F_ref

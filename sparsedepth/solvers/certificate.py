@@ -100,8 +100,8 @@ class Certificate:
                 self._K_norm_sq = 8.0
             else:
                 K = abs(sp.csr_matrix(self.l1.matrix))
-                rows = float(np.max(K.sum(axis=1), initial=0.0))
-                cols = float(np.max(K.sum(axis=0), initial=0.0))
+                rows = float(np.max(np.asarray(K.sum(axis=1)), initial=0.0))
+                cols = float(np.max(np.asarray(K.sum(axis=0)), initial=0.0))
                 self._K_norm_sq = max(rows * cols, np.finfo(float).tiny)
         return self._K_norm_sq
 
