@@ -220,7 +220,7 @@ def main(argv=None) -> int:
                      f"{reported[2] / base_report[2]:.2f}"])
     print("current defaults", file=sys.stderr, flush=True)
     defaults = run_grid([current_defaults()], report_frames, fractions, seeds)[0]
-    rows.append(["current defaults (`sd.DEFAULT_WEIGHTS` at run time, not tuned here)",
+    rows.append(["`sd.DEFAULT_WEIGHTS` at run time (constant weights, the density schedule's base; not tuned here)",
                  changes_text({k: v for k, v in defaults[0].items() if v}), "",
                  *(f"{r:.3f}" for r in per_fraction(defaults[1], fractions)), f"{mean_over(defaults[1]):.3f}",
                  f"{defaults[2] / base_report[2]:.2f}"])

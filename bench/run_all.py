@@ -126,7 +126,7 @@ def results_header(args, sections, elapsed) -> list[str]:
                  if line.startswith("Headline: ")]
     titles = [text.splitlines()[0][3:] for text in sections]
     head += ["## Headline numbers", "", "Copied by `run_all.py` from the sections below (defaults at run time: "
-             f"{H.weights_markdown(sd.DEFAULT_WEIGHTS)}):", ""]
+             f"{H.weights_markdown(sd.DEFAULT_SCHEDULE)}):", ""]
     head += ([f"- {t}: {h}" for t, h in zip(titles, headlines)] if len(titles) == len(headlines)
              else [f"- {h}" for h in headlines])
     return head + [""]

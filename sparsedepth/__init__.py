@@ -94,7 +94,8 @@ from .objective.robust import PENALTIES, RobustPenalty, robust_penalty
 from .result import ClampWarning, CompletionResult, IterationRecord, SolverState, UncertaintyCalibration
 from .sampling import sample_depth, sample_mask, valid_depth_mask
 from .solvers import SOLVER_OPTIONS, SOLVERS
-from .objective.weights import DEFAULT_SCHEDULE, DEFAULT_WEIGHTS, DensitySchedule, Weights, default_weights
+from .objective.weights import (DEFAULT_SCHEDULE, DEFAULT_WEIGHTS, DensitySchedule, Weights, default_weights,
+                                observed_fraction, resolve_weights)
 from .datasets import (
     Frame,
     list_embedded_frames,
@@ -116,6 +117,8 @@ __all__ = [
     "DensitySchedule",
     "DEFAULT_SCHEDULE",
     "default_weights",
+    "observed_fraction",
+    "resolve_weights",
     "FAST_WEIGHTS",
     "CompletionResult",
     "ClampWarning",

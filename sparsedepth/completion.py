@@ -27,7 +27,7 @@ from .result import ClampWarning, CompletionResult
 from .solvers import SOLVERS, solve_scaled, check_solver_arguments, depth_scale
 from .solvers.common import Recorder, output
 from .solvers.quadratic import DEFAULT_DEPTH_RTOL
-from .objective.weights import DEFAULT_WEIGHTS, Weights, check_weights
+from .objective.weights import DEFAULT_WEIGHTS, DensitySchedule, Weights, check_weights, observed_fraction, resolve_weights
 from .uncertainty import MIN_OBSERVED, estimate_uncertainty, split_samples
 
 __all__ = ["complete_depth", "choose_solver", "depth_jump_factor", "QUALITIES", "fast_factor"]
@@ -65,7 +65,7 @@ def complete_depth(
     sparse_depth,
     mask=None,
     *,
-    weights: Weights = DEFAULT_WEIGHTS,
+    weights: Weights | DensitySchedule | None = None,
     solver: str = "auto",
     tol: float | None = None,
     max_iter: int | None = None,
@@ -101,8 +101,14 @@ def complete_depth(
     mask : ndarray of bool, (H, W), optional
         True where depth is observed.  Default: finite and ``> 0`` (0 and NaN
         mean "no measurement"; a negative value is then an error).
-    weights : Weights
-        Term weights; default :data:`~sparsedepth.objective.weights.DEFAULT_WEIGHTS`.
+    weights : Weights, DensitySchedule or None
+        Term weights.  ``None`` (default): the weights of
+        :data:`~sparsedepth.objective.weights.DEFAULT_SCHEDULE` for the
+        observed fraction of the pixels (``mask.mean()``;
+        :func:`~sparsedepth.default_weights`); with ``quality="fast"``,
+        :data:`FAST_WEIGHTS`.  A :class:`DensitySchedule` is evaluated at the
+        observed fraction; :class:`Weights` are used as given.  The weights
+        solved with are ``result.weights``.
     solver : {"auto", "direct", "cg", "amg", "irls", "admm", "lbfgsb", "adam"}
         ``"auto"`` is ``"amg"`` for γ = 0, ``"irls"`` for γ > 0 with a robust
         ``weights.edge_penalty`` and ``"admm"`` otherwise.  The stopping
@@ -152,8 +158,8 @@ def complete_depth(
     quality : {"default", "fast"}
         ``"fast"``: the real-time mode (see Notes): a solve on a grid 2, 3
         or 4 times coarser per side, interpolated back and refined by a few
-        edge-aware sweeps.  With the default weights it solves with
-        :data:`FAST_WEIGHTS` (the defaults made for the coarse grid); other
+        edge-aware sweeps.  Without ``weights`` it solves with
+        :data:`FAST_WEIGHTS` (the defaults made for the coarse grid); given
         ``weights`` are used as given.  It takes ``weights``, ``clip_to_observed``,
         ``x0`` (its block means start the coarse solve: pass the previous
         frame's depth to reuse it along a video) and the inputs; ``solver``
@@ -181,7 +187,8 @@ def complete_depth(
         non-finite ``max_uncertainty``; an unknown ``quality``, or
         ``"fast"`` with γ > 0, ``x0``, ``callback`` or uncertainty.
     TypeError
-        ``weights`` not a :class:`Weights`, ``max_iter`` not an int, ``tol``
+        ``weights`` not a :class:`Weights`, :class:`DensitySchedule` or
+        ``None``, ``max_iter`` not an int, ``tol``
         not a number, ``options`` not a dict, an option of the wrong type, or
         ``uncertainty`` not a bool.
 
@@ -230,7 +237,7 @@ def complete_depth(
     ``quality="fast"`` averages the image and the observations over blocks
     of ``f x f`` pixels (:func:`fast_factor`: ``f = 4`` up to one
     observation per 16 pixels, 3 up to one per 9, 2 above), solves the
-    objective of ``weights`` (:data:`FAST_WEIGHTS` for the defaults) on the ``f`` times coarser grid (no duality gap is
+    objective of ``weights`` (:data:`FAST_WEIGHTS` without them) on the ``f`` times coarser grid (no duality gap is
     computed; for γ = 0 Jacobi-preconditioned CG, its products by the
     normal matrix in float32, to a relative residual of
     :data:`FAST_COARSE_RTOL`), interpolates the
@@ -253,9 +260,10 @@ def complete_depth(
     """
     if _check_quality(quality, solver=solver, tol=tol, max_iter=max_iter, callback=callback, options=options,
                       uncertainty=uncertainty, max_uncertainty=max_uncertainty, prior=prior):
-        return _complete_fast(image, sparse_depth, mask, weights=FAST_WEIGHTS if weights == DEFAULT_WEIGHTS else weights,
-                              l1_smoothing=l1_smoothing,
+        return _complete_fast(image, sparse_depth, mask, weights=FAST_WEIGHTS if weights is None else
+                              _weights_for(weights, sparse_depth, mask), l1_smoothing=l1_smoothing,
                               clip_to_observed=clip_to_observed, x0=x0)
+    weights = _weights_for(weights, sparse_depth, mask)
     name, tol, max_iter, options = _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed)
     want_uncertainty = _check_uncertainty_arguments(uncertainty, max_uncertainty)
     settings = dict(weights=weights, solver=name, tol=tol, max_iter=max_iter, options=options,
@@ -270,6 +278,14 @@ def complete_depth(
     if not want_uncertainty:
         return result
     return _with_uncertainty(result, image, sparse_depth, mask, settings, max_uncertainty)
+
+
+def _weights_for(weights, sparse_depth, mask) -> Weights:
+    """The :class:`Weights` of ``weights`` (``None``, a schedule or weights) for the observed fraction of the input."""
+    if isinstance(weights, Weights):
+        return weights
+    _, observed = as_depth_and_mask(sparse_depth, mask)
+    return resolve_weights(weights, observed_fraction(observed))
 
 
 def _complete(image, sparse_depth, mask, *, weights, solver, tol, max_iter, callback, x0, l1_smoothing,

@@ -155,7 +155,7 @@ def test_committed_results_were_made_with_the_current_defaults():
     recorded = re.findall(r"[Dd]efault weights at run time: (.*?)\.\n", text)
     recorded += re.findall(r"defaults at run time: (.*?)\):", text)
     assert len(recorded) >= 2, "docs/results.md no longer records its default weights"
-    assert set(recorded) == {harness.weights_markdown(sd.DEFAULT_WEIGHTS)}
+    assert set(recorded) == {harness.weights_markdown(sd.DEFAULT_SCHEDULE)}
 
 
 def test_uncertainty_quick_ratios_against_a_direct_computation():

@@ -296,8 +296,10 @@ def test_cli_flags_set_the_new_fields():
     from sparsedepth.cli.parser import build_parser, weights_of
 
     args = build_parser().parse_args(["--beta-local-linear", "0.02", "--local-linear-eps", "1e-5"])
-    weights, given = weights_of(args)
-    assert (weights.beta_local_linear, weights.local_linear_eps) == (0.02, 1e-5)
+    schedule, given = weights_of(args)
+    for fraction in (0.001, 0.05, 0.5):  # fixed at every density
+        weights = schedule.weights(fraction)
+        assert (weights.beta_local_linear, weights.local_linear_eps) == (0.02, 1e-5)
     assert given == {"beta_local_linear": 0.02, "local_linear_eps": 1e-5}
 
 

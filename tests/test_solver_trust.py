@@ -246,7 +246,7 @@ def test_unknown_option_rejected_by_solve_too(problem):
     (dict(options={"rho": "big"}), r"options\['rho'\] of solver 'admm' must be a number; got str"),
     (dict(options={"polish": 1}), r"options\['polish'\] of solver 'admm' must be True or False; got int"),
     (dict(options={"check_every": 2.0}), r"options\['check_every'\] of solver 'admm' must be an int; got float"),
-    (dict(weights={"gamma": 0.1}), r"weights must be a sparsedepth.Weights; got dict: use sd.Weights\(\*\*d\)"),
+    (dict(weights={"gamma": 0.1}), r"weights must be a sparsedepth.Weights \(or a sparsedepth.DensitySchedule.*\); got dict: use sd.Weights\(\*\*d\)"),
     (dict(clip_to_observed="yes"), r"clip_to_observed must be True or False; got str"),
 ])
 def test_wrong_types_raise_type_error_with_the_fix(problem, kwargs, match):

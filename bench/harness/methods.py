@@ -1,6 +1,6 @@
 """The compared methods: ours (``sparsedepth.complete_depth``) and the baselines, each a :class:`Method`.
 
-Only ``sparsedepth.DEFAULT_WEIGHTS`` read at run time is used for "ours", never a copy of its numbers.
+Only the library's defaults read at run time (``sparsedepth.DEFAULT_SCHEDULE``) are used for "ours", never a copy of its numbers.
 
 May import :mod:`sparsedepth`.
 """
@@ -31,12 +31,13 @@ class Method:
 
 def ours(name="ours", *, weights=None, solver="auto", tol=None, max_iter=None, clip_to_observed=True,
          options=None) -> Method:
-    """``sparsedepth.complete_depth``; ``weights=None`` reads ``sd.DEFAULT_WEIGHTS`` now.
+    """``sparsedepth.complete_depth``; ``weights=None`` uses the library's defaults now (``sd.DEFAULT_SCHEDULE``
+    evaluated at each input's observed fraction of the pixels).
 
     ``clip_to_observed=False`` keeps the solver's minimiser as it is (the solver table compares optimisers, not
     the range clamp that follows them); the range clamp's warning is not shown (its count is in the result).
     """
-    w = sd.DEFAULT_WEIGHTS if weights is None else weights
+    w = sd.DEFAULT_SCHEDULE if weights is None else weights
 
     def run(image, sparse, mask):
         with warnings.catch_warnings():

@@ -27,12 +27,22 @@ def command_line(module: str, argv=()) -> str:
 
 
 def weights_markdown(w) -> str:
-    """``alpha = 1, beta = ...``: every weight of a :class:`sparsedepth.Weights`.
+    """``alpha = 1, beta = ...``: every weight of a :class:`sparsedepth.Weights` or :class:`sparsedepth.DensitySchedule`.
 
     ``edge_penalty`` and ``edge_scale`` are listed only for a robust edge
-    penalty (with the default ``"l1"`` the scale is unused).
+    penalty (with the default ``"l1"`` the scale is unused).  A schedule is
+    its base's other fields, then each anchor's scheduled fields
+    (``at 1 % observed: delta = ...``).
     """
-    items = w.as_dict(used_only=True)
+    if isinstance(w, sd.DensitySchedule):
+        scheduled = set(w.anchors[0][1])
+        base = {k: v for k, v in w.base.as_dict(used_only=True).items() if k not in scheduled}
+        anchors = "; ".join(f"at {100 * f:g} % observed: " + _items_markdown(values) for f, values in w.anchors)
+        return f"{_items_markdown(base)}; {anchors}"
+    return _items_markdown(w.as_dict(used_only=True))
+
+
+def _items_markdown(items) -> str:
     return ", ".join(f"{k} = {v}" if isinstance(v, str) else f"{k} = {v:g}" for k, v in items.items())
 
 
@@ -56,7 +66,7 @@ def section(title, *, command, frames_, seeds, body, notes="", elapsed=None) -> 
     lines = [f"## {title}", "", f"Command: `{command}`", "",
              f"Machine: {machine_markdown()}.", "",
              f"Frames ({len(frames_)}): {frames_markdown(frames_)}.", "",
-             f"Seeds: {', '.join(map(str, seeds))}. Default weights at run time: {weights_markdown(sd.DEFAULT_WEIGHTS)}."]
+             f"Seeds: {', '.join(map(str, seeds))}. Default weights at run time: {weights_markdown(sd.DEFAULT_SCHEDULE)}."]
     if elapsed is not None:
         lines += ["", f"Wall time of this section: {elapsed:.0f} s."]
     if notes:

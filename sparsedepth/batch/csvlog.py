@@ -7,7 +7,7 @@ settings of the run (options and frame list) are kept as JSON beside it
 several rows for a frame is compacted to the last one (:func:`compact`),
 rewritten atomically.
 
-Imports the standard library and :mod:`sparsedepth.io` (atomic writes).
+Imports the standard library, :mod:`sparsedepth.io` (atomic writes) and :mod:`sparsedepth.objective.weights`.
 """
 
 from __future__ import annotations
@@ -19,6 +19,8 @@ import json
 from pathlib import Path
 
 from ..io import atomic_target
+from ..objective import weights as weights_module
+from ..objective.weights import Weights
 
 __all__ = ["CSV_COLUMNS", "LINE_END", "HEADER", "settings_path", "fingerprint", "settings_difference", "csv_line",
            "append_row", "read_log", "compact", "write_text_atomic", "start_log", "compact_file"]
@@ -41,11 +43,23 @@ def settings_path(csv_path) -> Path:
     return csv_path.with_name(csv_path.name + ".settings.json")
 
 
+def weights_settings(weights) -> dict:
+    """The weights of a batch as plain data: a :class:`Weights`' used fields, or a schedule's base and anchors.
+
+    ``None`` stands for :data:`~sparsedepth.objective.weights.DEFAULT_SCHEDULE` as it is now, so a batch resumed
+    after the library's defaults changed is refused as a different setting.
+    """
+    if isinstance(weights, Weights):
+        return weights.as_dict(used_only=True)
+    schedule = weights_module.DEFAULT_SCHEDULE if weights is None else weights
+    return {"base": schedule.base.as_dict(used_only=True), "density_schedule": schedule.as_dict()}
+
+
 def fingerprint(frames, options) -> dict:
     """The settings of a batch as plain JSON data: the options and the frame list (absolute paths)."""
     settings = dataclasses.asdict(options)
     # the L1 edge term has no scale: its penalty fields are left out, so settings files that do not name them match
-    settings["weights"] = options.weights.as_dict(used_only=True)
+    settings["weights"] = weights_settings(options.weights)
     if settings["quality"] == "default":  # batches of the default solve match settings files from before the field
         del settings["quality"]
     data = {

@@ -23,7 +23,7 @@ from ..baselines import nearest_fill
 from ..completion import complete_depth
 from ..holes import FILL_METHODS, fill_holes
 from ..metrics import DepthMetrics, depth_metrics
-from ..objective import DEFAULT_WEIGHTS, Weights
+from ..objective import DEFAULT_WEIGHTS, DensitySchedule, Weights
 from ..result import CompletionResult
 from ..sampling import sample_mask, valid_depth_mask
 
@@ -121,7 +121,10 @@ def _run_method(image, sparse, observed, task, fill_method, solve_options):
         dense = fill_holes(image, sparse, mask=observed, method="colorization")
         method = "fill colorization"
     else:
-        # fill_holes(method="complete") is exactly this call; calling it here keeps the solver result
+        # fill_holes(method="complete") is exactly this call (its default weights are DEFAULT_WEIGHTS); calling it
+        # here keeps the solver result
+        if task == "fill" and solve_options.get("weights") is None and solve_options.get("quality") != "fast":
+            solve_options = {**solve_options, "weights": DEFAULT_WEIGHTS}
         result = complete_depth(image, sparse, observed, **solve_options)
         dense = result.depth
         mode = ", fast" if solve_options.get("quality") == "fast" else ""
@@ -152,7 +155,7 @@ def evaluate_frame(
     keep_count: int | None = None,
     seed=0,
     fill_method: str = "colorization",
-    weights: Weights | None = None,
+    weights: Weights | DensitySchedule | None = None,
     solver: str = "auto",
     tol: float | None = None,
     max_iter: int | None = None,
@@ -191,7 +194,9 @@ def evaluate_frame(
     weights, solver, tol, max_iter, callback, clip_to_observed, uncertainty, max_uncertainty, quality
         Passed to :func:`~sparsedepth.complete_depth` (not used by the
         colorization fill, which refuses ``uncertainty`` and
-        ``max_uncertainty``).
+        ``max_uncertainty``).  ``weights=None`` is the library's default:
+        the density schedule for ``"complete"``, ``DEFAULT_WEIGHTS`` for the
+        ``"fill"`` task's default solve (as :func:`~sparsedepth.fill_holes`).
     prior, prior_alignment
         Passed to :func:`~sparsedepth.complete_depth`: a dense depth map the
         user brings, aligned to the observations and completed around (not
@@ -217,7 +222,6 @@ def evaluate_frame(
     if task == "fill" and fill_method == "colorization" and prior is not None:
         raise ValueError("prior is completed around by the solver; the colorization fill does not take it: use "
                          "fill_method='complete'")
-    weights = DEFAULT_WEIGHTS if weights is None else weights
     values = _depth_2d(depth, "depth")
     valid = _valid_pixels(image, values, mask)
     sampled = keep_fraction is not None or keep_count is not None

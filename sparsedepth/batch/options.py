@@ -13,14 +13,14 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from .._validation import is_int, is_real
 from ..holes import FILL_METHODS
 from ..io import MAX_PIXELS
 from ..io import resolve_scale
-from ..objective import DEFAULT_WEIGHTS, Weights
+from ..objective import DensitySchedule, Weights
 from ..completion import QUALITIES
 from ..solvers import SOLVERS
 from .evaluate import TASKS
@@ -56,7 +56,9 @@ class BatchOptions:
         Frame ``i`` of the batch (0-based position) is sampled with
         ``numpy.random.default_rng([seed, i])``.
     fill_method : {"colorization", "complete"}
-    weights : Weights
+    weights : Weights, DensitySchedule or None
+        ``None`` (default): the library's defaults (the density schedule
+        evaluated per frame; see :func:`~sparsedepth.batch.evaluate.evaluate_frame`).
     solver : str
         ``"auto"`` or a name in :data:`~sparsedepth.SOLVERS`.
     tol : float >= 0, optional
@@ -104,7 +106,7 @@ class BatchOptions:
     keep_count: int | None = None
     seed: int = 0
     fill_method: str = "colorization"
-    weights: Weights = field(default_factory=lambda: DEFAULT_WEIGHTS)
+    weights: Weights | DensitySchedule | None = None
     solver: str = "auto"
     tol: float | None = None
     max_iter: int | None = None
@@ -143,9 +145,10 @@ class BatchOptions:
         if self.fill_method not in FILL_METHODS:
             raise _option_error("fill_method", f"unknown fill method {self.fill_method!r}; "
                                 f"choose one of {list(FILL_METHODS)}")
-        if not isinstance(self.weights, Weights):
-            raise _option_error("weights", f"weights must be a sparsedepth.Weights, got {type(self.weights).__name__}; "
-                                "e.g. Weights(gamma=0.0)", TypeError)
+        if self.weights is not None and not isinstance(self.weights, (Weights, DensitySchedule)):
+            raise _option_error("weights", f"weights must be a sparsedepth.Weights, a sparsedepth.DensitySchedule or "
+                                f"None (the library's defaults), got {type(self.weights).__name__}; e.g. "
+                                "Weights(gamma=0.0)", TypeError)
         if self.solver != "auto" and self.solver not in SOLVERS:
             raise _option_error("solver", f"unknown solver {self.solver!r}; choose one of "
                                 f"{['auto', *sorted(SOLVERS)]}")

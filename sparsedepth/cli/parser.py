@@ -15,11 +15,13 @@ import dataclasses
 import math
 
 from ..batch import default_workers
+from ..completion import FAST_WEIGHTS
 from ..holes import FILL_METHODS
 from ..io import DEPTH_SCALES, MAX_PIXELS
 from ..io import resolve_scale
 from ..objective import DEFAULT_WEIGHTS, EDGE_PENALTIES, Weights
-from ..objective.weights import MODEL_FIELDS
+from ..objective import weights as weights_module
+from ..objective.weights import DENSITY_FIELDS, MODEL_FIELDS
 from ..priors import PRIOR_ALIGNMENTS
 from ..solvers import SOLVERS
 from .camera import CAMERA_PRESETS, parse_intrinsics
@@ -289,7 +291,8 @@ def _add_method_options(parser) -> None:
                         help="solver of complete_depth (default auto: amg for gamma = 0, irls for a robust "
                              "--edge-penalty, else admm).")
     for f in dataclasses.fields(Weights):
-        flag, default = f"--{f.name.replace('_', '-')}", getattr(DEFAULT_WEIGHTS, f.name)
+        flag = f"--{f.name.replace('_', '-')}"
+        default = getattr(FAST_WEIGHTS if f.name in DENSITY_FIELDS else DEFAULT_WEIGHTS, f.name)
         if f.name == "edge_penalty":
             method.add_argument(flag, dest=f"w_{f.name}", choices=EDGE_PENALTIES, metavar="NAME",
                                 help=f"{_WEIGHT_HELP[f.name]}; one of {', '.join(EDGE_PENALTIES)} "
@@ -298,10 +301,11 @@ def _add_method_options(parser) -> None:
         kind, metavar = ((_positive_metres, "METRES") if f.name == "edge_scale"
                          else (_nonnegative, "V") if f.name in MODEL_FIELDS else (_nonnegative, "W"))
         what = "" if f.name == "edge_scale" else "option " if f.name in MODEL_FIELDS else "weight "
+        scheduled = f" (default: by the observed fraction of the pixels, sparsedepth.DEFAULT_SCHEDULE; {default:g} " \
+            f"with --fast)" if f.name in DENSITY_FIELDS else f" (default {default:g})."
         method.add_argument(
             flag, dest=f"w_{f.name}", type=kind, metavar=metavar,
-            help=f"{what}{f.name}: {_WEIGHT_HELP.get(f.name, 'a term weight of sparsedepth.Weights')} "
-                 f"(default {default:g}).",
+            help=f"{what}{f.name}: {_WEIGHT_HELP.get(f.name, 'a term weight of sparsedepth.Weights')}{scheduled}",
         )
     method.add_argument("--fast", action="store_true",
                         help="real-time mode: solve on a 2-4x coarser grid, upsample, refine by a few edge-aware "
@@ -408,8 +412,19 @@ def _add_cluster_options(parser) -> None:
                               "(default 15).")
 
 
-def weights_of(args) -> tuple[Weights, dict]:
-    """(the :class:`~sparsedepth.Weights` of the options, {name: value} of the weights given on the command line)."""
+def weights_of(args) -> tuple:
+    """(the weights of the options, {name: value} of the weights given on the command line).
+
+    No weight option: ``None``, the library's defaults (the density schedule, ``FAST_WEIGHTS`` with ``--fast``,
+    ``DEFAULT_WEIGHTS`` for ``--fill-holes``).  With some: :data:`~sparsedepth.DEFAULT_SCHEDULE` with those fields
+    fixed at every density, or the ``--fast`` / ``--fill-holes`` defaults with them changed.
+    """
     given = {f.name: getattr(args, f"w_{f.name}") for f in dataclasses.fields(Weights)}
     given = {k: v for k, v in given.items() if v is not None}
-    return DEFAULT_WEIGHTS.replace(**given), given
+    if not given:
+        return None, given
+    if getattr(args, "fast", False):
+        return FAST_WEIGHTS.replace(**given), given
+    if getattr(args, "fill_holes", False):
+        return DEFAULT_WEIGHTS.replace(**given), given
+    return weights_module.DEFAULT_SCHEDULE.replace(**given), given

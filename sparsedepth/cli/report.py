@@ -18,6 +18,7 @@ import numpy as np
 
 from .. import __version__
 from .._validation import as_float_image
+from ..objective import weights as weights_module
 from ..visualize import DEPTH_COLORMAP
 from .parser import PROG
 
@@ -78,6 +79,7 @@ def build_report(args, argv, outcome, description, weights, weights_given, png_s
     if result is not None:
         report.update(
             solver=result.solver, weights=result.weights.as_dict(), weights_given=weights_given,
+            observed_fraction=float(outcome.observed.mean()), **_weights_source(args, weights),
             converged=result.converged, message=result.message, iterations=result.iterations,
             objective=result.objective, terms=result.terms, clamped=result.clamped,
             solver_runtime=result.runtime,
@@ -86,6 +88,18 @@ def build_report(args, argv, outcome, description, weights, weights_given, png_s
     if result is not None and result.uncertainty is not None:
         report["uncertainty"] = _uncertainty_summary(outcome)
     return _jsonable(report)
+
+
+def _weights_source(args, weights) -> dict:
+    """Where the solve's weights came from; with a density schedule, its anchors."""
+    with_options = " with the weight options" if weights is not None else ""
+    if getattr(args, "fast", False):
+        return {"weights_source": "FAST_WEIGHTS" + with_options}
+    if getattr(args, "fill_holes", False):
+        return {"weights_source": "DEFAULT_WEIGHTS (hole filling)" + with_options}
+    schedule = weights_module.DEFAULT_SCHEDULE if weights is None else weights
+    return {"weights_source": "DEFAULT_SCHEDULE at the observed fraction" + with_options,
+            "density_schedule": {"base": schedule.base.as_dict(), "anchors": schedule.as_dict()}}
 
 
 def _uncertainty_summary(outcome) -> dict:

@@ -15,9 +15,11 @@ from ..grid.edges import edge_weights, image_gradient_magnitude, pair_edge_weigh
 from .objective import DEFAULT_L1_SMOOTHING, Objective, build_objective
 from .robust import PENALTIES, RobustPenalty, robust_penalty
 from .terms import AbsTerm, QuadraticTerm, RobustTerm
-from .weights import DEFAULT_SCHEDULE, DEFAULT_WEIGHTS, EDGE_PENALTIES, DensitySchedule, Weights, default_weights
+from .weights import (DEFAULT_SCHEDULE, DEFAULT_WEIGHTS, EDGE_PENALTIES, DensitySchedule, Weights, default_weights,
+                      observed_fraction, resolve_weights)
 
 __all__ = ["QuadraticTerm", "AbsTerm", "RobustTerm", "Objective", "build_objective", "edge_weights",
            "pair_edge_weights", "second_order_edge_weights", "image_gradient_magnitude", "DEFAULT_L1_SMOOTHING", "Weights",
            "DEFAULT_WEIGHTS", "StackedL1", "is_grid_gradient", "RobustPenalty", "robust_penalty", "PENALTIES",
-           "EDGE_PENALTIES", "DensitySchedule", "DEFAULT_SCHEDULE", "default_weights"]
+           "EDGE_PENALTIES", "DensitySchedule", "DEFAULT_SCHEDULE", "default_weights", "observed_fraction",
+           "resolve_weights"]

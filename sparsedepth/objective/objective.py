@@ -40,7 +40,7 @@ from ..grid.geodesic import geodesic_fill
 from ..grid.operators import StencilOperator, gradient_stencil, hessian_stencil
 from ..grid.stencil import SymmetricStencil, stencil_to_csr
 from .terms import AbsTerm, QuadraticTerm, RobustTerm
-from .weights import DEFAULT_WEIGHTS, Weights, check_weights
+from .weights import Weights, check_weights, observed_fraction, resolve_weights
 
 __all__ = [
     "QuadraticTerm",
@@ -303,7 +303,7 @@ def build_objective(
     sparse_depth,
     mask=None,
     *,
-    weights: Weights = DEFAULT_WEIGHTS,
+    weights=None,
     l1_smoothing: float = DEFAULT_L1_SMOOTHING,
     pair_factor=None,
 ):
@@ -317,7 +317,10 @@ def build_objective(
         Depth (metres) at observed pixels.
     mask : ndarray of bool, (H, W), optional
         True where depth is observed; default: finite and ``> 0``.
-    weights : Weights
+    weights : Weights, DensitySchedule or None
+        ``None`` (default): :data:`~sparsedepth.objective.weights.DEFAULT_SCHEDULE`'s
+        weights for the observed fraction of the pixels; a schedule is
+        evaluated there; :class:`Weights` are used as given.
     l1_smoothing : float
         ``ε`` of the smoothed L1 (see module notes).
     pair_factor : ndarray, (2*H*W,), optional
@@ -348,11 +351,12 @@ def build_objective(
         For inconsistent shapes, no observed pixel, NaN/inf in the image,
         negative observed depth, wrong dimensions or bad weights.
     TypeError
-        If ``weights`` is not a :class:`~sparsedepth.objective.weights.Weights`.
+        If ``weights`` is not a :class:`~sparsedepth.objective.weights.Weights`,
+        a :class:`~sparsedepth.objective.weights.DensitySchedule` or ``None``.
     """
-    check_weights(weights)
-    img = smoothed_image(image, weights.edge_sigma)
     depth, observed = as_depth_and_mask(sparse_depth, mask)
+    weights = resolve_weights(weights, observed_fraction(observed))
+    img = smoothed_image(image, weights.edge_sigma)
     check_same_shape(img.shape[:2], depth.shape, "image", "sparse_depth")
     shape = depth.shape
     if weights.fill_contrast > 0:

@@ -313,6 +313,9 @@ class DensitySchedule:
             self.base.replace(**values)  # the values Weights accepts
         object.__setattr__(self, "anchors", anchors)
 
+    def __hash__(self):
+        return hash((tuple((f, tuple(sorted(values.items()))) for f, values in self.anchors), self.base))
+
     @classmethod
     def from_weights(cls, anchors, base: Weights = DEFAULT_WEIGHTS) -> "DensitySchedule":
         """The schedule through ``(fraction, Weights)`` anchors (their :data:`DENSITY_FIELDS` are used)."""
@@ -337,6 +340,25 @@ class DensitySchedule:
         t = math.log(fraction / f0) / math.log(f1 / f0)
         return self.base.replace(**{name: _between(low[name], high[name], t) for name in DENSITY_FIELDS})
 
+    def replace(self, **changes) -> "DensitySchedule":
+        """A copy with some fields fixed at every density.
+
+        A field of :data:`DENSITY_FIELDS` is set at every anchor (it no longer
+        depends on the density); any other field of :class:`Weights` is set
+        in ``base``.  ``DEFAULT_SCHEDULE.replace(gamma=0.1)`` keeps the
+        schedule and adds the edge term.
+
+        Raises
+        ------
+        TypeError
+            An unknown field (as :meth:`Weights.replace`).
+        ValueError
+            A value :class:`Weights` rejects.
+        """
+        scheduled = {name: value for name, value in changes.items() if name in DENSITY_FIELDS}
+        base = self.base.replace(**{name: value for name, value in changes.items() if name not in DENSITY_FIELDS})
+        return DensitySchedule(tuple((f, {**values, **scheduled}) for f, values in self.anchors), base)
+
     def as_dict(self) -> dict:
         """``{"fraction": {field: value}}`` of the anchors (for reports and fingerprints)."""
         return {f"{f:g}": dict(values) for f, values in self.anchors}
@@ -359,3 +381,37 @@ DEFAULT_SCHEDULE = DensitySchedule.from_weights(((0.01, DEFAULT_WEIGHTS), (0.05,
 def default_weights(fraction) -> Weights:
     """The library's default weights for an observed ``fraction`` of the pixels (:data:`DEFAULT_SCHEDULE`)."""
     return DEFAULT_SCHEDULE.weights(fraction)
+
+
+def observed_fraction(mask) -> float:
+    """The fraction of pixels a boolean ``mask`` marks observed (what a :class:`DensitySchedule` is evaluated at)."""
+    count, size = int(mask.sum()), int(mask.size)
+    return count / size if size else 0.0
+
+
+def resolve_weights(weights, fraction) -> Weights:
+    """The :class:`Weights` to solve with for an observed ``fraction`` of the pixels.
+
+    Parameters
+    ----------
+    weights : Weights, DensitySchedule or None
+        ``None`` is :data:`DEFAULT_SCHEDULE`; a schedule is evaluated at
+        ``fraction``; :class:`Weights` are returned as given.
+    fraction : float
+        Observed pixels / all pixels.  A fraction of 0 (no observation, an
+        error the caller reports) gives the lowest anchor's weights.
+
+    Raises
+    ------
+    TypeError
+        ``weights`` of another type.
+    """
+    if weights is None:
+        weights = DEFAULT_SCHEDULE
+    if isinstance(weights, DensitySchedule):
+        return weights.weights(fraction) if fraction > 0 else weights.weights(weights.anchors[0][0])
+    if not isinstance(weights, Weights):
+        hint = "use sd.Weights(**d)" if isinstance(weights, dict) else "use sd.Weights(alpha=..., gamma=...)"
+        raise TypeError(f"weights must be a sparsedepth.Weights (or a sparsedepth.DensitySchedule, or None for the "
+                        f"density-scheduled defaults); got {type(weights).__name__}: {hint}")
+    return weights
