@@ -257,15 +257,8 @@ def report(args, tune_frames, report_frames, fractions, rows, results, chosen, b
     prior_rows = prior_check(report_frames, fractions, args.seeds)
     command = harness.command_line("accuracy", args.argv)
     lines = [
-        "# Accuracy on unseen frames: modelling variants",
-        "",
-        f"Made by `{command}` (frames subsampled by {args.step}, sampling seeds {args.seeds}, "
-        f"{time.perf_counter() - start:.0f} s).",
-        "",
-        harness.machine_markdown(),
-        "",
-        "Tuning frames: " + ", ".join(f"`{f.name}`" for f in tune_frames) + ".",
-        "Report frames (never used for a choice): " + ", ".join(f"`{f.name}`" for f in report_frames) + ".",
+        *harness.tuned_report_header("Accuracy on unseen frames: modelling variants", command, args, time.perf_counter() - start, tune_frames,
+                                     report_frames),
         "",
         f"Baseline weights: {harness.weights_markdown(baseline())}.",
         "",

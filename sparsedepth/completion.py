@@ -27,7 +27,8 @@ from .result import ClampWarning, CompletionResult
 from .solvers import SOLVERS, solve_scaled, check_solver_arguments, depth_scale
 from .solvers.common import Recorder, output
 from .solvers.quadratic import DEFAULT_DEPTH_RTOL
-from .objective.weights import DEFAULT_WEIGHTS, DensitySchedule, Weights, check_weights, observed_fraction, resolve_weights
+from .objective.weights import (DEFAULT_WEIGHTS, DensitySchedule, Weights, check_weights, observed_fraction,
+                               resolve_weights)
 from .uncertainty import MIN_OBSERVED, estimate_uncertainty, split_samples
 
 __all__ = ["complete_depth", "choose_solver", "depth_jump_factor", "QUALITIES", "fast_factor"]

@@ -15,7 +15,7 @@ import sparsedepth as sd
 from .machine import machine_markdown
 
 __all__ = ["REPO", "DOCS", "command_line", "weights_markdown", "frames_markdown", "step_note", "section",
-           "write_text"]
+           "tuned_report_header", "write_text"]
 
 REPO = Path(__file__).resolve().parents[2]
 DOCS = REPO / "docs"
@@ -27,7 +27,8 @@ def command_line(module: str, argv=()) -> str:
 
 
 def weights_markdown(w) -> str:
-    """``alpha = 1, beta = ...``: every weight of a :class:`sparsedepth.Weights` or :class:`sparsedepth.DensitySchedule`.
+    """``alpha = 1, beta = ...``: every weight of a :class:`sparsedepth.Weights` or a
+    :class:`sparsedepth.DensitySchedule`.
 
     ``edge_penalty`` and ``edge_scale`` are listed only for a robust edge
     penalty (with the default ``"l1"`` the scale is unused).  A schedule is
@@ -44,6 +45,21 @@ def weights_markdown(w) -> str:
 
 def _items_markdown(items) -> str:
     return ", ".join(f"{k} = {v}" if isinstance(v, str) else f"{k} = {v:g}" for k, v in items.items())
+
+
+def tuned_report_header(title, command, args, seconds, tune_frames, report_frames) -> list[str]:
+    """The first lines of a report that tunes on TUNE_FRAMES and reports on REPORT_FRAMES: title, command, machine,
+    frames."""
+    return [
+        f"# {title}",
+        "",
+        f"Made by `{command}` (frames subsampled by {args.step}, sampling seeds {args.seeds}, {seconds:.0f} s).",
+        "",
+        machine_markdown(),
+        "",
+        "Tuning frames: " + ", ".join(f"`{f.name}`" for f in tune_frames) + ".",
+        "Report frames (never used for a choice): " + ", ".join(f"`{f.name}`" for f in report_frames) + ".",
+    ]
 
 
 def frames_markdown(frames_) -> str:

@@ -1,0 +1,59 @@
+"""bench.density's coordinate descent on a score made by hand (no completion): it finds the minimiser, stays within
+its span and weighs datasets alike."""
+
+import importlib
+import math
+from types import SimpleNamespace
+
+import pytest
+
+import sparsedepth as sd
+
+
+def _density():
+    return importlib.import_module("bench.density")
+
+
+def _sample(name, density, index):
+    return SimpleNamespace(frame=SimpleNamespace(name=name), density=density, key=(name, density, index))
+
+
+def _score_of(targets):
+    """A score whose minimum over delta is at ``targets[frame]``: |log2(delta / target)| + 1."""
+    def ratios(self, sample, weights):
+        value = abs(math.log2(weights.delta / targets[sample.frame.name])) + 1.0
+        return value, value
+    return ratios
+
+
+def test_descent_reaches_each_anchors_minimiser(monkeypatch):
+    density = _density()
+    base = sd.DEFAULT_WEIGHTS.delta
+    targets = {"nyu_a/0": base * 4, "kitti/0": base / 2}
+    monkeypatch.setattr(density.Scorer, "ratios", _score_of(targets))
+    samples = [_sample("nyu_a/0", 0.10, 0), _sample("kitti/0", 0.01, 0)]
+    schedule, trace = density.descend(samples, rounds=3, span=64.0)
+    assert schedule.weights(0.10).delta == pytest.approx(base * 4, rel=1e-12)
+    assert schedule.weights(0.01).delta == pytest.approx(base / 2, rel=1e-12)
+    assert trace[-1] == pytest.approx(1.0) and trace == sorted(trace, reverse=True)
+
+
+def test_descent_stays_within_its_span(monkeypatch):
+    density = _density()
+    base = sd.DEFAULT_WEIGHTS.delta
+    monkeypatch.setattr(density.Scorer, "ratios", _score_of({"nyu_a/0": base * 1000}))
+    schedule, _ = density.descend([_sample("nyu_a/0", 0.05, 0)], rounds=3, span=8.0)
+    assert schedule.weights(0.05).delta == pytest.approx(base * 8, rel=1e-12)
+
+
+def test_balanced_score_counts_each_dataset_once(monkeypatch):
+    density = _density()
+    base = sd.DEFAULT_WEIGHTS.delta
+    # three NYU inputs want 4x, one KITTI input wants 1/4x, all at the same density (one anchor decides)
+    targets = {"nyu_a/0": base * 4, "nyu_b/1": base * 4, "nyu_c/2": base * 4, "kitti/0": base / 4}
+    monkeypatch.setattr(density.Scorer, "ratios", _score_of(targets))
+    samples = [_sample(name, 0.05, 0) for name in targets]
+    scorer = density.Scorer()
+    schedule = sd.DensitySchedule.from_weights(((0.05, sd.DEFAULT_WEIGHTS.replace(delta=base * 4)),))
+    assert scorer.mean(schedule, samples) == pytest.approx((3 * 1 + 5) / 4)
+    assert scorer.mean(schedule, samples, balanced=True) == pytest.approx((1 + 5) / 2)
