@@ -152,6 +152,13 @@ class Weights:
     weight search) were chosen on the tuning frames by
     ``python -m bench.accuracy``; ``docs/accuracy.md`` has their scores on the
     report frames and leave-one-dataset-out.
+
+    These are the constant defaults.  Without ``weights``,
+    :func:`~sparsedepth.complete_depth` solves with
+    :data:`DEFAULT_SCHEDULE`'s weights for the observed fraction of the
+    pixels (:func:`default_weights`): this class's values for every field
+    but :data:`DENSITY_FIELDS`, which the schedule sets per density
+    (``python -m bench.density``, ``docs/density.md``).
     """
 
     # Defaults: the weight set chosen by ``python bench/tune.py`` (docs/tuning.md), rounded to
@@ -373,9 +380,17 @@ def _between(a: float, b: float, t: float) -> float:
     return (1 - t) * a + t * b
 
 
-#: The schedule the library uses when no weights are given (:func:`default_weights`).
-DEFAULT_SCHEDULE = DensitySchedule.from_weights(((0.01, DEFAULT_WEIGHTS), (0.05, DEFAULT_WEIGHTS),
-                                                 (0.10, DEFAULT_WEIGHTS)))
+#: The schedule the library uses when no weights are given (:func:`default_weights`): the anchors chosen on the
+#: tuning frames by ``python -m bench.density`` (docs/density.md), every value the default's times a power of 2;
+#: the other fields are :data:`DEFAULT_WEIGHTS`'.
+DEFAULT_SCHEDULE = DensitySchedule((
+    (0.01, dict(delta=6.55e-05, kappa=50.0, beta_image=0.000252375, beta_second=0.001144, beta_second_image=0.0936,
+                beta_local_linear=0.0025, local_linear_eps=2e-05)),
+    (0.05, dict(delta=0.000262, kappa=100.0, beta_image=0.016152, beta_second=3.575e-05, beta_second_image=0.0936,
+                beta_local_linear=0.00125, local_linear_eps=2.5e-06)),
+    (0.10, dict(delta=1.6375e-05, kappa=100.0, beta_image=0.016152, beta_second=3.575e-05, beta_second_image=0.0936,
+                beta_local_linear=0.00125, local_linear_eps=1e-05)),
+))
 
 
 def default_weights(fraction) -> Weights:
