@@ -115,7 +115,7 @@ def tune_fgs(frames_, seeds=(0,)):
 #: Weights the fast mode could solve with, compared on the tuning frames (``sd.FAST_WEIGHTS`` is the choice).
 def weight_candidates():
     return [("`sd.FAST_WEIGHTS`", sd.FAST_WEIGHTS),
-            ("`sd.DEFAULT_WEIGHTS` (the default solve's)", sd.DEFAULT_WEIGHTS),
+            ("`sd.DEFAULT_WEIGHTS` (the constant defaults)", sd.DEFAULT_WEIGHTS),
             ("`sd.FAST_WEIGHTS` with the geodesic fill (fill_contrast = 20)", sd.FAST_WEIGHTS.replace(fill_contrast=20.0))]
 
 
@@ -256,7 +256,7 @@ def main(argv=None) -> int:
     for label, recs in records.items():
         lines += [f"Per frame at 5 % observed ({label}):", "", per_frame_table(recs, 0.05), ""]
     lines += ["## The fast mode's weights", "",
-              "With the default weights `quality=\"fast\"` solves with `sd.FAST_WEIGHTS`, chosen here on the tuning "
+              "Without `weights` `quality=\"fast\"` solves with `sd.FAST_WEIGHTS`, chosen here on the tuning "
               "frames (step 2, seed 0, 1/5/10 %; each candidate run on the same inputs in turn):", "",
               weights_text, ""]
     lines += [f"Wall time of this run: {time.perf_counter() - start:.0f} s.", ""]
