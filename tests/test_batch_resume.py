@@ -33,6 +33,7 @@ from sparsedepth.complete import main
 
 FAST = sd.Weights(gamma=0.0)  # quadratic objective: the direct solver is exact and fast
 FAST_FLAGS = ["--gamma", "0", "--solver", "direct"]
+FLAGS_WEIGHTS = sd.DEFAULT_SCHEDULE.replace(gamma=0.0)  # what FAST_FLAGS select on the command line
 
 
 def _rows(path):
@@ -342,7 +343,8 @@ def test_kitti_style_folder_pair(tmp_path, capsys):
     image = sd.read_image(images / "0000000050.png")
     depth = sd.read_depth(depths / "0000000050.png", scale=256)
     mask = sd.sample_mask(depth, fraction=0.1, seed=np.random.default_rng([0, 1]))
-    completed = sd.complete_depth(image, np.where(mask, depth, np.nan), mask, weights=FAST, solver="direct").depth
+    completed = sd.complete_depth(image, np.where(mask, depth, np.nan), mask, weights=FLAGS_WEIGHTS,
+                                  solver="direct").depth
     assert float(rows["0000000050"]["rmse"]) == pytest.approx(sd.depth_metrics(completed, depth, mask=~mask).rmse,
                                                               rel=1e-5)
 
@@ -372,7 +374,8 @@ def test_folder_of_nyu_h5_files(tmp_path, capsys):
     image, depth = scenes[1]
     depth32 = depth.astype(np.float32).astype(float)
     mask = sd.sample_mask(depth32, fraction=0.1, seed=np.random.default_rng([0, 1]))
-    completed = sd.complete_depth(image, np.where(mask, depth32, np.nan), mask, weights=FAST, solver="direct").depth
+    completed = sd.complete_depth(image, np.where(mask, depth32, np.nan), mask, weights=FLAGS_WEIGHTS,
+                                  solver="direct").depth
     assert float(rows["official_00001"]["rmse"]) == pytest.approx(
         sd.depth_metrics(completed, depth32, mask=~mask).rmse, rel=1e-5)
 

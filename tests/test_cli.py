@@ -17,7 +17,8 @@ from sparsedepth.complete import main
 from sparsedepth.io import write_pfm
 
 FAST = ["--gamma", "0", "--solver", "direct"]  # quadratic objective, exact direct solve
-FAST_WEIGHTS = sd.Weights(gamma=0.0)
+# what FAST selects: the default density schedule with gamma fixed at 0 (hole filling: the constant defaults)
+FAST_WEIGHTS = sd.DEFAULT_SCHEDULE.replace(gamma=0.0)
 
 
 @pytest.fixture
@@ -88,7 +89,7 @@ def test_edge_penalty_options_reach_the_weights_and_pick_irls(files, capsys):
     assert report["solver"] == "irls"
     image = sd.read_image(files / "rgb.png")
     sparse = sd.read_depth(files / "sparse.png", scale=1000)
-    expected = sd.complete_depth(image, sparse, weights=sd.DEFAULT_WEIGHTS.replace(
+    expected = sd.complete_depth(image, sparse, weights=sd.DEFAULT_SCHEDULE.replace(
         gamma=0.01, edge_penalty="cauchy", edge_scale=0.02)).depth
     np.testing.assert_allclose(sd.read_depth(files / "out.npy"), expected, rtol=1e-12)
 
@@ -214,7 +215,7 @@ def test_fill_holes_complete_method(files, capsys):
                str(files / "raw.png"), "--depth-scale", "mm", "--out", str(files / "filled.npy"), "-q", *FAST])
     assert rc == 0, capsys.readouterr().err
     image, raw = sd.read_image(files / "rgb.png"), sd.read_depth(files / "raw.png", scale=1000)
-    expected = sd.fill_holes(image, raw, method="complete", weights=FAST_WEIGHTS, solver="direct")
+    expected = sd.fill_holes(image, raw, method="complete", weights=sd.Weights(gamma=0.0), solver="direct")
     np.testing.assert_allclose(np.load(files / "filled.npy"), expected, atol=1e-12)
 
 

@@ -59,7 +59,7 @@ def _one(files, *extra):
 
 def _expected(files):
     image, sparse = sd.read_image(files / "rgb.png"), sd.read_depth(files / "sparse.png", scale=1000)
-    return sd.complete_depth(image, sparse, weights=sd.Weights(gamma=0.0), solver="direct").depth
+    return sd.complete_depth(image, sparse, weights=sd.DEFAULT_SCHEDULE.replace(gamma=0.0), solver="direct").depth
 
 
 # ----------------------------------------------------------------------------- inputs are never outputs

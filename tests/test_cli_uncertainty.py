@@ -31,7 +31,7 @@ def _library_result(files, **kwargs):
     image = sd.read_image(files / "rgb.png")
     dense = sd.read_depth(files / "dense.png", scale=1000)
     sparse, mask = sd.sample_depth(dense, fraction=0.08, seed=0)
-    return sd.complete_depth(image, sparse, mask, weights=sd.Weights(gamma=0.0), solver="direct", **kwargs)
+    return sd.complete_depth(image, sparse, mask, weights=sd.DEFAULT_SCHEDULE.replace(gamma=0.0), solver="direct", **kwargs)
 
 
 def test_uncertainty_file_is_the_library_map(files, capsys):

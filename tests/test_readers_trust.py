@@ -340,7 +340,7 @@ def test_cli_integer_npy_needs_depth_scale(scene, capsys):
     assert not (folder / "o.npy").exists()
     assert main([str(a) for a in base + ["--depth-scale", "mm"] + FAST]) == 0
     mm = sd.read_depth(folder / "mm.npy", scale=1000)
-    expected = sd.complete_depth(sd.read_image(folder / "rgb.png"), mm, weights=sd.Weights(gamma=0.0),
+    expected = sd.complete_depth(sd.read_image(folder / "rgb.png"), mm, weights=sd.DEFAULT_SCHEDULE.replace(gamma=0.0),
                                  solver="direct").depth
     np.testing.assert_allclose(np.load(folder / "o.npy"), expected, atol=1e-12)
 
@@ -385,7 +385,7 @@ def test_cli_one_bit_png_mask(scene, capsys):
                                 "mm", "--mask", folder / "mask.png", "--out", folder / "o.npy", *FAST]])
     assert rc == 0, capsys.readouterr().err
     dense = sd.read_depth(folder / "dense.png", scale=1000)
-    expected = sd.complete_depth(image, dense, mask, weights=sd.Weights(gamma=0.0), solver="direct").depth
+    expected = sd.complete_depth(image, dense, mask, weights=sd.DEFAULT_SCHEDULE.replace(gamma=0.0), solver="direct").depth
     np.testing.assert_allclose(np.load(folder / "o.npy"), expected, atol=1e-12)
 
 
