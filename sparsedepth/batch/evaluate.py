@@ -22,8 +22,9 @@ from .._validation import check_same_shape
 from ..baselines import nearest_fill
 from ..completion import complete_depth
 from ..holes import FILL_METHODS, fill_holes
+from ..holes.fill import hole_fill_weights
 from ..metrics import DepthMetrics, depth_metrics
-from ..objective import DEFAULT_WEIGHTS, DensitySchedule, Weights
+from ..objective import DensitySchedule, Weights
 from ..result import CompletionResult
 from ..sampling import sample_mask, valid_depth_mask
 
@@ -121,10 +122,9 @@ def _run_method(image, sparse, observed, task, fill_method, solve_options):
         dense = fill_holes(image, sparse, mask=observed, method="colorization")
         method = "fill colorization"
     else:
-        # fill_holes(method="complete") is exactly this call (its default weights are DEFAULT_WEIGHTS); calling it
-        # here keeps the solver result
-        if task == "fill" and solve_options.get("weights") is None and solve_options.get("quality") != "fast":
-            solve_options = {**solve_options, "weights": DEFAULT_WEIGHTS}
+        # fill_holes(method="complete") is exactly this call; calling it here keeps the solver result
+        if task == "fill" and solve_options.get("quality") != "fast":
+            solve_options = {**solve_options, "weights": hole_fill_weights(solve_options.get("weights"))}
         result = complete_depth(image, sparse, observed, **solve_options)
         dense = result.depth
         mode = ", fast" if solve_options.get("quality") == "fast" else ""

@@ -18,7 +18,7 @@ from ..completion import complete_depth
 from ..sampling import valid_depth_mask
 from ..objective.weights import DEFAULT_WEIGHTS
 
-__all__ = ["FILL_METHODS", "fill_holes"]
+__all__ = ["FILL_METHODS", "fill_holes", "hole_fill_weights"]
 
 #: The methods :func:`fill_holes` accepts.
 FILL_METHODS = ("colorization", "complete")
@@ -155,10 +155,19 @@ def fill_holes(
         image,
         raw,
         mask,
-        weights=DEFAULT_WEIGHTS if weights is None else weights,
+        weights=hole_fill_weights(weights),
         solver="auto" if solver is None else solver,
         tol=tol,
         max_iter=max_iter,
         callback=callback,
     )
     return result.depth
+
+
+def hole_fill_weights(weights):
+    """The weights of the ``"complete"`` hole fill: ``weights``, or :data:`~sparsedepth.DEFAULT_WEIGHTS` for None.
+
+    Raw sensor depth is observed almost everywhere, far denser than the anchors of the density schedule
+    ``complete_depth`` uses without weights, so hole filling keeps the constant defaults.
+    """
+    return DEFAULT_WEIGHTS if weights is None else weights

@@ -40,7 +40,7 @@ from ..grid.geodesic import geodesic_fill
 from ..grid.operators import StencilOperator, gradient_stencil, hessian_stencil
 from ..grid.stencil import SymmetricStencil, stencil_to_csr
 from .terms import AbsTerm, QuadraticTerm, RobustTerm
-from .weights import Weights, check_weights, observed_fraction, resolve_weights
+from .weights import observed_fraction, resolve_weights
 
 __all__ = [
     "QuadraticTerm",
