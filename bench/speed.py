@@ -10,7 +10,7 @@ Two sections:
 * **Stopping rule** (:func:`stopping_rows`): per report frame at full size (5 % observed, seed 0), the default
   ``amg`` solve stopping on its estimated RMS remaining change (``depth_rtol`` =
   :data:`sparsedepth.solvers.quadratic.DEFAULT_DEPTH_RTOL` of the depth scale) against the same solve stopping at
-  the relative residual 1e-8 (the previous default) and a tight reference (1e-12).  The PCG time is given in
+  the residual rule at the relative residual 1e-8 (``tol=1e-8``) and a tight reference (1e-12).  The PCG time is given in
   *V-cycle-equivalents*: the time of the PCG iterations divided by the median time of one V-cycle of the same
   hierarchy, measured in the same process (set-up separately); the RMSE change is relative to the 1e-8 solve's;
   the remaining change of the returned depth is measured against the tight solve (RMS and max, depth units) and
@@ -118,7 +118,7 @@ def stopping_section(frames, argv, started) -> tuple[str, list]:
         f"the estimated RMS remaining change of the depth (`sparsedepth.solvers.quadratic.RemainingChange`: the "
         f"last CG step times ρ/(1−ρ), ρ the largest step ratio of the last three) is at most `depth_rtol` = "
         f"{DEFAULT_DEPTH_RTOL:g} of the depth scale s (the power of two nearest the median observed depth); "
-        f"`tol=1e-8` gives the previous stop, the relative residual 1e-8. PCG V-eq.: the PCG iterations' time "
+        f"`tol=1e-8` stops instead at the relative residual 1e-8. PCG V-eq.: the PCG iterations' time "
         f"divided by the median time of one V-cycle of the same hierarchy (same process); set-up: building the "
         f"hierarchy, same unit. `complete_depth` time: the ratio of the two calls' `runtime` (set-up, solve and "
         f"duality gap). RMSE: on the hidden valid pixels, change relative to the 1e-8 solve's. Remaining change: "
