@@ -22,15 +22,16 @@ from ...grid.stencil import SymmetricStencil, full_pattern_offsets, stencil_to_c
 from .bands import BandedStencil, FullStencil
 from .galerkin import galerkin_offsets, galerkin_stencil
 from .iteration import preconditioned_cg, prepare_rhs, vcycle_iteration
-from .interpolation import bilinear_weights, operator_weights
-from .smoothers import gauss_seidel_backward, gauss_seidel_forward, jacobi_damping, jacobi_sweeps
+from .interpolation import CollapsedSource, bilinear_weights, operator_weights
+from .smoothers import LineGaussSeidel, gauss_seidel_backward, gauss_seidel_forward, jacobi_damping, jacobi_sweeps
 from .stencils import StencilSource, extract_stencil, fine_stencil_source
 from .transfer import ClassProlongation, SeparableProlongation
 
 __all__ = ["GridMultigrid", "grid_multigrid"]
 
+_COLLAPSE_RULE = "neighbour"
 _INTERPOLATIONS = ("bilinear", "operator", "auto")
-_SMOOTHERS = ("gauss_seidel", "jacobi")
+_SMOOTHERS = ("gauss_seidel", "jacobi", "line_gauss_seidel")
 #: fine grids from this many pixels keep their coarse levels in float32 (coarse_precision="auto")
 _SINGLE_COARSE_PIXELS = 1 << 21
 #: fine operators with at most this many non-zeros are smoothed in float32 (fine_precision="auto"), on
@@ -259,11 +260,6 @@ class GridMultigrid:
         wide = any(max(abs(dy), abs(dx)) > 1 for dy, dx in offsets)
         if self.requested_interpolation == "auto":
             self.interpolation = "bilinear" if wide else "operator"
-        if self.interpolation == "operator" and wide:
-            raise ValueError(
-                "interpolation='operator' needs a stencil of radius 1 (5- or "
-                "9-point); use interpolation='bilinear' for wider stencils."
-            )
         shapes = self._shapes()
         levels = []
         for li, shp in enumerate(shapes):
@@ -296,7 +292,10 @@ class GridMultigrid:
         for li in range(len(levels) - 1):
             fine, coarse = levels[li], levels[li + 1]
             if self.interpolation == "operator":
-                interp = operator_weights(fine.offsets, source, fine.shape)
+                wide = any(max(abs(dy), abs(dx)) > 1 for dy, dx in fine.offsets)
+                view = CollapsedSource(source, _COLLAPSE_RULE) if wide else source
+                interp = operator_weights(view.offsets if wide else fine.offsets, view, fine.shape)
+                del view
                 fine.P = ClassProlongation(interp.full, self.coarse_dtype)
             else:
                 interp = bilinear_weights(fine.shape)
@@ -345,6 +344,11 @@ class GridMultigrid:
             for lvl in levels[1:-1]]
         for lvl in levels[:-1]:
             self._setup_smoother(lvl)
+        self._line = None
+        if self.smoother == "line_gauss_seidel" and len(levels) > 1:
+            fine = self._fine_cycle_A
+            fine = fine if sp.issparse(fine) else A.tocsr(dtype=self.fine_dtype)
+            self._line = LineGaussSeidel(fine, self.shape, select=_anisotropic(fine, self.shape, _LINE_THETA))
         self._factor_coarsest()
 
     def _setup_smoother(self, lvl):
@@ -447,6 +451,8 @@ class GridMultigrid:
             x = np.zeros_like(b)
             if lvl.diag_inv is None:
                 gauss_seidel_forward(A, x, b, nu)
+                if self._line is not None and lvl is levels[0]:
+                    self._line.forward(x, b)
             else:
                 self._jacobi(lvl, x, b, A)
             xs.append(x)
@@ -455,6 +461,8 @@ class GridMultigrid:
         x = self._coarse_solve(b.astype(np.float64, copy=False)).astype(self.coarse_dtype, copy=False)
         for lvl, A, xf, bf in zip(levels[-2::-1], cycle_ops[::-1], xs[::-1], bs[::-1]):
             lvl.P.add_prolonged(xf, x)
+            if self._line is not None and lvl is levels[0]:
+                self._line.backward(xf, bf)
             if lvl.diag_inv is None:
                 gauss_seidel_backward(A, xf, bf, nu)
             else:
@@ -618,6 +626,26 @@ def _restricted_residual(A, P, x, b):
     r = A @ x
     np.subtract(b, r, out=r)
     return P.T @ r
+
+
+_LINE_THETA = 4.0
+
+
+def _anisotropic(A, shape, theta):
+    if theta is None:
+        return None
+    h, w = shape
+    n = h * w
+    strength = []
+    for step in (1, w):
+        s = np.zeros(n)
+        for k in (1, 2):
+            d = np.abs(A.diagonal(k * step))
+            s[:n - k * step] += d
+            s[k * step:] += d
+        strength.append(s.reshape(shape))
+    sx, sy = strength
+    return np.array([sx > theta * sy, sy > theta * sx])
 
 
 def _as_fine_operator(A, shape):

@@ -146,3 +146,45 @@ def operator_weights(offsets, source, shape):
     if w % 2 == 0:
         full[:, 1, :, w - 1] = 0.0
     return InterpolationWeights(full=full)
+
+
+#: rules of :class:`CollapsedSource` (experimental knob; see there)
+COLLAPSE_RULES = ("neighbour", "diagonal", "negative")
+
+
+class CollapsedSource:
+    r"""A radius-1 (9-point) view of a radius-2 stencil, handed out one parity class at a time.
+
+    ``rule="neighbour"``: a coupling at offset :math:`(d_y, d_x)` is added to the offset
+    :math:`(\operatorname{sgn} d_y \min(|d_y|, 1), \operatorname{sgn} d_x \min(|d_x|, 1))`.
+    ``rule="diagonal"``: couplings at distance 2 are added to the centre.
+    ``rule="negative"``: "neighbour", then positive off-diagonal couplings moved to the centre.
+    Each rule keeps every row sum.
+    """
+
+    def __init__(self, source, rule="neighbour"):
+        if rule not in COLLAPSE_RULES:
+            raise ValueError(f"unknown collapse rule {rule!r}; use one of {COLLAPSE_RULES}.")
+        self.source = source
+        self.rule = rule
+        self.shape = source.shape
+        self.wide_offsets = list(source.offsets)
+        self.offsets = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+
+    def parity_class(self, py, px):
+        part = self.source.parity_class(py, px)
+        out = np.zeros((9,) + part.shape[1:])
+        centre = 4
+        for k, (dy, dx) in enumerate(self.wide_offsets):
+            if self.rule == "diagonal" and max(abs(dy), abs(dx)) > 1:
+                out[centre] += part[k]
+                continue
+            j = 3 * (int(np.sign(dy)) + 1) + int(np.sign(dx)) + 1
+            out[j] += part[k]
+        if self.rule == "negative":
+            for j in range(9):
+                if j != centre:
+                    pos = np.maximum(out[j], 0.0)
+                    out[j] -= pos
+                    out[centre] += pos
+        return out
