@@ -23,14 +23,14 @@ from .bands import BandedStencil, FullStencil
 from .galerkin import galerkin_offsets, galerkin_stencil
 from .iteration import preconditioned_cg, prepare_rhs, vcycle_iteration
 from .interpolation import bilinear_weights, operator_weights
-from .smoothers import gauss_seidel_backward, gauss_seidel_forward, jacobi_damping, jacobi_sweeps
+from .smoothers import LineGaussSeidel, gauss_seidel_backward, gauss_seidel_forward, jacobi_damping, jacobi_sweeps
 from .stencils import StencilSource, extract_stencil, fine_stencil_source
 from .transfer import ClassProlongation, SeparableProlongation
 
 __all__ = ["GridMultigrid", "grid_multigrid"]
 
 _INTERPOLATIONS = ("bilinear", "operator", "auto")
-_SMOOTHERS = ("gauss_seidel", "jacobi")
+_SMOOTHERS = ("gauss_seidel", "jacobi", "line_gauss_seidel")
 #: fine grids from this many pixels keep their coarse levels in float32 (coarse_precision="auto")
 _SINGLE_COARSE_PIXELS = 1 << 21
 #: fine operators with at most this many non-zeros are smoothed in float32 (fine_precision="auto"), on
@@ -96,13 +96,27 @@ class GridMultigrid:
         ``"bilinear"`` otherwise (on a 640x480 depth-completion system PCG
         needs 6 iterations with it instead of 9 with ``"bilinear"``);
         :attr:`interpolation` then holds the choice.
-    smoother : {"gauss_seidel", "jacobi"}, default "gauss_seidel"
+    smoother : {"gauss_seidel", "jacobi", "line_gauss_seidel"}, default "gauss_seidel"
         Gauss--Seidel uses a forward sweep before and a backward sweep after
         the coarse-grid correction; Jacobi is damped with
         :math:`\omega = 4 / (3 \rho)`, :math:`\rho` the Gershgorin bound of
-        :math:`D^{-1} A`.  Both keep the V-cycle symmetric.
+        :math:`D^{-1} A`.  ``"line_gauss_seidel"``: Gauss--Seidel, and on the
+        fine level after the forward sweep a sweep of line Gauss--Seidel
+        (:class:`~sparsedepth.linalg.multigrid.smoothers.LineGaussSeidel`:
+        the pixels of `line_anisotropy` relaxed along rows, then along
+        columns), its adjoint before the backward sweep; for operators
+        whose weights drop across image edges, which couple the pixels
+        along an edge much more strongly than across it.  All three keep
+        the V-cycle symmetric.
     sweeps : int, default 1
-        Smoothing sweeps before and after the coarse-grid correction.
+        Smoothing sweeps (point sweeps) before and after the coarse-grid
+        correction.
+    line_anisotropy : float or None, default 4.0
+        For ``smoother="line_gauss_seidel"``: the pixels relaxed along rows
+        (columns) are those whose couplings along the row (column) outweigh
+        those along the other axis by more than this ratio
+        (:func:`~sparsedepth.linalg.multigrid.smoothers.anisotropic_pixels`);
+        None: every pixel along both.  At least 1.
     max_coarse : int, default 1024
         Coarsening stops once a level has at most this many unknowns; that
         level is solved directly (sparse LU).
@@ -203,7 +217,7 @@ class GridMultigrid:
 
     def __init__(self, A, shape, *, interpolation="bilinear",
                  smoother="gauss_seidel", sweeps=1, max_coarse=1024,
-                 max_levels=None, coarse_precision="auto", fine_precision="auto"):
+                 max_levels=None, coarse_precision="auto", fine_precision="auto", line_anisotropy=4.0):
         for name, value in (("coarse_precision", coarse_precision), ("fine_precision", fine_precision)):
             if value not in ("auto", "double", "single"):
                 raise ValueError(f"`{name}` must be 'auto', 'double' or 'single', got {value!r}.")
@@ -216,6 +230,8 @@ class GridMultigrid:
             raise ValueError(
                 f"unknown smoother {smoother!r}; use one of {_SMOOTHERS}."
             )
+        if line_anisotropy is not None and not float(line_anisotropy) >= 1.0:
+            raise ValueError(f"`line_anisotropy` must be a ratio of at least 1, or None; got {line_anisotropy!r}.")
         if int(sweeps) < 1:
             raise ValueError(f"`sweeps` must be a positive integer, got {sweeps!r}.")
         if int(max_coarse) < 1:
@@ -230,6 +246,7 @@ class GridMultigrid:
         self.interpolation = interpolation
         self.smoother = smoother
         self.sweeps = int(sweeps)
+        self.line_anisotropy = None if line_anisotropy is None else float(line_anisotropy)
         self.max_coarse = int(max_coarse)
         self.max_levels = None if max_levels is None else int(max_levels)
         A, shape = _as_fine_operator(A, shape)
@@ -293,6 +310,9 @@ class GridMultigrid:
         if keep:
             source.read_whole()
         levels = self.levels
+        line_images = None
+        if self.smoother == "line_gauss_seidel" and source.array is not None:
+            line_images = dict(zip(source.offsets, source.array))
         for li in range(len(levels) - 1):
             fine, coarse = levels[li], levels[li + 1]
             if self.interpolation == "operator":
@@ -345,6 +365,13 @@ class GridMultigrid:
             for lvl in levels[1:-1]]
         for lvl in levels[:-1]:
             self._setup_smoother(lvl)
+        self._line = None
+        if self.smoother == "line_gauss_seidel" and len(levels) > 1:
+            fine = self._fine_cycle_A
+            if not sp.issparse(fine):  # a stencil swept band by band: the line steps need its rows as CSR
+                fine = A.tocsr(dtype=self.fine_dtype)
+            self._line = LineGaussSeidel(fine, self.shape, images=line_images, anisotropy=self.line_anisotropy)
+        del line_images
         self._factor_coarsest()
 
     def _setup_smoother(self, lvl):
@@ -447,6 +474,8 @@ class GridMultigrid:
             x = np.zeros_like(b)
             if lvl.diag_inv is None:
                 gauss_seidel_forward(A, x, b, nu)
+                if self._line is not None and lvl is levels[0]:
+                    self._line.forward(x, b)
             else:
                 self._jacobi(lvl, x, b, A)
             xs.append(x)
@@ -455,6 +484,8 @@ class GridMultigrid:
         x = self._coarse_solve(b.astype(np.float64, copy=False)).astype(self.coarse_dtype, copy=False)
         for lvl, A, xf, bf in zip(levels[-2::-1], cycle_ops[::-1], xs[::-1], bs[::-1]):
             lvl.P.add_prolonged(xf, x)
+            if self._line is not None and lvl is levels[0]:
+                self._line.backward(xf, bf)
             if lvl.diag_inv is None:
                 gauss_seidel_backward(A, xf, bf, nu)
             else:
@@ -543,7 +574,11 @@ class GridMultigrid:
             if lvl.P is not None:
                 L.P = (lvl.P if sp.issparse(lvl.P) else lvl.P.tocsr()).astype(np.float64, copy=False)
                 L.R = L.P.T.tocsr()
-                if lvl.diag_inv is None:
+                if lvl.diag_inv is None and self._line is not None and lvl is self.levels[0]:
+                    nu, line = self.sweeps, self._line
+                    L.presmoother = lambda A, x, b, nu=nu: (gauss_seidel_forward(A, x, b, nu), line.forward(x, b))
+                    L.postsmoother = lambda A, x, b, nu=nu: (line.backward(x, b), gauss_seidel_backward(A, x, b, nu))
+                elif lvl.diag_inv is None:
                     nu = self.sweeps
                     L.presmoother = lambda A, x, b, nu=nu: gauss_seidel_forward(A, x, b, nu)
                     L.postsmoother = lambda A, x, b, nu=nu: gauss_seidel_backward(A, x, b, nu)

@@ -23,7 +23,7 @@ __all__ = ["SolveInfo", "solve_spd"]
 _PRECONDITIONERS = ("grid", "amg", "sa", "jacobi", "none")
 #: The options of :class:`GridMultigrid` that ``solve_spd(..., preconditioner="grid", **options)`` passes on.
 GRID_OPTIONS = ("interpolation", "smoother", "sweeps", "max_coarse", "max_levels", "coarse_precision",
-                "fine_precision")
+                "fine_precision", "line_anisotropy")
 
 
 def _solve_preconditioner(A, shape, preconditioner, options):

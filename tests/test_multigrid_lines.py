@@ -1,0 +1,176 @@
+"""Line Gauss--Seidel smoothing of the fine level: block steps, symmetry, solves (against dense and direct algebra)."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from sparsedepth.linalg.multigrid import GridMultigrid, solve_spd
+from sparsedepth.linalg.multigrid.smoothers import LineGaussSeidel, anisotropic_pixels
+
+DOUBLE = dict(fine_precision="double", coarse_precision="double")
+
+
+def _first_difference(n):
+    main = -np.ones(n)
+    main[-1] = 0.0
+    return sp.diags([main, np.ones(n - 1)], [0, 1], shape=(n, n), format="csr")
+
+
+def _second_difference(n):
+    """Rows 1 .. n-2 of the 1-D second difference (Neumann: no rows at the ends), as an (n, n) matrix."""
+    if n < 3:
+        return sp.csr_matrix((n, n))
+    D = sp.diags([np.ones(n - 2), -2 * np.ones(n - 2), np.ones(n - 2)], [0, 1, 2], shape=(n - 2, n))
+    return sp.vstack([sp.csr_matrix((1, n)), D, sp.csr_matrix((1, n))]).tocsr()
+
+
+def edge_system(shape, rng, *, strip=True):
+    r"""A 25-point SPD system with jumping, direction-dependent weights.
+
+    ``δ I + M + Σ_d D_dᵀ diag(w_d) D_d`` over the first differences along x and y, the second differences
+    along x and y and the mixed difference ``D_x D_y``; the weights are constant on 4x4 blocks with values
+    10**U(-2, 2), and with ``strip`` the weights across a one-pixel horizontal line (row H // 2 + 1) are 1e-4 of
+    those along it (an image edge pair).
+    """
+    h, w = shape
+    n = h * w
+    Iy, Ix = sp.eye(h), sp.eye(w)
+    Dx, Dy = sp.kron(Iy, _first_difference(w)), sp.kron(_first_difference(h), Ix)
+    Dxx, Dyy = sp.kron(Iy, _second_difference(w)), sp.kron(_second_difference(h), Ix)
+    ops = [Dx, Dy, Dxx, Dyy, Dx @ Dy]
+    blocks = 10.0 ** rng.uniform(-2, 2, (len(ops), (h + 3) // 4, (w + 3) // 4))
+    weights = np.kron(blocks, np.ones((1, 4, 4)))[:, :h, :w]
+    if strip and h > 4:
+        y = h // 2 + 1
+        weights[[1, 3], y - 2:y + 1] *= 1e-4  # vertical differences touching row y
+        weights[4, y - 1:y + 1] *= 1e-4
+    mask = rng.random(n) < 0.05
+    A = sp.diags(1e-3 + mask * 1.0)
+    for D, wd in zip(ops, weights):
+        A = A + D.T @ sp.diags(wd.ravel()) @ D
+    return sp.csr_array(A)
+
+
+def dense_bands(A, shape):
+    """``{offset: image}`` of the couplings ``A[(y, x), (y + dy, x + dx)]`` read entry by entry (0 outside)."""
+    h, w = shape
+    dense = A.toarray()
+    bands = {}
+    for dy, dx in ((0, 0), (0, 1), (0, 2), (1, 0), (2, 0)):
+        image = np.zeros(shape)
+        for y in range(h - dy):
+            for x in range(w - dx):
+                image[y, x] = dense[y * w + x, (y + dy) * w + x + dx]
+        bands[dy, dx] = image
+    return bands
+
+
+def block_sets(shape, select=None):
+    """The pixel sets of the six block steps, built from their definition (rows, then columns, y or x mod 3)."""
+    h, w = shape
+    yy, xx = np.mgrid[:h, :w]
+    sets = []
+    for axis, coord in ((0, yy), (1, xx)):
+        for c in range(3):
+            chosen = coord % 3 == c
+            if select is not None:
+                chosen &= select[axis]
+            idx = np.flatnonzero(chosen.ravel())
+            if idx.size:
+                sets.append(idx)
+    return sets
+
+
+@pytest.mark.parametrize("selected", [False, True])
+@pytest.mark.parametrize("shape", [(13, 17), (1, 9), (9, 1), (5, 5)])
+def test_forward_sweep_is_block_gauss_seidel_over_lines(shape, selected):
+    rng = np.random.default_rng(1)
+    A = edge_system(shape, rng)
+    anisotropy = 2.0 if selected else None
+    select = anisotropic_pixels(dense_bands(A, shape), anisotropy) if selected else None
+    b = rng.standard_normal(A.shape[0])
+    x = rng.standard_normal(A.shape[0])
+    expected = x.copy()
+    dense = A.toarray()
+    for idx in block_sets(shape, select):
+        r = b[idx] - dense[idx] @ expected
+        expected[idx] += np.linalg.solve(dense[np.ix_(idx, idx)], r)
+    smoother = LineGaussSeidel(sp.csr_matrix(A), shape, anisotropy=anisotropy)
+    smoother.forward(x, b)
+    np.testing.assert_allclose(x, expected, rtol=1e-10, atol=1e-10 * np.abs(expected).max())
+
+
+def test_backward_sweep_is_adjoint_of_forward_in_the_energy_inner_product():
+    # error propagation E of the forward sweep and E* of the backward one: <E u, v>_A = <u, E* v>_A
+    shape = (14, 11)
+    rng = np.random.default_rng(2)
+    A = sp.csr_matrix(edge_system(shape, rng))
+    smoother = LineGaussSeidel(A, shape, anisotropy=2.0)
+    zero = np.zeros(A.shape[0])
+
+    def forward_error(u):
+        e = u.copy()
+        smoother.forward(e, zero)
+        return e
+
+    def backward_error(u):
+        e = u.copy()
+        smoother.backward(e, zero)
+        return e
+
+    u, v = rng.standard_normal((2, A.shape[0]))
+    left = forward_error(u) @ (A @ v)
+    right = u @ (A @ backward_error(v))
+    assert abs(left - right) <= 1e-10 * abs(left)
+
+
+@pytest.mark.parametrize("line_anisotropy", [None, 4.0])
+def test_vcycle_with_line_smoothing_is_symmetric_positive_definite(line_anisotropy):
+    shape = (29, 37)
+    rng = np.random.default_rng(3)
+    A = edge_system(shape, rng)
+    mg = GridMultigrid(A, shape, smoother="line_gauss_seidel", line_anisotropy=line_anisotropy, max_coarse=16,
+                       **DOUBLE)
+    for _ in range(3):
+        u, v = rng.standard_normal((2, A.shape[0]))
+        Mu, Mv = mg.vcycle(u), mg.vcycle(v)
+        assert abs(u @ Mv - Mu @ v) <= 1e-11 * np.linalg.norm(u) * np.linalg.norm(Mv)
+        assert u @ Mu > 0
+
+
+@pytest.mark.parametrize("shape", [(29, 37), (30, 2), (1, 40), (16, 17)])
+@pytest.mark.parametrize("precision", ["double", "auto"])
+def test_pcg_with_line_smoothing_matches_spsolve(shape, precision):
+    rng = np.random.default_rng(4)
+    A = edge_system(shape, rng)
+    b = rng.standard_normal(A.shape[0])
+    x, info = solve_spd(A, b, shape, rtol=1e-11, preconditioner="grid", smoother="line_gauss_seidel", max_coarse=4,
+                        fine_precision=precision, coarse_precision=precision)
+    assert info.converged
+    x_ref = spla.spsolve(sp.csc_matrix(A), b)
+    # condition numbers up to 1e6: a relative residual of 1e-11 leaves at most ~1e-5 of the solution
+    np.testing.assert_allclose(x, x_ref, rtol=0, atol=1e-5 * np.abs(x_ref).max())
+
+
+def test_anisotropic_pixels_of_a_strip():
+    # weights across (y) 1e-3 of those along x for the differences touching rows 4..6 of a 5-point operator:
+    # those rows' pixels are x-line pixels; elsewhere the operator is isotropic enough and none is chosen
+    shape = (11, 9)
+    h, w = shape
+    wy = np.ones(shape)
+    wy[3:7] = 1e-3  # the differences (y, y+1) for y = 3..6 touch rows 3..7
+    Dx, Dy = sp.kron(sp.eye(h), _first_difference(w)), sp.kron(_first_difference(h), sp.eye(w))
+    A = sp.csr_matrix(sp.eye(h * w) + Dx.T @ Dx + Dy.T @ sp.diags(wy.ravel()) @ Dy)
+    along_x, along_y = anisotropic_pixels(dense_bands(A, shape), 4.0)
+    assert not along_y.any()
+    np.testing.assert_array_equal(np.flatnonzero(along_x.any(axis=1)), [4, 5, 6])
+    assert along_x[4:7].all()
+
+
+def test_line_options_checked():
+    A = edge_system((8, 8), np.random.default_rng(5))
+    with pytest.raises(ValueError, match="line_anisotropy"):
+        GridMultigrid(A, (8, 8), smoother="line_gauss_seidel", line_anisotropy=0.5)
+    with pytest.raises(ValueError, match="unknown smoother"):
+        GridMultigrid(A, (8, 8), smoother="line")
