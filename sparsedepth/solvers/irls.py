@@ -286,12 +286,13 @@ def _solve_newton(objective, system, x0, *, max_iter, recorder, options):
     the iterates may rise when ``ε`` shrinks; the point returned is the one
     with the lowest exact ``F``.
 
-    The Newton steps reach a certified gap of about 1e-4 ``F`` quickly but
-    stall near 1e-5 as ``ε`` shrinks: the reweighted systems grow
-    ill-conditioned and the iterates never tie edges exactly.  With option
-    ``finish="admm"`` (the default) they therefore stop at the gap
-    ``max(gap_tol, newton_gap)``, and when ``gap_tol`` is smaller (or the
-    Newton phase stalled) an exact finishing phase takes over: ADMM with its
+    The Newton steps lower ``F`` fast while ``ε`` is large but slow down
+    and stall near a gap of 1e-5 ``F`` as ``ε`` shrinks: the reweighted
+    systems grow ill-conditioned and the iterates never tie edges exactly.
+    With option ``finish="admm"`` (the default) they therefore stop at the
+    gap ``max(gap_tol, newton_gap)`` (``newton_gap`` 1e-2 by default), and
+    when ``gap_tol`` is smaller (or the Newton phase stalled) an exact
+    finishing phase takes over: ADMM with its
     active-set polishes and certificate
     (:func:`~sparsedepth.solvers.admm.finish_from`), started from the best
     Newton point with ``p`` as its dual, whose iterations continue the

@@ -275,9 +275,10 @@ class IrlsOptions(SolverOptions):
         polishes (:func:`~sparsedepth.solvers.admm.finish_from`) continue
         from the Newton point and dual to ``gap_tol``; ``"none"``: Newton
         steps only.
-    newton_gap : float, default 1e-4
+    newton_gap : float, default 1e-2
         The relative duality gap at which the Newton phase hands over to the
-        finishing phase.
+        finishing phase (the Newton steps gain most while ``ε`` is large;
+        ``python -m bench.solver_gaps`` times the hand-over).
     """
 
     solver: ClassVar[str] = "irls"
@@ -297,7 +298,7 @@ class IrlsOptions(SolverOptions):
     tie_band: float | None = _option(None, kind=float, positive=True, depth_unit=True)
     certify_below: float | None = _option(None, kind=float, positive=True, depth_unit=True)
     finish: str = _option("admm", kind=str, choices=("admm", "none"))
-    newton_gap: float = _option(1e-4)
+    newton_gap: float = _option(1e-2)
 
 
 @dataclass(frozen=True, kw_only=True)
