@@ -74,7 +74,7 @@ def _line_bands(A, shape, images):
     out = {}
     for dy, dx in ((0, 0), (0, 1), (0, 2), (1, 0), (2, 0)):
         if images is not None and (dy, dx) in images:
-            out[dy, dx] = np.asarray(images[dy, dx], dtype=A.dtype)
+            out[dy, dx] = np.asarray(images[dy, dx])
             continue
         k = dy * w + dx
         band = np.zeros(n, dtype=A.dtype)
@@ -85,6 +85,19 @@ def _line_bands(A, shape, images):
             band[:, w - dx:] = 0.0
         out[dy, dx] = band
     return out
+
+
+def _line_pixels(pick, axis, c):
+    """Flat indices of the ``True`` pixels of ``pick`` on the rows (``axis`` 0) or columns (1) ``≡ c (mod 3)``.
+
+    Ordered line by line, and along each line by position (row-major for rows, column-major for columns).
+    """
+    h, w = pick.shape
+    if axis == 0:
+        line, pos = np.divmod(np.flatnonzero(pick[c::3]), w)
+        return (c + 3 * line) * w + pos
+    line, pos = np.divmod(np.flatnonzero(pick[:, c::3].T), h)
+    return pos * w + c + 3 * line
 
 
 def anisotropic_pixels(bands, anisotropy):
@@ -167,43 +180,37 @@ class LineGaussSeidel:
     """
 
     def __init__(self, A, shape, *, images=None, anisotropy=None):
-        h, w = shape
-        n = h * w
+        w = shape[1]
         dtype = A.dtype
         self.pbtrf = scipy.linalg.get_lapack_funcs("pbtrf", dtype=dtype)
         bands = _line_bands(A, shape, images)
         chosen = (None, None) if anisotropy is None else anisotropic_pixels(bands, anisotropy)
-        diag = bands[0, 0].reshape(-1)
-        grid = np.arange(n).reshape(h, w)
+        flat = {offset: band.reshape(-1) for offset, band in bands.items()}
         self.blocks = []
         self.size = 0
-        for step, lines, near, far, pick in ((1, grid, bands[0, 1], bands[0, 2], chosen[0]),
-                                            (w, grid.T, bands[1, 0].T, bands[2, 0].T,
-                                             None if chosen[1] is None else chosen[1].T)):
+        for axis, step, near, far in ((0, 1, flat[0, 1], flat[0, 2]), (1, w, flat[1, 0], flat[2, 0])):
+            pick = np.ones(shape, dtype=bool) if anisotropy is None else chosen[axis]
             for c in range(3):
-                rows = slice(c, None, 3)
-                if pick is None:
-                    idx, a1, a2 = lines[rows].reshape(-1), near[rows].reshape(-1), far[rows].reshape(-1)
-                else:
-                    keep = pick[rows]
-                    idx, a1, a2 = lines[rows][keep], near[rows][keep], far[rows][keep]
+                idx = _line_pixels(pick, axis, c)
                 if idx.size == 0:
                     continue
+                a1, a2 = near[idx], far[idx]
                 # the next chosen pixel of the line 1 or 2 steps on, the one after next 2 steps on
                 gap1 = np.diff(idx, append=-1)
                 gap2 = np.full_like(gap1, -1)
                 gap2[:-2] = idx[2:] - idx[:-2]
                 ab = np.zeros((3, idx.size), dtype=dtype)
-                ab[0] = diag[idx]
+                ab[0] = flat[0, 0][idx]
                 ab[1] = np.where(gap1 == step, a1, np.where(gap1 == 2 * step, a2, 0))
                 ab[2] = np.where(gap2 == 2 * step, a2, 0)
                 factor, info = self.pbtrf(ab, lower=1)
                 if info != 0:
                     raise ValueError("the line smoother needs a symmetric positive definite operator.")
                 m = idx.size
-                lower = sp.diags([factor[0], factor[1][:m - 1], factor[2][:m - 2]], [0, -1, -2], shape=(m, m),
-                                 format="csr", dtype=dtype)
-                self.blocks.append((idx, A[idx], lower, lower.T.tocsr()))
+                bands_l = [factor[0], factor[1][:m - 1], factor[2][:m - 2]]
+                lower = sp.diags(bands_l, [0, -1, -2], shape=(m, m), format="csr", dtype=dtype)
+                upper = sp.diags(bands_l, [0, 1, 2], shape=(m, m), format="csr", dtype=dtype)
+                self.blocks.append((idx, A[idx], lower, upper))
                 self.size += m
 
     @staticmethod
