@@ -90,7 +90,7 @@ def block_sets(shape, select=None):
 
 
 @pytest.mark.parametrize("selected", [False, True])
-@pytest.mark.parametrize("shape", [(13, 17), (1, 9), (9, 1), (5, 5)])
+@pytest.mark.parametrize("shape", [(13, 17), (1, 9), (9, 1), (5, 5), (2, 2), (4, 1)])
 def test_forward_sweep_is_block_gauss_seidel_over_lines(shape, selected):
     rng = np.random.default_rng(1)
     A = edge_system(shape, rng)

@@ -207,9 +207,10 @@ class LineGaussSeidel:
                 if info != 0:
                     raise ValueError("the line smoother needs a symmetric positive definite operator.")
                 m = idx.size
-                bands_l = [factor[0], factor[1][:m - 1], factor[2][:m - 2]]
-                lower = sp.diags(bands_l, [0, -1, -2], shape=(m, m), format="csr", dtype=dtype)
-                upper = sp.diags(bands_l, [0, 1, 2], shape=(m, m), format="csr", dtype=dtype)
+                k = min(m, 3)  # a block of one or two pixels has fewer sub-diagonals
+                bands_l = [factor[0], factor[1][:m - 1], factor[2][:m - 2]][:k]
+                lower = sp.diags(bands_l, [0, -1, -2][:k], shape=(m, m), format="csr", dtype=dtype)
+                upper = sp.diags(bands_l, [0, 1, 2][:k], shape=(m, m), format="csr", dtype=dtype)
                 self.blocks.append((idx, A[idx], lower, upper))
                 self.size += m
 
