@@ -39,9 +39,9 @@ import numpy as np  # noqa: E402
 
 import sparsedepth as sd  # noqa: E402
 from sparsedepth.linalg import pcg_info  # noqa: E402
-from sparsedepth.linalg.multigrid import GridMultigrid  # noqa: E402
 from sparsedepth.solvers import depth_scale, scaled_objective  # noqa: E402
-from sparsedepth.solvers.quadratic import DEFAULT_DEPTH_RTOL, RemainingChange  # noqa: E402
+from sparsedepth.solvers.quadratic import (DEFAULT_DEPTH_RTOL, RemainingChange, default_hierarchy,  # noqa: E402
+                                           system_form)
 
 from . import fast_peers  # noqa: E402
 from . import harness as H  # noqa: E402
@@ -77,10 +77,10 @@ def stopping_row(frame) -> dict:
     scale = depth_scale(observed)
     objective, coarse, _ = sd.build_objective(frame.image, sparse, mask)
     scaled = scaled_objective(objective, scale)
-    A, b, _ = scaled.normal_equations()
+    A, b, _ = scaled.normal_equations(form=system_form(scaled))
     x0 = coarse.ravel() / scale
     start = time.perf_counter()
-    mg = GridMultigrid(A, scaled.shape, interpolation="auto")
+    mg = default_hierarchy(A, scaled.shape)
     setup = time.perf_counter() - start
     t_v = _v_cycle_time(mg, b)
     rule = RemainingChange(b.size, DEFAULT_DEPTH_RTOL)

@@ -1,12 +1,19 @@
-"""Line Gauss--Seidel smoothing of the fine level: block steps, symmetry, solves (against dense and direct algebra)."""
+"""Line Gauss--Seidel smoothing of the fine level: block steps, symmetry, solves (against dense and direct algebra),
+and the hierarchy of the default solve built with it."""
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+import sparsedepth as sd
+from sparsedepth.completion import _scaled_objective
+from sparsedepth.linalg import pcg
 from sparsedepth.linalg.multigrid import GridMultigrid, solve_spd
 from sparsedepth.linalg.multigrid.smoothers import LineGaussSeidel, anisotropic_pixels
+from sparsedepth.solvers.quadratic import default_hierarchy
+
+from conftest import make_problem
 
 DOUBLE = dict(fine_precision="double", coarse_precision="double")
 
@@ -83,7 +90,7 @@ def block_sets(shape, select=None):
 
 
 @pytest.mark.parametrize("selected", [False, True])
-@pytest.mark.parametrize("shape", [(13, 17), (1, 9), (9, 1), (5, 5)])
+@pytest.mark.parametrize("shape", [(13, 17), (1, 9), (9, 1), (5, 5), (2, 2), (4, 1)])
 def test_forward_sweep_is_block_gauss_seidel_over_lines(shape, selected):
     rng = np.random.default_rng(1)
     A = edge_system(shape, rng)
@@ -174,3 +181,22 @@ def test_line_options_checked():
         GridMultigrid(A, (8, 8), smoother="line_gauss_seidel", line_anisotropy=0.5)
     with pytest.raises(ValueError, match="unknown smoother"):
         GridMultigrid(A, (8, 8), smoother="line")
+
+
+# ----------------------------------------------------------------------------- the hierarchy of complete_depth
+@pytest.mark.parametrize("form", ["csr", "stencil"])
+def test_default_hierarchy_is_a_symmetric_preconditioner_reaching_spsolve(form):
+    image, sparse, mask, _ = make_problem((61, 83), fraction=0.05, seed=4)
+    obj, coarse, _, _ = _scaled_objective(image, sparse, mask, sd.DEFAULT_WEIGHTS, 1e-6, False)
+    A, b, _ = obj.normal_equations(form=form)
+    mg = default_hierarchy(A, obj.shape)
+    rng = np.random.default_rng(0)
+    u, v = rng.standard_normal((2, b.size))
+    Mu, Mv = mg.vcycle(u), mg.vcycle(v)
+    assert abs(u @ Mv - v @ Mu) <= 1e-5 * abs(u @ Mv)  # float32 cycle
+    assert u @ Mu > 0 and v @ Mv > 0
+    A_csr = A.tocsr() if form == "stencil" else A
+    z_star = spla.spsolve(sp.csc_matrix(A_csr), b)
+    x, _, converged, _ = pcg(A, b, x0=coarse.ravel(), M=mg.aspreconditioner(), rtol=1e-10, maxiter=200)
+    assert converged
+    assert np.linalg.norm(x - z_star) <= 1e-7 * np.linalg.norm(z_star)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg
+import scipy.sparse as sp
 from pyamg import amg_core
 
 __all__ = ["gauss_seidel_forward", "gauss_seidel_backward", "jacobi_damping", "jacobi_sweeps", "LineGaussSeidel",
@@ -73,7 +74,7 @@ def _line_bands(A, shape, images):
     out = {}
     for dy, dx in ((0, 0), (0, 1), (0, 2), (1, 0), (2, 0)):
         if images is not None and (dy, dx) in images:
-            out[dy, dx] = np.asarray(images[dy, dx], dtype=A.dtype)
+            out[dy, dx] = np.asarray(images[dy, dx])
             continue
         k = dy * w + dx
         band = np.zeros(n, dtype=A.dtype)
@@ -84,6 +85,19 @@ def _line_bands(A, shape, images):
             band[:, w - dx:] = 0.0
         out[dy, dx] = band
     return out
+
+
+def _line_pixels(pick, axis, c):
+    """Flat indices of the ``True`` pixels of ``pick`` on the rows (``axis`` 0) or columns (1) ``≡ c (mod 3)``.
+
+    Ordered line by line, and along each line by position (row-major for rows, column-major for columns).
+    """
+    h, w = pick.shape
+    if axis == 0:
+        line, pos = np.divmod(np.flatnonzero(pick[c::3]), w)
+        return (c + 3 * line) * w + pos
+    line, pos = np.divmod(np.flatnonzero(pick[:, c::3].T), h)
+    return pos * w + c + 3 * line
 
 
 def anisotropic_pixels(bands, anisotropy):
@@ -142,13 +156,15 @@ class LineGaussSeidel:
     then those on the columns :math:`x \equiv c \pmod 3` (``y``-lines), :math:`c = 0, 1, 2`.  Lines of one
     block lie at least three pixels apart, so with couplings at most two pixels apart the block's matrix
     :math:`A_{BB}` is block diagonal, one pentadiagonal SPD matrix per line (or per run of chosen pixels of a
-    line), factored once (banded Cholesky, LAPACK ``pbtrf``).  A block step is
+    line), factored once (banded Cholesky :math:`A_{BB} = L L^\top`, LAPACK ``pbtrf``; :math:`L` kept as CSR).
+    A block step is
 
     .. math::
 
         x_B \leftarrow x_B + A_{BB}^{-1} (b - A x)_B ,
 
-    with :math:`(A x)_B` from the block's rows of :math:`A`, kept as a CSR slice.  :meth:`forward` takes the
+    with :math:`(A x)_B` from the block's rows of :math:`A`, kept as a CSR slice, and :math:`A_{BB}^{-1}` applied
+    by forward and back substitution with :math:`L` and :math:`L^\top`.  :meth:`forward` takes the
     blocks in that order, :meth:`backward` in the reverse one: as for point Gauss--Seidel the two sweeps'
     error propagators :math:`I - B^{-1} A` and :math:`I - B^{-\top} A` are adjoint in the :math:`A` inner
     product, so a V-cycle with one before and the other after the coarse-grid correction stays symmetric
@@ -164,46 +180,51 @@ class LineGaussSeidel:
     """
 
     def __init__(self, A, shape, *, images=None, anisotropy=None):
-        h, w = shape
-        n = h * w
+        w = shape[1]
         dtype = A.dtype
-        self.pbtrf, self.pbtrs = scipy.linalg.get_lapack_funcs(("pbtrf", "pbtrs"), dtype=dtype)
+        self.pbtrf = scipy.linalg.get_lapack_funcs("pbtrf", dtype=dtype)
         bands = _line_bands(A, shape, images)
         chosen = (None, None) if anisotropy is None else anisotropic_pixels(bands, anisotropy)
-        diag = bands[0, 0].reshape(-1)
-        grid = np.arange(n).reshape(h, w)
+        flat = {offset: band.reshape(-1) for offset, band in bands.items()}
         self.blocks = []
         self.size = 0
-        for step, lines, near, far, pick in ((1, grid, bands[0, 1], bands[0, 2], chosen[0]),
-                                            (w, grid.T, bands[1, 0].T, bands[2, 0].T,
-                                             None if chosen[1] is None else chosen[1].T)):
+        for axis, step, near, far in ((0, 1, flat[0, 1], flat[0, 2]), (1, w, flat[1, 0], flat[2, 0])):
+            pick = np.ones(shape, dtype=bool) if anisotropy is None else chosen[axis]
             for c in range(3):
-                rows = slice(c, None, 3)
-                if pick is None:
-                    idx, a1, a2 = lines[rows].reshape(-1), near[rows].reshape(-1), far[rows].reshape(-1)
-                else:
-                    keep = pick[rows]
-                    idx, a1, a2 = lines[rows][keep], near[rows][keep], far[rows][keep]
+                idx = _line_pixels(pick, axis, c)
                 if idx.size == 0:
                     continue
+                a1, a2 = near[idx], far[idx]
                 # the next chosen pixel of the line 1 or 2 steps on, the one after next 2 steps on
                 gap1 = np.diff(idx, append=-1)
                 gap2 = np.full_like(gap1, -1)
                 gap2[:-2] = idx[2:] - idx[:-2]
                 ab = np.zeros((3, idx.size), dtype=dtype)
-                ab[0] = diag[idx]
+                ab[0] = flat[0, 0][idx]
                 ab[1] = np.where(gap1 == step, a1, np.where(gap1 == 2 * step, a2, 0))
                 ab[2] = np.where(gap2 == 2 * step, a2, 0)
                 factor, info = self.pbtrf(ab, lower=1)
                 if info != 0:
                     raise ValueError("the line smoother needs a symmetric positive definite operator.")
-                self.blocks.append((idx, A[idx], factor))
-                self.size += idx.size
+                m = idx.size
+                k = min(m, 3)  # a block of one or two pixels has fewer sub-diagonals
+                bands_l = [factor[0], factor[1][:m - 1], factor[2][:m - 2]][:k]
+                lower = sp.diags(bands_l, [0, -1, -2][:k], shape=(m, m), format="csr", dtype=dtype)
+                upper = sp.diags(bands_l, [0, 1, 2][:k], shape=(m, m), format="csr", dtype=dtype)
+                self.blocks.append((idx, A[idx], lower, upper))
+                self.size += m
 
-    def _step(self, block, x, b):
-        idx, rows, factor = block
+    @staticmethod
+    def _step(block, x, b):
+        idx, rows, lower, upper = block
         r = b[idx] - rows @ x
-        dx, _ = self.pbtrs(factor, r, lower=1)
+        m = idx.size
+        # L L^T dx = r: forward substitution is one Gauss--Seidel sweep on L from zero, back substitution
+        # one backward sweep on L^T (pyamg's compiled kernel: about twice as fast as LAPACK pbtrs here)
+        y = np.zeros_like(r)
+        amg_core.gauss_seidel(lower.indptr, lower.indices, lower.data, y, r, 0, m, 1)
+        dx = np.zeros_like(r)
+        amg_core.gauss_seidel(upper.indptr, upper.indices, upper.data, dx, y, m - 1, -1, -1)
         x[idx] += dx
 
     def forward(self, x, b):
