@@ -63,7 +63,10 @@ def test_admm_irls_lbfgsb_agree_on_13_point_l1_problem(problem):
     assert abs(irls.objective - lbfgsb.objective) / lbfgsb.objective < 1e-4
     assert admm.objective <= irls.objective * (1 + 1e-7)
     F = irls.history_array("objective")
-    assert irls.objective == pytest.approx(F.min(), rel=1e-12)  # Newton returns its best point
+    if "finished by" in irls.message:  # the ADMM finish returns its best polish: within its certified gap of every iterate
+        assert irls.converged and 0.0 <= irls.objective - F.min() <= irls.gap * (1 + 1e-9) + 1e-12 * irls.objective
+    else:
+        assert irls.objective == pytest.approx(F.min(), rel=1e-12)  # Newton returns its best point
     # pyamg-preconditioned ADMM reaches the same point
     admm_amg = complete_depth(image, sparse, mask, weights=L1_13, solver="admm", options={"preconditioner": "amg"})
     assert admm_amg.objective == pytest.approx(admm.objective, rel=1e-6)
