@@ -3,6 +3,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("SPARSEDEPTH_DATA", REPO.parent / "shared" / "data"))
@@ -50,3 +51,15 @@ def scene_files(tmp_path):
     sparse, _ = sd.sample_depth(depth, fraction=0.1, seed=1)
     sd.write_depth(tmp_path / "sparse.png", sparse, scale=1000)
     return tmp_path
+
+
+#: Multigrid options that keep the whole V-cycle in float64, for tests of its exact algebra (by default the V-cycle
+#: runs in float32 unless the operator is very large).
+DOUBLE = dict(fine_precision="double", coarse_precision="double")
+
+
+def forward_difference_1d(n):
+    """The 1-D forward difference on ``n`` points as an ``(n, n)`` CSR matrix, its last row zero (Neumann)."""
+    main = -np.ones(n)
+    main[-1] = 0.0
+    return sp.diags([main, np.ones(n - 1)], [0, 1], shape=(n, n), format="csr")

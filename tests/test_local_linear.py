@@ -16,7 +16,8 @@ from sparsedepth.linalg.multigrid import GridMultigrid
 from sparsedepth.objective.objective import build_objective
 from sparsedepth.objective.weights import MODEL_FIELDS
 
-DOUBLE = dict(fine_precision="double", coarse_precision="double")
+from conftest import DOUBLE
+
 pytestmark = pytest.mark.filterwarnings("ignore::sparsedepth.ClampWarning")
 
 

@@ -15,20 +15,12 @@ from sparsedepth.linalg.multigrid import (
     solve_spd,
 )
 
+from conftest import DOUBLE
+from conftest import forward_difference_1d as forward_diff
 
 # --------------------------------------------------------------------------
 # test systems, built from the plain definition with scipy products
 # --------------------------------------------------------------------------
-#: the hierarchy in float64 throughout, for tests of its exact algebra (by default the V-cycle runs in
-#: float32 unless the operator is very large)
-DOUBLE = dict(fine_precision="double", coarse_precision="double")
-
-
-def forward_diff(n):
-    """1-D forward difference, zero last row (Neumann)."""
-    main = -np.ones(n)
-    main[-1] = 0.0
-    return sp.diags([main, np.ones(n - 1)], [0, 1], shape=(n, n), format="csr")
 
 
 def gradient(shape):

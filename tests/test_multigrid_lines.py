@@ -13,15 +13,8 @@ from sparsedepth.linalg.multigrid import GridMultigrid, solve_spd
 from sparsedepth.linalg.multigrid.smoothers import LineGaussSeidel, anisotropic_pixels
 from sparsedepth.solvers.quadratic import default_hierarchy
 
-from conftest import make_problem
-
-DOUBLE = dict(fine_precision="double", coarse_precision="double")
-
-
-def _first_difference(n):
-    main = -np.ones(n)
-    main[-1] = 0.0
-    return sp.diags([main, np.ones(n - 1)], [0, 1], shape=(n, n), format="csr")
+from conftest import DOUBLE, make_problem
+from conftest import forward_difference_1d as _first_difference
 
 
 def _second_difference(n):
