@@ -148,3 +148,16 @@ def test_nested_admm_on_a_real_frame_matches_the_cold_solve_within_the_certified
     assert cold.converged and nested.converged, (cold.message, nested.message)
     assert "started from the solution on the" in nested.message
     assert abs(nested.objective - cold.objective) <= cold.gap + nested.gap
+
+
+@pytest.mark.parametrize("options", [{"restart_from_polish": True}, dict(NESTED, restart_from_polish=True)])
+def test_admm_restarted_from_its_polishes_reaches_the_optimum_of_a_tight_cold_solve(options):
+    image, sparse, mask, _ = make_problem((48, 64), fraction=0.08)
+    weights = Weights.paper(alpha=1.0, beta=0.2, gamma=0.2, delta=0.01, kappa=5.0)  # many ties
+    run = complete_depth(image, sparse, mask, weights=weights, solver="admm", options=options,
+                         clip_to_observed=False)
+    tight = complete_depth(image, sparse, mask, weights=weights, solver="admm", clip_to_observed=False,
+                           options={"gap_tol": 1e-8, "check_rtol": 2e-9})
+    assert run.converged and tight.converged, (run.message, tight.message)
+    assert run.objective - tight.objective <= run.gap + 1e-12 * tight.objective
+    assert tight.objective - run.objective <= tight.gap + 1e-12 * tight.objective

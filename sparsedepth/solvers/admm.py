@@ -161,7 +161,9 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     ``2^(−pm)`` for differences of order ``m`` in a term of power ``p``) is
     solved first, by this solver from the block means of the start,
     recursively, with ``ρ_c = ρ / 2`` (:func:`default_rho` grows with the side
-    length) and ``gap_tol = coarse_gap_tol`` (default 1e-4).  This grid's run
+    length), ``check_rtol`` loosened by ``coarse_gap_tol / gap_tol`` (default
+    ``coarse_gap_tol`` 1e-4) and no certificate: a coarse run stops when two
+    polishes agree.  This grid's run
     then starts from ``z = P z_c`` (bilinear,
     :func:`~sparsedepth.grid.resample.upsample_bilinear`), ``u = K z`` and
     ``λ = c ⊙ σ / ρ``, where ``σ = clip(ρ_c λ_c / c_c, −1, 1)``, the coarse
@@ -172,6 +174,11 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     fine run's stopping rules, polishes and certificate are those above, so
     the result is certified as without it; the message names the coarse
     grids and their iterations.
+
+    With ``restart_from_polish=True`` (default False) a polish that lowers
+    the best polished ``F`` also moves the iteration: ADMM goes on from
+    ``z`` = the polished point and ``u = K z`` (its tied edges exactly 0),
+    with its ``λ``.  The stopping rules are unchanged.
 
     ρ (option ``rho``; default :func:`default_rho`) may be adapted by
     residual balancing (factor 2 when one residual exceeds 10× the other,
