@@ -270,7 +270,7 @@ def _coarse_start(objective, z, options, max_iter, tol):
                             upsample_edges(sigma[n:].reshape(cshape), shape, COARSENING, axis=0).ravel()])
     z = upsample_bilinear(out.z.reshape(cshape), shape, COARSENING).ravel()
     note = (f"started from the solution on the {cshape[0]}x{cshape[1]} grid ({out.iterations} ADMM iterations, "
-            f"{'converged' if out.converged else 'not converged'}"
+            f"{'its polishes agreed' if out.converged else 'its polishes did not agree'}"
             + (f"; {run.warm_note}" if run.warm_note else "") + ")")
     return z, sigma, note
 
@@ -451,7 +451,8 @@ class _AdmmRun:
 
         Returns None when the reduced model is singular (polishing is then
         switched off), True when the polishes agree and the certificate
-        accepts the best polished point, False otherwise.
+        accepts the best polished point (a coarse grid's run of the nested
+        iteration: when they agree), False otherwise.
         """
         options = self.options
         F_prev = None if self.best is None else self.best[0]
@@ -475,9 +476,10 @@ class _AdmmRun:
         self.interval = check_every if F_prev is None else min(2 * self.interval, 4 * check_every)
         self.next_polish = k + self.interval
         if F_prev is not None and abs(F_prev - F_pol) <= options.check_rtol * abs(F_pol) + self.F_floor:
-            if not self.certify:
+            if not self.certify:  # a coarse grid's run: the agreement alone stops it
+                self.converged = True
                 self.message = (f"active-set polish at iteration {k} changed the best polished F by "
-                                f"{relative(F_prev - F_pol, F_pol):.1e} (relative) (no certificate)")
+                                f"{relative(F_prev - F_pol, F_pol):.1e} (relative), no certificate")
                 return True
             return self._certify_agreement(k, F_prev, F_pol)
         return False
