@@ -4,12 +4,17 @@ The real-time mode (``complete_depth(..., quality="fast")``) solves on a
 coarse grid and comes back to the full one with these:
 
 * :func:`block_mean` - the mean of each ``f x f`` block (the coarse image);
+* :func:`block_sum` - the sum of each ``f x f`` block;
 * :func:`block_sample_mean` - the mean of the observed values of each block
   and whether it holds any (the coarse samples);
 * :func:`upsample_bilinear` - the coarse depth, bilinearly interpolated between
   the block centres;
 * :func:`edge_aware_sweeps` - red-black Gauss-Seidel sweeps on an
   image-weighted smoothness model with the observations held.
+
+The nested iteration of the ADMM solver (option ``warm_start="coarse"``)
+moves an L1 problem's solution back with :func:`upsample_bilinear` and its
+dual edge field with :func:`upsample_edges`.
 
 May import NumPy, :mod:`sparsedepth._validation` and :mod:`.edges`.
 """
@@ -21,7 +26,8 @@ import numpy as np
 from .._validation import check_count, check_nonnegative_real
 from .edges import pair_distances
 
-__all__ = ["coarse_shape", "block_mean", "block_sample_mean", "upsample_bilinear", "edge_aware_sweeps"]
+__all__ = ["coarse_shape", "block_mean", "block_sum", "block_sample_mean", "upsample_bilinear", "upsample_edges",
+           "edge_aware_sweeps"]
 
 
 def coarse_shape(shape, factor: int) -> tuple[int, int]:
@@ -72,6 +78,17 @@ def block_mean(values, factor: int) -> np.ndarray:
     return sums / (counts if values.ndim == 2 else counts[..., None])
 
 
+def block_sum(values, factor: int) -> np.ndarray:
+    """The sum of each ``f x f`` block of ``values`` (shape ``(H, W)``), partial blocks included, in float64.
+
+    Returns
+    -------
+    ndarray, shape ``coarse_shape((H, W), f)``
+    """
+    factor = check_count(factor, name="factor")
+    return _block_sums(np.asarray(values, dtype=np.float64), factor)
+
+
 def block_sample_mean(depth, observed, factor: int):
     """The mean observed depth of each ``f x f`` block and the blocks that hold at least one observation.
 
@@ -96,13 +113,34 @@ def block_sample_mean(depth, observed, factor: int):
     return np.where(coarse_observed, sums / np.maximum(counts, 1), 0.0), coarse_observed
 
 
-def _linear_taps(n_fine, n_coarse, factor):
-    """Coarse indices ``(i0, i1)`` and weight of ``i1`` for each fine index (block centres as nodes, clamped ends)."""
-    position = (np.arange(n_fine) + 0.5) / factor - 0.5
+def _linear_taps(n_fine, n_coarse, factor, edges=False):
+    """Coarse indices ``(i0, i1)`` and weight of ``i1`` for each fine index (block centres as nodes, clamped ends).
+
+    ``edges``: the nodes are the coarse edges (fine position ``(j + 1) f − ½``) and the points the fine edges
+    (``x + ½``), as :func:`upsample_edges` places them.
+    """
+    if edges:
+        position = (np.arange(n_fine) + 1.0) / factor - 1.0
+    else:
+        position = (np.arange(n_fine) + 0.5) / factor - 0.5
     np.clip(position, 0.0, n_coarse - 1, out=position)
     i0 = np.floor(position).astype(np.intp)
     i1 = np.minimum(i0 + 1, n_coarse - 1)
     return i0, i1, position - i0
+
+
+def _interpolate(coarse, r_taps, c_taps):
+    """``coarse`` interpolated by the row taps, then the column taps (each ``(i0, i1, weight of i1)``)."""
+    r0, r1, wr = r_taps
+    c0, c1, wc = c_taps
+    wr = wr.astype(coarse.dtype)[:, None]
+    wc = wc.astype(coarse.dtype)
+    rows = coarse[r0] * (1 - wr) + coarse[r1] * wr  # (H, w): the coarse rows interpolated
+    # the columns: gathers along the first axis of the transpose are contiguous row copies
+    columns = rows.T
+    out = columns[c0] * (1 - wc)[:, None]
+    out += columns[c1] * wc[:, None]
+    return np.ascontiguousarray(out.T)
 
 
 def upsample_bilinear(coarse, shape, factor: int) -> np.ndarray:
@@ -122,16 +160,51 @@ def upsample_bilinear(coarse, shape, factor: int) -> np.ndarray:
     if coarse.shape != coarse_shape((H, W), factor):
         raise ValueError(f"coarse has shape {coarse.shape}; a {H}x{W} grid at factor {factor} needs "
                          f"{coarse_shape((H, W), factor)}")
-    r0, r1, wr = _linear_taps(H, coarse.shape[0], factor)
-    c0, c1, wc = _linear_taps(W, coarse.shape[1], factor)
-    wr = wr.astype(coarse.dtype)[:, None]
-    wc = wc.astype(coarse.dtype)
-    rows = coarse[r0] * (1 - wr) + coarse[r1] * wr  # (H, w): the coarse rows interpolated
-    # the columns: gathers along the first axis of the transpose are contiguous row copies
-    columns = rows.T
-    out = columns[c0] * (1 - wc)[:, None]
-    out += columns[c1] * wc[:, None]
-    return np.ascontiguousarray(out.T)
+    return _interpolate(coarse, _linear_taps(H, coarse.shape[0], factor), _linear_taps(W, coarse.shape[1], factor))
+
+
+def upsample_edges(coarse, shape, factor: int, axis: int) -> np.ndarray:
+    r"""A field on the coarse grid's edges along ``axis`` interpolated onto the fine grid's edges along it.
+
+    Entry ``(i, j)`` of an edge field along ``axis = 1`` belongs to the edge
+    between pixels ``(i, j)`` and ``(i, j + 1)`` (the row order of the
+    forward difference :func:`~sparsedepth.grid.operators.forward_diff`);
+    along ``axis = 0``, to the edge between ``(i, j)`` and ``(i + 1, j)``.
+
+    Parameters
+    ----------
+    coarse : ndarray, shape ``coarse_shape(shape, factor)``
+    shape : tuple of int
+        The fine grid ``(H, W)``.
+    factor : int
+    axis : {0, 1}
+
+    Returns
+    -------
+    ndarray, shape ``shape``
+
+    Notes
+    -----
+    Across ``axis`` the values are interpolated as by
+    :func:`upsample_bilinear` (block centres).  Along it, the coarse edge
+    ``j`` sits halfway between the centres of blocks ``j`` and ``j + 1``,
+    at fine position ``(j + 1) f − ½``, and the fine edge ``x`` at ``x +
+    ½``; the fine edges are interpolated linearly between the coarse edges
+    around them (constant beyond the outermost ones).  With ``f = 2`` the
+    fine edge ``2j + 1``, which lies between the two blocks, takes coarse
+    edge ``j``'s value, and the fine edge ``2j`` inside block ``j`` the mean
+    of coarse edges ``j − 1`` and ``j``.
+    """
+    coarse = np.asarray(coarse)
+    H, W = int(shape[0]), int(shape[1])
+    if coarse.shape != coarse_shape((H, W), factor):
+        raise ValueError(f"coarse has shape {coarse.shape}; a {H}x{W} grid at factor {factor} needs "
+                         f"{coarse_shape((H, W), factor)}")
+    if axis not in (0, 1):
+        raise ValueError(f"axis must be 0 or 1, got {axis!r}")
+    taps = [_linear_taps(H, coarse.shape[0], factor), _linear_taps(W, coarse.shape[1], factor)]
+    taps[axis] = _linear_taps((H, W)[axis], coarse.shape[axis], factor, edges=True)
+    return _interpolate(coarse, *taps)
 
 
 # the numpydoc docstring (the model in Notes) is most of the length

@@ -10,18 +10,22 @@ May import :mod:`sparsedepth.linalg`, :mod:`sparsedepth.grid`,
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import scipy.sparse as sp
 
+from ..grid.resample import block_mean, upsample_bilinear, upsample_edges
 from ..grid.stencil import full_pattern_offsets
 from ..linalg.krylov import dot, pcg, pcg_steps
 from ..linalg.multigrid import GridMultigrid
 from ..linalg.preconditioners import make_preconditioner
+from ..objective.coarsen import COARSENING, coarsen_objective
 from ..objective.l1 import StackedL1
 from . import active_set
 from .active_set import polish_active_set
 from .certificate import Certificate
-from .common import gap_threshold, objective_floor, output, refuse_robust, relative
+from .common import Recorder, gap_threshold, objective_floor, output, refuse_robust, relative
 
 __all__ = ["solve_admm", "finish_from", "default_rho", "combine", "RHO_REFERENCE_PIXELS"]
 
@@ -149,6 +153,33 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     the quadratic part's matrix is singular) the solver's own rules decide.  The result carries the gap of the
     returned point.
 
+    Nested iteration (option ``warm_start="coarse"``; default ``"none"``):
+    on a grid of more than ``coarse_above`` pixels (default 600000) whose L1
+    operator is the image gradient, the same problem rediscretised on blocks
+    of 2x2 pixels (:func:`~sparsedepth.objective.coarsen.coarsen_objective`:
+    same terms and weights, row weights summed over the blocks and scaled by
+    ``2^(−pm)`` for differences of order ``m`` in a term of power ``p``) is
+    solved first, by this solver from the block means of the start,
+    recursively, with ``ρ_c = ρ / 2`` (:func:`default_rho` grows with the side
+    length), ``check_rtol`` loosened by ``coarse_gap_tol / gap_tol`` (default
+    ``coarse_gap_tol`` 1e-4) and no certificate: a coarse run stops when two
+    polishes agree.  This grid's run
+    then starts from ``z = P z_c`` (bilinear,
+    :func:`~sparsedepth.grid.resample.upsample_bilinear`), ``u = K z`` and
+    ``λ = c ⊙ σ / ρ``, where ``σ = clip(ρ_c λ_c / c_c, −1, 1)``, the coarse
+    multiplier relative to its bound, is interpolated onto the fine edges by
+    :func:`~sparsedepth.grid.resample.upsample_edges`: ``ρλ`` is then inside
+    the bound ``[−c, c]`` and, where the coarse solution has a jump or a
+    slope, at the bound with its sign, as the fine optimum's multiplier.  The
+    fine run's stopping rules, polishes and certificate are those above, so
+    the result is certified as without it; the message names the coarse
+    grids and their iterations.
+
+    With ``restart_from_polish=True`` (default False) a polish that lowers
+    the best polished ``F`` also moves the iteration: ADMM goes on from
+    ``z`` = the polished point and ``u = K z`` (its tied edges exactly 0),
+    with its ``λ``.  The stopping rules are unchanged.
+
     ρ (option ``rho``; default :func:`default_rho`) may be adapted by
     residual balancing (factor 2 when one residual exceeds 10× the other,
     checked every 5 iterations) during the first ``adapt_iters`` iterations
@@ -179,7 +210,69 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     recorder(0, z, inner=0)
     if not objective.has_l1:
         return _solve_quadratic(objective, z, recorder, options)
-    return _run(_AdmmRun(objective, z, options, max_iter), tol, max_iter, recorder)
+    return _run(_new_run(objective, z, options, max_iter, tol), tol, max_iter, recorder)
+
+
+def _new_run(objective, z, options, max_iter, tol):
+    """The run of :func:`solve_admm` from ``z``, or with ``warm_start="coarse"`` from the coarse grid's solution."""
+    start = _coarse_start(objective, z, options, max_iter, tol)
+    if start is None:
+        return _AdmmRun(objective, z, options, max_iter)
+    z, sigma, note = start
+    run = _AdmmRun(objective, z, options, max_iter)
+    run.lam = run.l1.weighted(sigma)
+    run.lam /= run.rho
+    run.warm_note = note
+    return run
+
+
+def _coarse_start(objective, z, options, max_iter, tol):
+    """``(z, σ, note)``: the coarse grid's solution and normalised dual ``ρλ / c`` on this grid, or None.
+
+    None unless ``warm_start="coarse"``, the grid has more than
+    ``coarse_above`` pixels and the L1 operator is the grid gradient (the
+    coarse problem: :func:`~sparsedepth.objective.coarsen.coarsen_objective`).
+    The coarse problem is solved by :func:`solve_admm`'s run (itself started
+    from a coarser grid when it is large enough) from the block means of
+    ``z``, with ``gap_tol = coarse_gap_tol``, ``check_rtol`` loosened in
+    the same ratio and half this grid's ``ρ``; its solution is interpolated bilinearly
+    (:func:`~sparsedepth.grid.resample.upsample_bilinear`) and its dual
+    edge field ``σ = clip(ρλ / c, −1, 1)`` by
+    :func:`~sparsedepth.grid.resample.upsample_edges`.
+    """
+    if options.warm_start != "coarse" or objective.size <= options.coarse_above:
+        return None
+    if not StackedL1(objective).grid_gradient:
+        return None
+    coarse = coarsen_objective(objective)
+    if coarse is None or min(coarse.shape) < 2 or not coarse.has_l1:
+        return None
+    shape, cshape = objective.shape, coarse.shape
+    z_coarse = block_mean(np.maximum(z, 0.0).reshape(shape), COARSENING).ravel()
+    loosen = max(1.0, options.coarse_gap_tol / options.gap_tol)
+    sub_options = replace(options, gap_tol=options.coarse_gap_tol, check_rtol=options.check_rtol * loosen)
+    rho = options.rho
+    if rho is None:
+        positive = z[z > 0]
+        rho = default_rho(objective, StackedL1(objective).max_weight(),
+                          float(np.median(positive)) if positive.size else 1.0)
+        del positive
+    sub_options = replace(sub_options, rho=rho / COARSENING)
+    run = _new_run(coarse, z_coarse, sub_options, max_iter, tol)
+    run.certify = False
+    out = _run(run, tol, max_iter, Recorder(coarse, None, values=False))
+    c = run.l1.weights
+    sigma = np.divide(run.rho * run.lam, c, out=np.zeros_like(c), where=c > 0)
+    np.clip(sigma, -1.0, 1.0, out=sigma)
+    del c
+    n = coarse.size
+    sigma = np.concatenate([upsample_edges(sigma[:n].reshape(cshape), shape, COARSENING, axis=1).ravel(),
+                            upsample_edges(sigma[n:].reshape(cshape), shape, COARSENING, axis=0).ravel()])
+    z = upsample_bilinear(out.z.reshape(cshape), shape, COARSENING).ravel()
+    note = (f"started from the solution on the {cshape[0]}x{cshape[1]} grid ({out.iterations} ADMM iterations, "
+            f"{'its polishes agreed' if out.converged else 'its polishes did not agree'}"
+            + (f"; {run.warm_note}" if run.warm_note else "") + ")")
+    return z, sigma, note
 
 
 def finish_from(objective, z, p, *, tol, max_iter, recorder, options, first_iteration):
@@ -260,6 +353,8 @@ class _AdmmRun:
         self.converged = False
         self.message = f"reached max_iter = {max_iter}"
         self.max_iter = max_iter
+        self.warm_note = None  # how a coarse grid started the run (warm_start="coarse")
+        self.certify = True  # False: a coarse grid's run, stopped by the polishes' agreement alone
 
     def _build_system(self):
         """``S = 2A + ρKᵀK``, the matrices the polish and the ρ adaptation need, the preconditioner of ``S``."""
@@ -356,7 +451,8 @@ class _AdmmRun:
 
         Returns None when the reduced model is singular (polishing is then
         switched off), True when the polishes agree and the certificate
-        accepts the best polished point, False otherwise.
+        accepts the best polished point (a coarse grid's run of the nested
+        iteration: when they agree), False otherwise.
         """
         options = self.options
         F_prev = None if self.best is None else self.best[0]
@@ -370,12 +466,21 @@ class _AdmmRun:
         self.polish_steps += steps
         if self.best is None or F_pol < self.best[0]:
             self.best = (F_pol, z_pol, n_comp)
+            if options.restart_from_polish:  # ADMM goes on from the polished point, with its λ
+                self.z = z_pol.copy()
+                self.Sz = self.S @ self.z
+                self.l1.apply(self.z, out=self.u)
         # the first check comes check_every iterations later; each failed check doubles the wait
         # (up to 4 check_every), so that slow cases are not dominated by polishes
         check_every = options.check_every
         self.interval = check_every if F_prev is None else min(2 * self.interval, 4 * check_every)
         self.next_polish = k + self.interval
         if F_prev is not None and abs(F_prev - F_pol) <= options.check_rtol * abs(F_pol) + self.F_floor:
+            if not self.certify:  # a coarse grid's run: the agreement alone stops it
+                self.converged = True
+                self.message = (f"active-set polish at iteration {k} changed the best polished F by "
+                                f"{relative(F_prev - F_pol, F_pol):.1e} (relative), no certificate")
+                return True
             return self._certify_agreement(k, F_prev, F_pol)
         return False
 
@@ -438,8 +543,12 @@ class _AdmmRun:
                 self.message += "; no active-set polish lowered F"
         if self.certified is not None and (self.certified[0] is z or np.array_equal(self.certified[0], z)):
             gap = self.certified[1]
+        elif not self.certify:
+            gap = float("nan")
         else:
             if self.certificate is None:
                 self.certificate = self._new_certificate()
             gap = self.certificate.gap(z, p=self.rho * self.lam, eps=TIE_BAND if self.polish else 0.0)
+        if self.warm_note:
+            self.message += f"; {self.warm_note}"
         return output(z, k, self.converged, self.message, recorder, gap=gap)

@@ -334,6 +334,19 @@ class AdmmOptions(SolverOptions):
         Stop when a polish changes the best polished ``F`` by at most this (relative).
     gap_tol : float, default 1e-6
         Converged needs the duality gap ``<= gap_tol · max(F, 1e-7 F(0))``.
+    restart_from_polish : bool, default False
+        After a polish that lowers the best polished ``F``, ADMM goes on
+        from the polished point (``z`` and ``u = K z``; ``λ`` kept).
+    warm_start : {"none", "coarse"}, default "none"
+        ``"coarse"``: nested iteration: a grid of more than ``coarse_above``
+        pixels first solves the problem rediscretised on a grid twice as
+        coarse per side (recursively) and starts from that solution and its
+        dual (:func:`~sparsedepth.solvers.admm.solve_admm`, Notes).
+    coarse_above : int, default 600000
+        With ``warm_start="coarse"``: the pixel count above which a grid is
+        started from the coarser one.
+    coarse_gap_tol : float, default 1e-4
+        ``gap_tol`` of the coarse solves (they only start the fine one).
     """
 
     solver: ClassVar[str] = "admm"
@@ -351,6 +364,10 @@ class AdmmOptions(SolverOptions):
     check_every: int = _option(3)
     check_rtol: float = _option(2e-7)
     gap_tol: float = _option(1e-6)
+    restart_from_polish: bool = _option(False)
+    warm_start: str = _option("none", kind=str, choices=("none", "coarse"))
+    coarse_above: int = _option(600_000)
+    coarse_gap_tol: float = _option(1e-4, positive=True)
 
 
 @dataclass(frozen=True, kw_only=True)
