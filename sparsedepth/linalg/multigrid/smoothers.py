@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg
-import scipy.sparse as sp
 from pyamg import amg_core
 
-from ...grid.stencil import SymmetricStencil
+from ...grid.stencil import SymmetricStencil, index_dtype
 
 __all__ = ["gauss_seidel_forward", "gauss_seidel_backward", "jacobi_damping", "jacobi_sweeps", "LineGaussSeidel",
            "anisotropic_pixels", "stencil_rows_product"]
@@ -218,7 +217,8 @@ class LineGaussSeidel:
     then those on the columns :math:`x \equiv c \pmod 3` (``y``-lines), :math:`c = 0, 1, 2`.  Lines of one
     block lie at least three pixels apart, so with couplings at most two pixels apart the block's matrix
     :math:`A_{BB}` is block diagonal, one pentadiagonal SPD matrix per line (or per run of chosen pixels of a
-    line), factored once (banded Cholesky :math:`A_{BB} = L L^\top`, LAPACK ``pbtrf``; :math:`L` kept as CSR).
+    line), factored once (banded Cholesky :math:`A_{BB} = L L^\top`, LAPACK ``pbtrf``; :math:`L` kept as its
+    three bands).
     A block step is
 
     .. math::
@@ -228,7 +228,9 @@ class LineGaussSeidel:
     with :math:`(A x)_B` from the block's rows of :math:`A`, kept as a CSR slice for a CSR ``A`` and gathered
     from the images at each step for a :class:`~sparsedepth.grid.stencil.SymmetricStencil`
     (:func:`stencil_rows_product`: no copy of its coefficients, only the block's pixel indices), and
-    :math:`A_{BB}^{-1}` applied by forward and back substitution with :math:`L` and :math:`L^\top`.
+    :math:`A_{BB}^{-1}` applied by forward and back substitution with :math:`L` and :math:`L^\top` (LAPACK
+    ``pbtrs``).  Besides the CSR slice of a CSR ``A``, the smoother keeps 4 or 8 bytes of index and three
+    coefficients of :math:`L` per relaxed pixel and line direction.
     :meth:`forward` takes the blocks in that order, :meth:`backward` in the reverse one: as for point
     Gauss--Seidel the two sweeps' error propagators :math:`I - B^{-1} A` and :math:`I - B^{-\top} A` are
     adjoint in the :math:`A` inner product, so a V-cycle with one before and the other after the coarse-grid
@@ -247,7 +249,8 @@ class LineGaussSeidel:
         w = shape[1]
         dtype = A.dtype
         self.stencil = A if isinstance(A, SymmetricStencil) else None
-        self.pbtrf = scipy.linalg.get_lapack_funcs("pbtrf", dtype=dtype)
+        self.pbtrf, self.pbtrs = scipy.linalg.get_lapack_funcs(("pbtrf", "pbtrs"), dtype=dtype)
+        index = index_dtype(2 * shape[0] * shape[1])  # p + u < 2 N in stencil_rows_product
         bands = _line_bands(A, shape, images)
         chosen = (None, None) if anisotropy is None else anisotropic_pixels(bands, anisotropy)
         flat = {offset: band.reshape(-1) for offset, band in bands.items()}
@@ -256,7 +259,7 @@ class LineGaussSeidel:
         for axis, step, near, far in ((0, 1, flat[0, 1], flat[0, 2]), (1, w, flat[1, 0], flat[2, 0])):
             pick = np.ones(shape, dtype=bool) if anisotropy is None else chosen[axis]
             for c in range(3):
-                idx = _line_pixels(pick, axis, c)
+                idx = _line_pixels(pick, axis, c).astype(index)
                 if idx.size == 0:
                     continue
                 a1, a2 = near[idx], far[idx]
@@ -271,29 +274,18 @@ class LineGaussSeidel:
                 factor, info = self.pbtrf(ab, lower=1)
                 if info != 0:
                     raise ValueError("the line smoother needs a symmetric positive definite operator.")
-                m = idx.size
-                k = min(m, 3)  # a block of one or two pixels has fewer sub-diagonals
-                bands_l = [factor[0], factor[1][:m - 1], factor[2][:m - 2]][:k]
-                lower = sp.diags(bands_l, [0, -1, -2][:k], shape=(m, m), format="csr", dtype=dtype)
-                upper = sp.diags(bands_l, [0, 1, 2][:k], shape=(m, m), format="csr", dtype=dtype)
                 rows = None if self.stencil is not None else A[idx]
-                self.blocks.append((idx, rows, lower, upper))
-                self.size += m
+                self.blocks.append((idx, rows, factor))
+                self.size += idx.size
 
     def _step(self, block, x, b):
-        idx, rows, lower, upper = block
+        idx, rows, factor = block
         if rows is None:
             r = stencil_rows_product(self.stencil, idx, x, np.empty(idx.shape[0], dtype=x.dtype))
             np.subtract(b[idx], r, out=r)
         else:
             r = b[idx] - rows @ x
-        m = idx.size
-        # L L^T dx = r: forward substitution is one Gauss--Seidel sweep on L from zero, back substitution
-        # one backward sweep on L^T (pyamg's compiled kernel: about twice as fast as LAPACK pbtrs here)
-        y = np.zeros_like(r)
-        amg_core.gauss_seidel(lower.indptr, lower.indices, lower.data, y, r, 0, m, 1)
-        dx = np.zeros_like(r)
-        amg_core.gauss_seidel(upper.indptr, upper.indices, upper.data, dx, y, m - 1, -1, -1)
+        dx, _ = self.pbtrs(factor, r, lower=1, overwrite_b=1)  # L L^T dx = r (info < 0 only for bad arguments)
         x[idx] += dx
 
     def forward(self, x, b):
