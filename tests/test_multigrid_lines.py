@@ -8,9 +8,10 @@ import scipy.sparse.linalg as spla
 
 import sparsedepth as sd
 from sparsedepth.completion import _scaled_objective
+from sparsedepth.grid.stencil import SymmetricStencil
 from sparsedepth.linalg import pcg
 from sparsedepth.linalg.multigrid import GridMultigrid, solve_spd
-from sparsedepth.linalg.multigrid.smoothers import LineGaussSeidel, anisotropic_pixels
+from sparsedepth.linalg.multigrid.smoothers import LineGaussSeidel, anisotropic_pixels, stencil_rows_product
 from sparsedepth.solvers.quadratic import default_hierarchy
 
 from conftest import DOUBLE, make_problem
@@ -50,6 +51,24 @@ def edge_system(shape, rng, *, strip=True):
     for D, wd in zip(ops, weights):
         A = A + D.T @ sp.diags(wd.ravel()) @ D
     return sp.csr_array(A)
+
+
+def stencil_form(A, shape):
+    """``(S, A_sym)``: the 25-point SymmetricStencil of ``(A + Aᵀ) / 2`` (read entry by entry) and that CSR matrix.
+
+    The average makes the matrix exactly symmetric in floating point, so that both forms hold the same numbers.
+    """
+    h, w = shape
+    A_sym = sp.csr_matrix((A + A.T) / 2)
+    dense = A_sym.toarray()
+    offsets = [(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3)]
+    upper = [o for o in offsets if o >= (0, 0)]
+    images = np.zeros((len(upper), h, w))
+    for k, (dy, dx) in enumerate(upper):
+        for y in range(max(0, -dy), min(h, h - dy)):
+            for x in range(max(0, -dx), min(w, w - dx)):
+                images[k, y, x] = dense[y * w + x, (y + dy) * w + x + dx]
+    return SymmetricStencil(offsets, images), A_sym
 
 
 def dense_bands(A, shape):
@@ -101,6 +120,33 @@ def test_forward_sweep_is_block_gauss_seidel_over_lines(shape, selected):
     np.testing.assert_allclose(x, expected, rtol=1e-10, atol=1e-10 * np.abs(expected).max())
 
 
+@pytest.mark.parametrize("shape", [(13, 17), (1, 9), (9, 1), (5, 5), (2, 2), (4, 1), (3, 2)])
+def test_stencil_rows_product_is_the_csr_product(shape):
+    rng = np.random.default_rng(6)
+    S, A = stencil_form(edge_system(shape, rng), shape)
+    x = rng.standard_normal(A.shape[0])
+    idx = rng.permutation(A.shape[0])  # every pixel, the border ones included, in no particular order
+    out = stencil_rows_product(S, idx, x, np.empty(idx.size))
+    np.testing.assert_allclose(out, (A @ x)[idx], rtol=1e-13, atol=1e-13 * np.abs(A @ x).max())
+
+
+@pytest.mark.parametrize("selected", [False, True])
+@pytest.mark.parametrize("shape", [(13, 17), (1, 9), (9, 1), (5, 5), (2, 2), (4, 1)])
+def test_stencil_form_sweeps_are_those_of_the_csr_form(shape, selected):
+    rng = np.random.default_rng(7)
+    S, A = stencil_form(edge_system(shape, rng), shape)
+    anisotropy = 2.0 if selected else None
+    b, x = rng.standard_normal((2, A.shape[0]))
+    ours, ref = x.copy(), x.copy()
+    on_stencil = LineGaussSeidel(S, shape, anisotropy=anisotropy)
+    on_csr = LineGaussSeidel(A, shape, anisotropy=anisotropy)
+    assert len(on_stencil.blocks) == len(on_csr.blocks)
+    for sweep in ("forward", "forward", "backward"):
+        getattr(on_stencil, sweep)(ours, b)
+        getattr(on_csr, sweep)(ref, b)
+        np.testing.assert_allclose(ours, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+
+
 def test_backward_sweep_is_adjoint_of_forward_in_the_energy_inner_product():
     # error propagation E of the forward sweep and E* of the backward one: <E u, v>_A = <u, E* v>_A
     shape = (14, 11)
@@ -150,6 +196,23 @@ def test_pcg_with_line_smoothing_matches_spsolve(shape, precision):
     assert info.converged
     x_ref = spla.spsolve(sp.csc_matrix(A), b)
     # condition numbers up to 1e6: a relative residual of 1e-11 leaves at most ~1e-5 of the solution
+    np.testing.assert_allclose(x, x_ref, rtol=0, atol=1e-5 * np.abs(x_ref).max())
+
+
+@pytest.mark.parametrize("shape", [(29, 37), (30, 2), (1, 40), (16, 17)])
+def test_vcycle_and_pcg_with_line_smoothing_of_a_stencil_form(shape):
+    rng = np.random.default_rng(8)
+    S, A = stencil_form(edge_system(shape, rng), shape)
+    mg = GridMultigrid(S, shape, smoother="line_gauss_seidel", max_coarse=4, **DOUBLE)
+    assert mg._line.stencil is S  # the line steps gather from the stencil, no CSR rows
+    u, v = rng.standard_normal((2, A.shape[0]))
+    Mu, Mv = mg.vcycle(u), mg.vcycle(v)
+    assert abs(u @ Mv - Mu @ v) <= 1e-11 * np.linalg.norm(u) * np.linalg.norm(Mv)
+    assert u @ Mu > 0
+    b = rng.standard_normal(A.shape[0])
+    x, _, converged, _ = pcg(S, b, M=mg.aspreconditioner(), rtol=1e-11, maxiter=500)
+    assert converged
+    x_ref = spla.spsolve(sp.csc_matrix(A), b)
     np.testing.assert_allclose(x, x_ref, rtol=0, atol=1e-5 * np.abs(x_ref).max())
 
 

@@ -286,8 +286,7 @@ def test_banded_coarse_levels_equal_the_csr_hierarchy(monkeypatch, shape, layout
 def test_large_frames_solve_in_stencil_form_with_the_csr_solution(monkeypatch):
     """From STENCIL_FORM_PIXELS on, the γ = 0 solve keeps A as a SymmetricStencil; same depth as the CSR solve.
 
-    The two forms' hierarchies smooth differently (line Gauss-Seidel needs the CSR rows), so both are solved to a
-    relative residual of 1e-12 and compared at that accuracy.
+    Both are solved to a relative residual of 1e-12 and compared at that accuracy.
     """
     import warnings
 

@@ -13,7 +13,6 @@ import math
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from ..grid.stencil import SymmetricStencil
 from ..linalg.krylov import dot, pcg
 from ..linalg.multigrid import GridMultigrid
 from ..linalg.preconditioners import make_preconditioner
@@ -127,9 +126,9 @@ def default_hierarchy(A, shape):
     Returns
     -------
     GridMultigrid
-        ``interpolation="auto"``; ``smoother="line_gauss_seidel"`` (default ``line_anisotropy``) for a CSR
-        ``A``, ``"gauss_seidel"`` for a stencil form (the frames of at least :data:`STENCIL_FORM_PIXELS`
-        pixels), whose line steps would need the fine operator's rows as CSR, the memory the stencil form saves.
+        ``interpolation="auto"``, ``smoother="line_gauss_seidel"`` (default ``line_anisotropy``) in either
+        form; on a stencil form (the frames of at least :data:`STENCIL_FORM_PIXELS` pixels) the line steps
+        gather the fine operator's rows from its images, so no CSR copy of it is made.
 
     Notes
     -----
@@ -138,8 +137,7 @@ def default_hierarchy(A, shape):
     (:class:`~sparsedepth.linalg.multigrid.smoothers.LineGaussSeidel`).  ``python -m bench.speed`` times the
     V-cycles of this hierarchy.
     """
-    smoother = "gauss_seidel" if isinstance(A, SymmetricStencil) else "line_gauss_seidel"
-    return GridMultigrid(A, shape, interpolation="auto", smoother=smoother)
+    return GridMultigrid(A, shape, interpolation="auto", smoother="line_gauss_seidel")
 
 
 def _depth_tolerance(options):

@@ -367,9 +367,8 @@ class GridMultigrid:
             self._setup_smoother(lvl)
         self._line = None
         if self.smoother == "line_gauss_seidel" and len(levels) > 1:
-            fine = self._fine_cycle_A
-            if not sp.issparse(fine):  # a stencil swept band by band: the line steps need its rows as CSR
-                fine = A.tocsr(dtype=self.fine_dtype)
+            # a stencil swept band by band: the line steps gather its rows from the stencil itself
+            fine = self._fine_cycle_A if sp.issparse(self._fine_cycle_A) else A
             self._line = LineGaussSeidel(fine, self.shape, images=line_images, anisotropy=self.line_anisotropy)
         del line_images
         self._factor_coarsest()

@@ -2,19 +2,23 @@ r"""Smoothers of the V-cycle: Gauss--Seidel sweeps (pyamg's compiled kernel) and
 
 Forward Gauss--Seidel before and backward after the coarse-grid correction
 are adjoint in the :math:`A` inner product, and damped Jacobi is symmetric,
-so either keeps the V-cycle a symmetric preconditioner.  May import NumPy
-and pyamg.
+so either keeps the V-cycle a symmetric preconditioner.  May import NumPy,
+SciPy, pyamg and :mod:`sparsedepth.grid`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import scipy.linalg
-import scipy.sparse as sp
 from pyamg import amg_core
 
+from ...grid.stencil import SymmetricStencil, index_dtype
+
 __all__ = ["gauss_seidel_forward", "gauss_seidel_backward", "jacobi_damping", "jacobi_sweeps", "LineGaussSeidel",
-           "anisotropic_pixels"]
+           "anisotropic_pixels", "stencil_rows_product"]
+
+#: pixels per chunk of :func:`stencil_rows_product` (its temporaries: a few hundred kilobytes)
+_GATHER_PIXELS = 1 << 15
 
 
 def gauss_seidel_forward(A, x, b, sweeps):
@@ -66,11 +70,16 @@ def jacobi_sweeps(A, x, b, diag_inv, omega, sweeps):
 def _line_bands(A, shape, images):
     """``{offset: image}`` of the couplings ``(0, 0)``, ``(0, 1)``, ``(0, 2)``, ``(1, 0)``, ``(2, 0)`` of ``A``.
 
-    Taken from ``images`` (a ``{offset: (H, W) image}`` mapping of the stencil) where it has them, else
-    read as diagonals of the CSR ``A`` (zero where the neighbour is outside the grid).
+    The images of a :class:`~sparsedepth.grid.stencil.SymmetricStencil` ``A``; for a CSR ``A`` taken from
+    ``images`` (a ``{offset: (H, W) image}`` mapping of the stencil) where it has them, else read as diagonals
+    of ``A`` (zero where the neighbour is outside the grid).
     """
     h, w = shape
     n = h * w
+    if isinstance(A, SymmetricStencil):  # every offset >= (0, 0) is stored: its images, no copy
+        images = dict(zip(A.upper, A.images))
+        return {o: images[o] if o in images else np.zeros(shape, dtype=A.dtype)
+                for o in ((0, 0), (0, 1), (0, 2), (1, 0), (2, 0))}
     out = {}
     for dy, dx in ((0, 0), (0, 1), (0, 2), (1, 0), (2, 0)):
         if images is not None and (dy, dx) in images:
@@ -84,6 +93,57 @@ def _line_bands(A, shape, images):
         if dx:
             band[:, w - dx:] = 0.0
         out[dy, dx] = band
+    return out
+
+
+def stencil_rows_product(A, idx, x, out):
+    r"""The rows ``idx`` of ``A @ x`` for a :class:`~sparsedepth.grid.stencil.SymmetricStencil` ``A``.
+
+    Parameters
+    ----------
+    A : SymmetricStencil, shape (N, N)
+    idx : ndarray of int, shape (m,)
+        Flat (C-order) pixel indices.
+    x : ndarray, shape (N,)
+        Finite values.
+    out : ndarray, shape (m,)
+        Receives :math:`(A x)_i`, ``i`` in ``idx``.
+
+    Returns
+    -------
+    out : ndarray, shape (m,)
+
+    Notes
+    -----
+    Gathered from the stored images at the pixels' indices, with no rows of ``A`` built:
+
+    .. math::
+
+        (A x)_p = a_0[p] x_p + \sum_{u > 0} \left( a_u[p] x_{p + u} + a_u[p - u] x_{p - u} \right),
+
+    ``u`` over the stored offsets after ``(0, 0)`` as flat index steps, :math:`a_{-u}[p] = a_u[p - u]` by
+    symmetry.  A neighbour outside the grid has a zero coefficient; its flat index (``p + u`` past the end,
+    ``p - u`` before the start, or a pixel of the next or previous image row) reads that zero: ``x`` is
+    read with clipped indices, the coefficient ``a_u[p - u]`` with ``p - u < 0`` at ``p - u + N``, a pixel
+    whose neighbour at ``u`` lies past the grid's last row.  Pixels go ``_GATHER_PIXELS`` at a time, so the
+    temporaries stay small.
+    """
+    h, w = A.grid_shape
+    # an offset reaching past the grid from every pixel has a zero image; the others step 0 < dy W + dx < N
+    terms = [(dy * w + dx, image.reshape(-1)) for (dy, dx), image in zip(A.upper, A.images)
+             if dy < h and abs(dx) < w]
+    for start in range(0, idx.shape[0], _GATHER_PIXELS):
+        p = idx[start:start + _GATHER_PIXELS]
+        acc = out[start:start + _GATHER_PIXELS]
+        acc[:] = 0.0
+        for step, a in terms:
+            if step == 0:
+                acc += a[p] * x[p]
+                continue
+            q = p + step
+            acc += a[p] * np.take(x, q, mode="clip")
+            np.subtract(p, step, out=q)
+            acc += a[q] * np.take(x, q, mode="clip")  # a[q], q < 0: a[q + n] (NumPy's negative indices)
     return out
 
 
@@ -135,17 +195,18 @@ def anisotropic_pixels(bands, anisotropy):
 
 
 class LineGaussSeidel:
-    r"""Alternating line Gauss--Seidel for a grid operator of stencil radius at most 2 (CSR).
+    r"""Alternating line Gauss--Seidel for a grid operator of stencil radius at most 2 (CSR or symmetric stencil).
 
     Parameters
     ----------
-    A : scipy.sparse CSR matrix, shape (N, N)
+    A : scipy.sparse CSR matrix or SymmetricStencil, shape (N, N)
         Symmetric positive definite operator on the grid, float32 or float64 (the sweeps' precision).
     shape : tuple of int
         Grid shape ``(H, W)``.
     images : dict, optional
         ``{(dy, dx): (H, W) image}`` of ``A``'s stencil (zero outside the grid); the couplings along the
-        lines are read from it where it has them, else from the diagonals of ``A``.
+        lines are read from it where it has them, else from the diagonals of ``A`` (a
+        :class:`~sparsedepth.grid.stencil.SymmetricStencil`: from its own images).
     anisotropy : float, optional
         Relax along the lines only the pixels of :func:`anisotropic_pixels` with this ratio (``x``-lines:
         those coupled more strongly along ``x``, ``y``-lines: along ``y``); None: every pixel on both.
@@ -156,19 +217,24 @@ class LineGaussSeidel:
     then those on the columns :math:`x \equiv c \pmod 3` (``y``-lines), :math:`c = 0, 1, 2`.  Lines of one
     block lie at least three pixels apart, so with couplings at most two pixels apart the block's matrix
     :math:`A_{BB}` is block diagonal, one pentadiagonal SPD matrix per line (or per run of chosen pixels of a
-    line), factored once (banded Cholesky :math:`A_{BB} = L L^\top`, LAPACK ``pbtrf``; :math:`L` kept as CSR).
+    line), factored once (banded Cholesky :math:`A_{BB} = L L^\top`, LAPACK ``pbtrf``; :math:`L` kept as its
+    three bands).
     A block step is
 
     .. math::
 
         x_B \leftarrow x_B + A_{BB}^{-1} (b - A x)_B ,
 
-    with :math:`(A x)_B` from the block's rows of :math:`A`, kept as a CSR slice, and :math:`A_{BB}^{-1}` applied
-    by forward and back substitution with :math:`L` and :math:`L^\top`.  :meth:`forward` takes the
-    blocks in that order, :meth:`backward` in the reverse one: as for point Gauss--Seidel the two sweeps'
-    error propagators :math:`I - B^{-1} A` and :math:`I - B^{-\top} A` are adjoint in the :math:`A` inner
-    product, so a V-cycle with one before and the other after the coarse-grid correction stays symmetric
-    positive definite.
+    with :math:`(A x)_B` from the block's rows of :math:`A`, kept as a CSR slice for a CSR ``A`` and gathered
+    from the images at each step for a :class:`~sparsedepth.grid.stencil.SymmetricStencil`
+    (:func:`stencil_rows_product`: no copy of its coefficients, only the block's pixel indices), and
+    :math:`A_{BB}^{-1}` applied by forward and back substitution with :math:`L` and :math:`L^\top` (LAPACK
+    ``pbtrs``).  Besides the CSR slice of a CSR ``A``, the smoother keeps 4 or 8 bytes of index and three
+    coefficients of :math:`L` per relaxed pixel and line direction.
+    :meth:`forward` takes the blocks in that order, :meth:`backward` in the reverse one: as for point
+    Gauss--Seidel the two sweeps' error propagators :math:`I - B^{-1} A` and :math:`I - B^{-\top} A` are
+    adjoint in the :math:`A` inner product, so a V-cycle with one before and the other after the coarse-grid
+    correction stays symmetric positive definite.
 
     Along an image edge the operator couples pixels strongly along the edge and weakly across it.  Errors
     smooth along such a line and oscillating across it are barely reduced by point relaxation, and the
@@ -182,7 +248,9 @@ class LineGaussSeidel:
     def __init__(self, A, shape, *, images=None, anisotropy=None):
         w = shape[1]
         dtype = A.dtype
-        self.pbtrf = scipy.linalg.get_lapack_funcs("pbtrf", dtype=dtype)
+        self.stencil = A if isinstance(A, SymmetricStencil) else None
+        self.pbtrf, self.pbtrs = scipy.linalg.get_lapack_funcs(("pbtrf", "pbtrs"), dtype=dtype)
+        index = index_dtype(2 * shape[0] * shape[1])  # p + u < 2 N in stencil_rows_product
         bands = _line_bands(A, shape, images)
         chosen = (None, None) if anisotropy is None else anisotropic_pixels(bands, anisotropy)
         flat = {offset: band.reshape(-1) for offset, band in bands.items()}
@@ -191,7 +259,7 @@ class LineGaussSeidel:
         for axis, step, near, far in ((0, 1, flat[0, 1], flat[0, 2]), (1, w, flat[1, 0], flat[2, 0])):
             pick = np.ones(shape, dtype=bool) if anisotropy is None else chosen[axis]
             for c in range(3):
-                idx = _line_pixels(pick, axis, c)
+                idx = _line_pixels(pick, axis, c).astype(index)
                 if idx.size == 0:
                     continue
                 a1, a2 = near[idx], far[idx]
@@ -206,25 +274,18 @@ class LineGaussSeidel:
                 factor, info = self.pbtrf(ab, lower=1)
                 if info != 0:
                     raise ValueError("the line smoother needs a symmetric positive definite operator.")
-                m = idx.size
-                k = min(m, 3)  # a block of one or two pixels has fewer sub-diagonals
-                bands_l = [factor[0], factor[1][:m - 1], factor[2][:m - 2]][:k]
-                lower = sp.diags(bands_l, [0, -1, -2][:k], shape=(m, m), format="csr", dtype=dtype)
-                upper = sp.diags(bands_l, [0, 1, 2][:k], shape=(m, m), format="csr", dtype=dtype)
-                self.blocks.append((idx, A[idx], lower, upper))
-                self.size += m
+                rows = None if self.stencil is not None else A[idx]
+                self.blocks.append((idx, rows, factor))
+                self.size += idx.size
 
-    @staticmethod
-    def _step(block, x, b):
-        idx, rows, lower, upper = block
-        r = b[idx] - rows @ x
-        m = idx.size
-        # L L^T dx = r: forward substitution is one Gauss--Seidel sweep on L from zero, back substitution
-        # one backward sweep on L^T (pyamg's compiled kernel: about twice as fast as LAPACK pbtrs here)
-        y = np.zeros_like(r)
-        amg_core.gauss_seidel(lower.indptr, lower.indices, lower.data, y, r, 0, m, 1)
-        dx = np.zeros_like(r)
-        amg_core.gauss_seidel(upper.indptr, upper.indices, upper.data, dx, y, m - 1, -1, -1)
+    def _step(self, block, x, b):
+        idx, rows, factor = block
+        if rows is None:
+            r = stencil_rows_product(self.stencil, idx, x, np.empty(idx.shape[0], dtype=x.dtype))
+            np.subtract(b[idx], r, out=r)
+        else:
+            r = b[idx] - rows @ x
+        dx, _ = self.pbtrs(factor, r, lower=1, overwrite_b=1)  # L L^T dx = r (info < 0 only for bad arguments)
         x[idx] += dx
 
     def forward(self, x, b):
