@@ -67,7 +67,7 @@ STENCIL_MODE = "default, stencil form at every size"
 PARTS = (("sparsedepth.objective.objective", "geodesic_fill", "geodesic fill"),
          ("sparsedepth.completion", "build_objective", "objective"),
          ("sparsedepth.objective.objective.Objective", "normal_equations", "normal equations"),
-         ("sparsedepth.solvers.quadratic", "make_preconditioner", "multigrid set-up"),
+         ("sparsedepth.solvers.quadratic", "default_hierarchy", "multigrid set-up"),
          ("sparsedepth.solvers.quadratic", "pcg", "CG"),
          ("sparsedepth.solvers.core", "certify", "certificate"))
 
