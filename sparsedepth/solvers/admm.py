@@ -67,6 +67,14 @@ def default_rho(objective, max_weight, depth_scale):
     return 1.5 * max(alpha, 300.0 * float(max_weight) / depth_scale) * grid
 
 
+def _penalty(objective, l1, z, options):
+    """ρ of a run from ``z``: option ``rho``, or :func:`default_rho` with the median positive value of ``z``."""
+    if options.rho is not None:
+        return options.rho
+    positive = z[z > 0]
+    return default_rho(objective, l1.max_weight(), float(np.median(positive)) if positive.size else 1.0)
+
+
 def combine(a, A, b, B):
     """``a A + b B`` for CSR matrices; one vector operation when both have the same sparsity pattern."""
     A, B = sp.csr_matrix(A), sp.csr_matrix(B)
@@ -242,7 +250,8 @@ def _coarse_start(objective, z, options, max_iter, tol):
     """
     if options.warm_start != "coarse" or objective.size <= options.coarse_above:
         return None
-    if not StackedL1(objective).grid_gradient:
+    l1 = StackedL1(objective)
+    if not l1.grid_gradient:
         return None
     coarse = coarsen_objective(objective)
     if coarse is None or min(coarse.shape) < 2 or not coarse.has_l1:
@@ -251,13 +260,8 @@ def _coarse_start(objective, z, options, max_iter, tol):
     z_coarse = block_mean(np.maximum(z, 0.0).reshape(shape), COARSENING).ravel()
     loosen = max(1.0, options.coarse_gap_tol / options.gap_tol)
     sub_options = replace(options, gap_tol=options.coarse_gap_tol, check_rtol=options.check_rtol * loosen)
-    rho = options.rho
-    if rho is None:
-        positive = z[z > 0]
-        rho = default_rho(objective, StackedL1(objective).max_weight(),
-                          float(np.median(positive)) if positive.size else 1.0)
-        del positive
-    sub_options = replace(sub_options, rho=rho / COARSENING)
+    sub_options = replace(sub_options, rho=_penalty(objective, l1, z, options) / COARSENING)
+    del l1
     run = _new_run(coarse, z_coarse, sub_options, max_iter, tol)
     run.certify = False
     out = _run(run, tol, max_iter, Recorder(coarse, None, values=False))
@@ -335,10 +339,7 @@ class _AdmmRun:
         self.F_floor = objective_floor(objective)
         # residual floors: edge vectors below 1e-9 per row (depth ~1 in normalised units) count as zero
         self.edge_floor_sq = (1e-9 * 1e-9) * l1.rows
-        positive = z[z > 0]
-        depth_scale = float(np.median(positive)) if positive.size else 1.0
-        del positive
-        self.rho = default_rho(objective, l1.max_weight(), depth_scale) if options.rho is None else options.rho
+        self.rho = _penalty(objective, l1, z, options)
         self._build_system()
         self.Sz = self.S @ z
         self.u = l1.apply(z)

@@ -66,7 +66,6 @@ def jacobi_sweeps(A, x, b, diag_inv, omega, sweeps):
         x += omega * diag_inv * (b - A @ x)
 
 
-
 def _line_bands(A, shape, images):
     """``{offset: image}`` of the couplings ``(0, 0)``, ``(0, 1)``, ``(0, 2)``, ``(1, 0)``, ``(2, 0)`` of ``A``.
 
