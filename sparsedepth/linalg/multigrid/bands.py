@@ -3,7 +3,7 @@ r"""Gauss--Seidel sweeps and products of a symmetric stencil, a band of image ro
 pyamg's Gauss--Seidel kernel needs a CSR matrix.  Instead of holding the
 whole CSR form of a level (12 bytes per non-zero in float64, 1.25 GB for an
 8-megapixel 13-point system), :class:`BandedStencil` writes the CSR values of
-a few image rows at a time into a small buffer (one gather from the stencil's
+a few image rows at a time into a small buffer (one slice per offset of the stencil's
 images) and runs the kernel on that band.  The vectors are copied into a grid padded by the stencil radius
 ``R`` on every side, so that every band has the same column indices
 (computed once) and every pixel the same ``K`` entries, the neighbours
@@ -129,7 +129,7 @@ class BandedStencil:
         self._rows = max(1, min(H, _BAND_VALUES // (W * K)))
         self._delta = np.array([dy * self._wp + dx for dy, dx in A.offsets])
         self._patterns = {}
-        self._gathers = {}
+        self._offset_starts = None
 
     # ---- band structure -----------------------------------------------------
     def _pattern(self, rows):
@@ -155,41 +155,42 @@ class BandedStencil:
         starts = list(range(0, H, B))
         return [(y0, min(H, y0 + B)) for y0 in (starts[::-1] if reverse else starts)]
 
-    def _gather(self, y0, y1):
-        """``(start, index)``: the band's CSR values are ``data.ravel()[start:][index]`` (clipped to the array).
+    def _starts(self):
+        """Flat start of each offset's coefficients for pixel 0 in the stencil's ``data`` (may be negative).
 
-        Entry ``(r, x, k)`` reads offset ``k``'s coefficient at pixel ``(y0 + r, x)``: the stored image of ``k``
-        there, or for a lower offset ``o`` the image of ``−o`` at the neighbour ``p + o``.  Entries whose
-        neighbour lies outside the grid read some other finite coefficient: they multiply the zero padding.
-        Bands away from the top share one index array per height (relative to ``start``).
+        Entry ``(p, k)`` of a band reads offset ``k``'s coefficient at pixel ``p``: the stored image of ``k``
+        there, or for a lower offset ``o`` the image of ``−o`` at the neighbour ``p + o``, so that each offset
+        reads one contiguous run of ``data.ravel()``.  Entries whose neighbour lies outside the grid read some
+        other finite coefficient: they multiply the zero padding.
         """
-        A = self.stencil
-        H, W = self.grid_shape
-        symmetric = isinstance(A, SymmetricStencil)
-        lead = self.radius * (W + 1) if symmetric else 0  # the farthest a lower offset reaches back
-        start = y0 * W - lead
-        key = (y1 - y0, None if start >= 0 else y0)
-        if key not in self._gathers:
-            if symmetric:
-                slot = np.array([A._slot[o] if o >= (0, 0) else A._slot[(-o[0], -o[1])] for o in A.offsets])
-                shift = np.array([0 if o >= (0, 0) else o[0] * W + o[1] for o in A.offsets])
+        if self._offset_starts is None:
+            A = self.stencil
+            H, W = self.grid_shape
+            if isinstance(A, SymmetricStencil):
+                self._offset_starts = [A._slot[o] * H * W if o >= (0, 0)
+                                       else A._slot[(-o[0], -o[1])] * H * W + o[0] * W + o[1] for o in A.offsets]
             else:  # every offset has its own image
-                slot, shift = np.arange(len(A.offsets)), np.zeros(len(A.offsets), dtype=int)
-            base = slot * (H * W) + shift + lead + (0 if start >= 0 else start)
-            r = np.arange(y1 - y0)[:, None, None]
-            x = np.arange(W)[None, :, None]
-            self._gathers[key] = (r * W + x + base[None, None, :]).astype(np.intp)
-        return max(start, 0), self._gathers[key]
+                self._offset_starts = [k * H * W for k in range(len(A.offsets))]
+        return self._offset_starts
 
     def _fill(self, y0, y1):
-        """Write the CSR values of image rows ``y0:y1`` into their band matrix; returns its flat values."""
+        """Write the CSR values of image rows ``y0:y1`` into their band matrix; returns its flat values.
+
+        One slice copy per offset (contiguous reads of the stencil's images); a run that would start before
+        the first image (lower offsets in the first rows) reads its first value there instead.
+        """
         _, _, matrix = self._pattern(y1 - y0)
-        start, index = self._gather(y0, y1)
-        source = self.stencil.data.reshape(-1)[start:]
-        if source.dtype == self.dtype:
-            np.take(source, index.reshape(-1), out=matrix.data, mode="clip")
-        else:
-            matrix.data[...] = np.take(source, index.reshape(-1), mode="clip")
+        W = self.grid_shape[1]
+        n = (y1 - y0) * W
+        flat = self.stencil.data.reshape(-1)
+        values = matrix.data.reshape(n, -1)
+        for k, first in enumerate(self._starts()):
+            lo = first + y0 * W
+            if lo >= 0:
+                values[:, k] = flat[lo:lo + n]
+            else:
+                values[:-lo, k] = flat[0]
+                values[-lo:, k] = flat[:lo + n]
         return matrix.data
 
     def _padded(self, v):
