@@ -97,6 +97,23 @@ def test_stencil_operator_equals_the_csr_operator(shape, pair):
     assert np.isclose(v @ (K @ z), (K.T @ v) @ z, rtol=1e-12)  # dot test
 
 
+@pytest.mark.parametrize("band_rows", [1, 2, 3])
+@pytest.mark.parametrize("pair", [(gradient_stencil, gradient), (hessian_stencil, hessian_operator)])
+def test_stencil_product_over_row_bands_equals_the_csr_product(monkeypatch, band_rows, pair):
+    import sparsedepth.grid.operators as operators
+
+    shape = (8, 5)
+    monkeypatch.setattr(operators, "_BAND_VALUES", band_rows * shape[1])
+    stencil_form, csr_form = pair
+    K, C = stencil_form(shape), csr_form(shape)
+    z = np.random.default_rng(6).standard_normal(C.shape[1])
+    out = np.full(C.shape[0], np.nan)  # every row written, also those outside the anchor regions
+    n = shape[0] * shape[1]
+    for b in range(len(K.blocks)):
+        K.block_matvec(z, b, out=out[b * n:(b + 1) * n])
+    np.testing.assert_allclose(out, C @ z, rtol=0, atol=1e-13)
+
+
 @pytest.mark.parametrize("shape", [(3, 3), (5, 4), (7, 9), (2, 6)])
 def test_normal_stencil_is_KT_diag_r_K(shape):
     rng = np.random.default_rng(5)
