@@ -105,7 +105,12 @@ def _sweep_model(start, image, depth, observed, smoothness, kappa):
     return z.reshape(H, W)
 
 
-def test_edge_aware_sweeps_converge_to_the_direct_solve_of_their_model():
+@pytest.mark.parametrize("band_rows", [2, 4, None])
+def test_edge_aware_sweeps_converge_to_the_direct_solve_of_their_model(monkeypatch, band_rows):
+    import sparsedepth.grid.resample as resample
+
+    if band_rows is not None:  # half sweeps over bands of rows of the (9, 6) parity arrays
+        monkeypatch.setattr(resample, "_SWEEP_BAND_VALUES", band_rows * 6)
     rng = np.random.default_rng(2)
     image = rng.random((9, 11, 3))
     start = rng.random((9, 11)) + 1.0

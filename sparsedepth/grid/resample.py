@@ -294,6 +294,10 @@ def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa
     return _merge_parity(*fields)[:, :W]
 
 
+#: values per band of rows in a half sweep (512 kB in float32)
+_SWEEP_BAND_VALUES = 1 << 17
+
+
 def _pair_weights(distance, kappa, smoothness):
     """``smoothness · exp(−κ d)`` in place on the float32 pair distances ``d``."""
     distance *= -kappa
@@ -327,17 +331,35 @@ def _half_sweep(target, other, prior, inverse, free, horizontal, weight_above, w
     k]`` (``wx[y, 2k]``); in the other rows it is at ``x = 2k + 1``, with neighbours ``other[y, k]`` (``wx[y,
     2k]``) and ``other[y, k + 1]`` (``wx[y, 2k + 1]``).  Above and below are ``other[y ∓ 1, k]``, whose pair
     weights are the vertical weights of the pixel above (``weight_above``, the other parity's) and of the pixel
-    itself (``weight_below``).
+    itself (``weight_below``).  Computed over bands of rows (:data:`_SWEEP_BAND_VALUES` values each), so that
+    the partial sums stay in cache; each pixel adds its terms in the same order as a whole-array update.
     """
     pairs_even, pairs_odd = horizontal  # wx[:, 2k] and wx[:, 2k + 1]
-    update = prior.copy()
-    at_even = slice(row_offset, None, 2)  # rows whose target pixels have even x
+    H = target.shape[0]
+    band = max(2, (_SWEEP_BAND_VALUES // max(target.shape[1], 1)) & ~1)  # even: a band's rows keep their parity
+    work = np.empty((min(band, H),) + target.shape[1:], dtype=target.dtype)
+    term = np.empty_like(work)
+    at_even = slice(row_offset, None, 2)  # rows (of a band starting at an even row) whose target pixels have even x
     at_odd = slice(1 - row_offset, None, 2)
-    update[at_even, 1:] += pairs_odd[at_even, :-1] * other[at_even, :-1]
-    update[at_even] += pairs_even[at_even] * other[at_even]
-    update[at_odd] += pairs_even[at_odd] * other[at_odd]
-    update[at_odd, :-1] += pairs_odd[at_odd, :-1] * other[at_odd, 1:]
-    update[1:] += weight_above[:-1] * other[:-1]
-    update[:-1] += weight_below[:-1] * other[1:]
-    update *= inverse
-    np.copyto(target, update, where=free)
+    for y0 in range(0, H, band):
+        y1 = min(H, y0 + band)
+        rows = slice(y0, y1)
+        update, t = work[:y1 - y0], term[:y1 - y0]
+        np.copyto(update, prior[rows])
+        near, odd_pairs, even_pairs = other[rows], pairs_odd[rows], pairs_even[rows]
+        np.multiply(odd_pairs[at_even, :-1], near[at_even, :-1], out=t[at_even, :-1])
+        update[at_even, 1:] += t[at_even, :-1]
+        np.multiply(even_pairs[at_even], near[at_even], out=t[at_even])
+        update[at_even] += t[at_even]
+        np.multiply(even_pairs[at_odd], near[at_odd], out=t[at_odd])
+        update[at_odd] += t[at_odd]
+        np.multiply(odd_pairs[at_odd, :-1], near[at_odd, 1:], out=t[at_odd, :-1])
+        update[at_odd, :-1] += t[at_odd, :-1]
+        lo = max(y0, 1)  # rows y >= 1: + w_above[y − 1] z[y − 1]
+        np.multiply(weight_above[lo - 1:y1 - 1], other[lo - 1:y1 - 1], out=t[lo - y0:])
+        update[lo - y0:] += t[lo - y0:]
+        hi = min(y1, H - 1)  # rows y <= H − 2: + w_below[y] z[y + 1]
+        np.multiply(weight_below[y0:hi], other[y0 + 1:hi + 1], out=t[:hi - y0])
+        update[:hi - y0] += t[:hi - y0]
+        update *= inverse[rows]
+        np.copyto(target[rows], update, where=free[rows])
