@@ -112,16 +112,19 @@ def test_dual_point_from_admm_multiplier_and_the_nonnegativity_multiplier():
     assert curvature_lower_bound(obj) == pytest.approx(L1.delta)
 
 
+@pytest.mark.parametrize("fit", [dict(fit_steps=0, fit_max_iter=30, fit_correction=True),
+                                 dict(fit_steps=0, fit_max_iter=0)], ids=["corrected", "unfitted"])
 @pytest.mark.parametrize("eps", [0.0, 1e-4, 1e-2])
-def test_dual_fit_correcting_a_start_keeps_the_bound(eps):
-    """The least-squares correction of a given dual start (ADMM's polished-point certificate): still a bound."""
+def test_dual_fit_correcting_a_start_keeps_the_bound(eps, fit):
+    """The least-squares correction of a given dual start (ADMM's polished-point certificate), or the start as it
+    is on the tied rows (IRLS's hand-over check): still a bound."""
     image, sparse, mask, _ = make_problem((10, 11))
     obj, coarse, _ = build_objective(image, sparse, mask, weights=L1)
     F_ref = _reference(obj, coarse)
     out, _ = solve(obj, coarse.ravel(), solver="admm")
     c = StackedL1(obj).weights
     rng = np.random.default_rng(4)
-    cert = Certificate(obj, fit_steps=0, fit_max_iter=30, fit_correction=True)
+    cert = Certificate(obj, **fit)
     points = [out.z, np.maximum(out.z + 1e-3 * rng.standard_normal(obj.size), 0.0),
               np.maximum(coarse.ravel() + 0.3 * rng.standard_normal(obj.size), 0.0)]
     for z in points:

@@ -292,7 +292,9 @@ def _solve_newton(objective, system, x0, *, max_iter, recorder, options):
     With option ``finish="admm"`` (the default) they therefore stop at the
     gap ``max(gap_tol, newton_gap)`` (``newton_gap`` 1e-2 by default), and
     when ``gap_tol`` is smaller (or the Newton phase stalled) an exact
-    finishing phase takes over: ADMM with its
+    finishing phase takes over (the gap that decides this hand-over uses the
+    dual point ``p`` as it is on the tied rows, without the certificate's
+    least-squares fit and projected-gradient steps): ADMM with its
     active-set polishes and certificate
     (:func:`~sparsedepth.solvers.admm.finish_from`), started from the best
     Newton point with ``p`` as its dual, whose iterations continue the
@@ -319,9 +321,12 @@ def _solve_newton(objective, system, x0, *, max_iter, recorder, options):
     tie_band = 1e-3 * scale if options.tie_band is None else options.tie_band
     certify_below = 1e-5 * scale if options.certify_below is None else options.certify_below
     floor = objective_floor(objective)
-    certificate = Certificate(objective, nonnegative=True)
     finish = options.finish == "admm"
     newton_gap_tol = max(options.gap_tol, options.newton_gap) if finish else options.gap_tol
+    # a gap that only decides the hand-over to the exact finish needs no fitted dual point on the tied rows
+    hand_over = finish and newton_gap_tol > options.gap_tol
+    unfitted = {"fit_max_iter": 0, "fit_steps": 0} if hand_over else {}
+    certificate = Certificate(objective, nonnegative=True, **unfitted)
     b_norm = max(2.0 * float(np.linalg.norm(b)), np.finfo(float).tiny)
     z = np.maximum(np.asarray(x0, dtype=float).copy(), 0.0)
     F = recorder(0, z, inner=0)
