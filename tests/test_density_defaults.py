@@ -173,7 +173,8 @@ def test_cli_reports_the_observed_fraction_and_the_scheduled_weights(scene, caps
     assert report["weights_source"].startswith("DEFAULT_SCHEDULE")
     for name in ("delta", "kappa", "beta_image", "beta_local_linear"):
         assert report["weights"][name] == pytest.approx(getattr(expected, name), rel=1e-12)
-    assert set(report["density_schedule"]["anchors"]) == {"0.01", "0.1"}
+    assert set(report["weights_settings"]["density_schedule"]) == {"0.01", "0.1"}
+    assert report["weights_settings"] == weights_module.weights_settings(SCHEDULE)
 
 
 def test_cli_weight_options_fix_their_field_and_keep_the_schedule_elsewhere(scene, capsys, default_schedule):

@@ -19,8 +19,7 @@ import json
 from pathlib import Path
 
 from ..io import atomic_target
-from ..objective import weights as weights_module
-from ..objective.weights import Weights
+from ..objective.weights import weights_settings
 
 __all__ = ["CSV_COLUMNS", "LINE_END", "HEADER", "settings_path", "fingerprint", "settings_difference", "csv_line",
            "append_row", "read_log", "compact", "write_text_atomic", "start_log", "compact_file"]
@@ -41,18 +40,6 @@ def settings_path(csv_path) -> Path:
     """Where :func:`~sparsedepth.batch.run_batch` keeps the settings fingerprint of ``csv_path``: ``<csv>.settings.json``."""
     csv_path = Path(csv_path)
     return csv_path.with_name(csv_path.name + ".settings.json")
-
-
-def weights_settings(weights) -> dict:
-    """The weights of a batch as plain data: a :class:`Weights`' used fields, or a schedule's base and anchors.
-
-    ``None`` stands for :data:`~sparsedepth.objective.weights.DEFAULT_SCHEDULE` as it is now, so a batch resumed
-    after the library's defaults changed is refused as a different setting.
-    """
-    if isinstance(weights, Weights):
-        return weights.as_dict(used_only=True)
-    schedule = weights_module.DEFAULT_SCHEDULE if weights is None else weights
-    return {"base": schedule.base.as_dict(used_only=True), "density_schedule": schedule.as_dict()}
 
 
 def fingerprint(frames, options) -> dict:

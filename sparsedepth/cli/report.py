@@ -91,15 +91,15 @@ def build_report(args, argv, outcome, description, weights, weights_given, png_s
 
 
 def _weights_source(args, weights) -> dict:
-    """Where the solve's weights came from; with a density schedule, its anchors."""
+    """Where the solve's weights came from; with a density schedule, its base and anchors as the batch settings
+    file stores them (:func:`~sparsedepth.objective.weights.weights_settings`)."""
     with_options = " with the weight options" if weights is not None else ""
     if getattr(args, "fast", False):
         return {"weights_source": "FAST_WEIGHTS" + with_options}
     if getattr(args, "fill_holes", False):
         return {"weights_source": "DEFAULT_WEIGHTS (hole filling)" + with_options}
-    schedule = weights_module.DEFAULT_SCHEDULE if weights is None else weights
     return {"weights_source": "DEFAULT_SCHEDULE at the observed fraction" + with_options,
-            "density_schedule": {"base": schedule.base.as_dict(), "anchors": schedule.as_dict()}}
+            "weights_settings": weights_module.weights_settings(weights)}
 
 
 def _uncertainty_summary(outcome) -> dict:

@@ -12,7 +12,7 @@ from .._validation import check_nonnegative_real, check_positive_real, is_real
 from .robust import PENALTIES
 
 __all__ = ["Weights", "DEFAULT_WEIGHTS", "DensitySchedule", "DENSITY_FIELDS", "DEFAULT_SCHEDULE", "default_weights",
-           "check_weights", "EDGE_PENALTIES", "EDGE_PENALTY_FIELDS",
+           "check_weights", "weights_settings", "EDGE_PENALTIES", "EDGE_PENALTY_FIELDS",
            "DEFAULT_EDGE_SCALE", "MODEL_FIELDS"]
 
 #: The penalties of the edge term: ``"l1"`` (``|t|``) or a robust penalty of :mod:`sparsedepth.objective.robust`.
@@ -402,6 +402,19 @@ def observed_fraction(mask) -> float:
     """The fraction of pixels a boolean ``mask`` marks observed (what a :class:`DensitySchedule` is evaluated at)."""
     count, size = int(mask.sum()), int(mask.size)
     return count / size if size else 0.0
+
+
+def weights_settings(weights) -> dict:
+    """Weights or a schedule as plain data: a :class:`Weights`' used fields, or a schedule's base and anchors.
+
+    ``{"base": ..., "density_schedule": {fraction: {field: value}}}`` for a schedule.  ``None`` stands for
+    :data:`DEFAULT_SCHEDULE` as it is now.  The batch settings file stores this (a batch resumed after the
+    library's defaults changed is refused as a different setting) and the command line's JSON report shows it.
+    """
+    if isinstance(weights, Weights):
+        return weights.as_dict(used_only=True)
+    schedule = DEFAULT_SCHEDULE if weights is None else weights
+    return {"base": schedule.base.as_dict(used_only=True), "density_schedule": schedule.as_dict()}
 
 
 def resolve_weights(weights, fraction) -> Weights:
