@@ -68,9 +68,14 @@ def test_upsample_bilinear_reproduces_a_plane_between_the_centres_and_checks_the
         upsample_bilinear(coarse, (17, 24), factor)
 
 
+@pytest.mark.parametrize("band_rows", [1, 2, None])
 @pytest.mark.parametrize("channels, dtype, rtol", [(3, np.float64, 1e-13), (3, np.float32, 1e-6), (1, np.float64, 1e-15)])
-def test_pair_distances_are_the_channel_norms_of_neighbour_differences(channels, dtype, rtol):
+def test_pair_distances_are_the_channel_norms_of_neighbour_differences(monkeypatch, channels, dtype, rtol, band_rows):
+    import sparsedepth.grid.edges as edges
     from sparsedepth.grid.edges import pair_distances
+
+    if band_rows is not None:  # the norms over bands of 1 or 2 rows (7 values per row at most)
+        monkeypatch.setattr(edges, "_NORM_BAND_VALUES", band_rows * 7)
     image = np.random.default_rng(6).random((5, 7, channels)).astype(dtype)
     across, down = pair_distances(image)
     assert across.dtype == down.dtype == dtype and across.shape == (5, 6) and down.shape == (4, 7)

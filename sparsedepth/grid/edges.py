@@ -219,20 +219,32 @@ class PairEdgeWeights:
         return f"PairEdgeWeights(grid_shape={self.grid_shape}, kappa={self.kappa})"
 
 
+#: values per band of rows in :func:`_plane_norm` (256 kB in float32)
+_NORM_BAND_VALUES = 1 << 16
+
+
 def _plane_norm(first, second):
     """``‖first − second‖`` over the first axis (channel planes), summed channel by channel.
 
-    One channel's difference is formed, squared and added at a time: two images of work whatever the number of
-    channels, no ``(C, …)`` temporary, and faster than a reduction along the channel axis.
+    One channel's difference is formed, squared and added at a time (no ``(C, …)`` temporary, and faster than a
+    reduction along the channel axis), over bands of rows (:data:`_NORM_BAND_VALUES` values each), so that a band
+    of an interleaved image is read from memory once for all its channels.
     """
-    total = np.subtract(first[0], second[0])
-    total *= total
-    difference = np.empty_like(total)
-    for channel in range(1, first.shape[0]):
-        np.subtract(first[channel], second[channel], out=difference)
-        difference *= difference
-        total += difference
-    return np.sqrt(total, out=total)
+    _, h, w = first.shape
+    total = np.empty((h, w), dtype=np.result_type(first.dtype, second.dtype))
+    band = max(1, _NORM_BAND_VALUES // max(w, 1))
+    difference = np.empty((min(band, h), w), dtype=total.dtype)
+    for y0 in range(0, h, band):
+        rows = slice(y0, min(h, y0 + band))
+        part, work = total[rows], difference[:rows.stop - y0]
+        np.subtract(first[0, rows], second[0, rows], out=part)
+        part *= part
+        for channel in range(1, first.shape[0]):
+            np.subtract(first[channel, rows], second[channel, rows], out=work)
+            work *= work
+            part += work
+        np.sqrt(part, out=part)
+    return total
 
 
 def second_order_edge_weights(pair_weights, shape) -> np.ndarray:
