@@ -129,7 +129,15 @@ class BandedStencil:
         self._rows = max(1, min(H, _BAND_VALUES // (W * K)))
         self._delta = np.array([dy * self._wp + dx for dy, dx in A.offsets])
         self._patterns = {}
-        self._offset_starts = None
+        # flat start in A.data of each offset's coefficients for pixel 0 (may be negative): entry (p, k) of a band
+        # reads offset k's coefficient at pixel p, i.e. the stored image of k there or, for a lower offset o, the
+        # image of -o at the neighbour p + o, so each offset reads one contiguous run of data.ravel(); entries
+        # whose neighbour lies outside the grid read some other finite coefficient, which multiplies the padding
+        if isinstance(A, SymmetricStencil):
+            self._starts = [A._slot[o] * H * W if o >= (0, 0) else A._slot[(-o[0], -o[1])] * H * W + o[0] * W + o[1]
+                            for o in A.offsets]
+        else:  # every offset has its own image
+            self._starts = [k * H * W for k in range(K)]
 
     # ---- band structure -----------------------------------------------------
     def _pattern(self, rows):
@@ -155,24 +163,6 @@ class BandedStencil:
         starts = list(range(0, H, B))
         return [(y0, min(H, y0 + B)) for y0 in (starts[::-1] if reverse else starts)]
 
-    def _starts(self):
-        """Flat start of each offset's coefficients for pixel 0 in the stencil's ``data`` (may be negative).
-
-        Entry ``(p, k)`` of a band reads offset ``k``'s coefficient at pixel ``p``: the stored image of ``k``
-        there, or for a lower offset ``o`` the image of ``−o`` at the neighbour ``p + o``, so that each offset
-        reads one contiguous run of ``data.ravel()``.  Entries whose neighbour lies outside the grid read some
-        other finite coefficient: they multiply the zero padding.
-        """
-        if self._offset_starts is None:
-            A = self.stencil
-            H, W = self.grid_shape
-            if isinstance(A, SymmetricStencil):
-                self._offset_starts = [A._slot[o] * H * W if o >= (0, 0)
-                                       else A._slot[(-o[0], -o[1])] * H * W + o[0] * W + o[1] for o in A.offsets]
-            else:  # every offset has its own image
-                self._offset_starts = [k * H * W for k in range(len(A.offsets))]
-        return self._offset_starts
-
     def _fill(self, y0, y1):
         """Write the CSR values of image rows ``y0:y1`` into their band matrix; returns its flat values.
 
@@ -184,7 +174,7 @@ class BandedStencil:
         n = (y1 - y0) * W
         flat = self.stencil.data.reshape(-1)
         values = matrix.data.reshape(n, -1)
-        for k, first in enumerate(self._starts()):
+        for k, first in enumerate(self._starts):
             lo = first + y0 * W
             if lo >= 0:
                 values[:, k] = flat[lo:lo + n]
