@@ -12,6 +12,7 @@ from sparsedepth.grid.operators import (
     mixed_diff,
     second_diff,
 )
+from sparsedepth.grid.rowbands import row_bands, rows_per_band
 
 
 @pytest.mark.parametrize("shape", [(1, 1), (1, 5), (6, 1), (4, 7), (9, 3)])
@@ -141,3 +142,18 @@ def test_stencil_operator_rejects_bad_vectors_and_blocks():
         K.T @ np.zeros(12)
     with pytest.raises(ValueError, match="at least one"):
         StencilOperator((3, 4), [])
+
+
+@pytest.mark.parametrize("start, stop, rows", [(0, 7, 3), (2, 9, 2), (0, 5, 5), (0, 4, 9), (3, 3, 2), (4, 1, 2)])
+def test_row_bands_cover_the_rows_once_in_order(start, stop, rows):
+    bands = row_bands(start, stop, rows)
+    covered = [y for band in bands for y in range(band.start, band.stop)]
+    assert covered == list(range(start, stop))
+    assert all(0 < band.stop - band.start <= rows for band in bands)
+    assert all(band.stop - band.start == rows for band in bands[:-1])
+
+
+@pytest.mark.parametrize("width, values, multiple, expected", [
+    (10, 35, 1, 3), (10, 35, 2, 2), (10, 5, 1, 1), (10, 5, 2, 2), (0, 8, 1, 8), (7, 70, 4, 8), (7, 84, 4, 12)])
+def test_rows_per_band(width, values, multiple, expected):
+    assert rows_per_band(width, values, multiple=multiple) == expected

@@ -12,7 +12,7 @@ forward differences (:func:`image_differences`, the rows of
   (:class:`SecondOrderEdgeWeights`: the same, one block at a time on request);
 * :func:`smoothed_image` - the image blurred by a Gaussian before any of the above (``Weights.edge_sigma``).
 
-May import NumPy, :mod:`scipy.ndimage` and :mod:`sparsedepth._validation`.
+May import NumPy, :mod:`scipy.ndimage`, :mod:`sparsedepth._validation` and :mod:`.rowbands`.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import numpy as np
 from scipy import ndimage
 
 from .._validation import as_float_image, check_grid_shape, check_nonnegative_real
+from .rowbands import row_bands, rows_per_band
 
 __all__ = [
     "image_differences",
@@ -232,11 +233,10 @@ def _plane_norm(first, second):
     """
     _, h, w = first.shape
     total = np.empty((h, w), dtype=np.result_type(first.dtype, second.dtype))
-    band = max(1, _NORM_BAND_VALUES // max(w, 1))
+    band = rows_per_band(w, _NORM_BAND_VALUES)
     difference = np.empty((min(band, h), w), dtype=total.dtype)
-    for y0 in range(0, h, band):
-        rows = slice(y0, min(h, y0 + band))
-        part, work = total[rows], difference[:rows.stop - y0]
+    for rows in row_bands(0, h, band):
+        part, work = total[rows], difference[:rows.stop - rows.start]
         np.subtract(first[0, rows], second[0, rows], out=part)
         part *= part
         for channel in range(1, first.shape[0]):

@@ -13,7 +13,7 @@ that the row of pixel ``(i, j)`` of ``forward_diff(shape, axis=1)`` is
 The same operators exist matrix-free (:class:`StencilOperator`,
 :func:`gradient_stencil`, :func:`hessian_stencil`), applied by array slicing.
 
-May import NumPy, SciPy and :mod:`sparsedepth._validation`.
+May import NumPy, SciPy, :mod:`sparsedepth._validation` and :mod:`.rowbands`.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import check_grid_shape
+from .rowbands import row_bands, rows_per_band
 
 __all__ = [
     "forward_diff",
@@ -272,10 +273,10 @@ class StencilOperator:
         out[ys, :xs.start] = 0.0
         out[ys, xs.stop:] = 0.0
         (first_offset, first_coef), *taps = self.blocks[b]
-        band = max(1, _BAND_VALUES // W)
+        band = rows_per_band(W, _BAND_VALUES)
         work = np.empty((min(band, max(ys.stop - ys.start, 0)), max(xs.stop - xs.start, 0)))
-        for y0 in range(ys.start, ys.stop, band):
-            rows = (slice(y0, min(ys.stop, y0 + band)), xs)
+        for band_rows in row_bands(ys.start, ys.stop, band):
+            rows = (band_rows, xs)
             view = out[rows]
             np.multiply(img[_shifted(rows, first_offset)], first_coef, out=view)
             term = work[:view.shape[0]]

@@ -16,7 +16,7 @@ The nested iteration of the ADMM solver (option ``warm_start="coarse"``)
 moves an L1 problem's solution back with :func:`upsample_bilinear` and its
 dual edge field with :func:`upsample_edges`.
 
-May import NumPy, :mod:`sparsedepth._validation` and :mod:`.edges`.
+May import NumPy, :mod:`sparsedepth._validation`, :mod:`.edges` and :mod:`.rowbands`.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ import numpy as np
 
 from .._validation import check_count, check_nonnegative_real
 from .edges import pair_distances
+from .rowbands import row_bands, rows_per_band
 
 __all__ = ["coarse_shape", "block_mean", "block_sum", "block_sample_mean", "upsample_bilinear", "upsample_edges",
            "edge_aware_sweeps"]
@@ -336,14 +337,13 @@ def _half_sweep(target, other, prior, inverse, free, horizontal, weight_above, w
     """
     pairs_even, pairs_odd = horizontal  # wx[:, 2k] and wx[:, 2k + 1]
     H = target.shape[0]
-    band = max(2, (_SWEEP_BAND_VALUES // max(target.shape[1], 1)) & ~1)  # even: a band's rows keep their parity
+    band = rows_per_band(target.shape[1], _SWEEP_BAND_VALUES, multiple=2)  # even: a band's rows keep their parity
     work = np.empty((min(band, H),) + target.shape[1:], dtype=target.dtype)
     term = np.empty_like(work)
     at_even = slice(row_offset, None, 2)  # rows (of a band starting at an even row) whose target pixels have even x
     at_odd = slice(1 - row_offset, None, 2)
-    for y0 in range(0, H, band):
-        y1 = min(H, y0 + band)
-        rows = slice(y0, y1)
+    for rows in row_bands(0, H, band):
+        y0, y1 = rows.start, rows.stop
         update, t = work[:y1 - y0], term[:y1 - y0]
         np.copyto(update, prior[rows])
         near, odd_pairs, even_pairs = other[rows], pairs_odd[rows], pairs_even[rows]

@@ -19,7 +19,7 @@ offset whose neighbour lies inside the grid, in lexicographic offset order
 recognised exactly (its ``indptr`` and ``indices`` are compared with the
 pattern), so :func:`csr_to_stencil` never guesses.
 
-May import NumPy, SciPy and :mod:`sparsedepth._validation`.
+May import NumPy, SciPy, :mod:`sparsedepth._validation` and :mod:`.rowbands`.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import check_grid_shape
+from .rowbands import row_bands, rows_per_band
 
 __all__ = ["stencil_to_csr", "csr_to_stencil", "full_pattern_offsets", "index_dtype", "SymmetricStencil"]
 
@@ -341,7 +342,7 @@ class SymmetricStencil:
         self.shape = (n, n)
         self.dtype = images.dtype
         self._slot = {o: k for k, o in enumerate(upper)}
-        self._band = max(1, (1 << 16) // max(self.grid_shape[1], 1))  # rows per band of the product
+        self._band = rows_per_band(self.grid_shape[1], 1 << 16)  # rows per band of the product
 
     @classmethod
     def from_stencil(cls, offsets, stencil, *, dtype=np.float64, copy=True):
@@ -479,9 +480,8 @@ class SymmetricStencil:
         if out is not None:
             res[...] = 0
         tmp = np.empty((min(self._band, H), W), dtype=dtype)
-        for y0 in range(0, H, self._band):
-            y1 = min(H, y0 + self._band)
-            self._add_rows_product(img, y0, y1, res[y0:y1], tmp)
+        for rows in row_bands(0, H, self._band):
+            self._add_rows_product(img, rows.start, rows.stop, res[rows], tmp)
         return y
 
     def matvec_rows(self, x, y0, y1):
@@ -491,9 +491,8 @@ class SymmetricStencil:
         dtype = np.result_type(self.dtype, img.dtype)
         out = np.zeros((y1 - y0, W), dtype=dtype)
         tmp = np.empty((min(self._band, y1 - y0), W), dtype=dtype)
-        for b0 in range(y0, y1, self._band):
-            b1 = min(y1, b0 + self._band)
-            self._add_rows_product(img, b0, b1, out[b0 - y0:b1 - y0], tmp)
+        for rows in row_bands(y0, y1, self._band):
+            self._add_rows_product(img, rows.start, rows.stop, out[rows.start - y0:rows.stop - y0], tmp)
         return out
 
     def _as_image(self, x):
