@@ -71,27 +71,3 @@ def test_fast_mode_quick_run(capsys):
     if fast_peers.available():
         assert "FGS setting picked on the tuning frames" in text
 
-
-def test_v_cycle_factor_is_the_spectral_radius_of_the_error_propagator():
-    """The stationary V-cycle's measured contraction against max |1 − λ(M⁻¹A)| from a dense eigen-solve."""
-    import scipy.linalg
-    import scipy.sparse as sp
-
-    from sparsedepth.solvers.quadratic import default_hierarchy
-
-    rng = np.random.default_rng(3)
-    shape = (40, 32)  # more than max_coarse unknowns: at least two levels
-    n = shape[0] * shape[1]
-    gx = sp.diags([-1.0, 1.0], [0, 1], shape=(shape[1] - 1, shape[1]))
-    gy = sp.diags([-1.0, 1.0], [0, 1], shape=(shape[0] - 1, shape[0]))
-    D = sp.vstack([sp.kron(sp.identity(shape[0]), gx), sp.kron(gy, sp.identity(shape[1]))]).tocsr()
-    w = np.exp(-3.0 * rng.random(D.shape[0]))  # varying edge weights
-    A = (D.T @ sp.diags(w) @ D + sp.diags(0.05 * (rng.random(n) < 0.05) + 1e-3)).tocsr()
-    mg = default_hierarchy(A, shape)
-    assert len(mg.levels) >= 2
-    Minv = np.column_stack([mg.vcycle(col) for col in np.identity(n)])
-    M = np.linalg.inv((Minv + Minv.T) / 2)  # the V-cycle is symmetric: M⁻¹ A has the eigenvalues of A v = λ M v
-    radius = np.max(np.abs(1.0 - scipy.linalg.eigh(A.toarray(), M, eigvals_only=True)))
-    factor = speed._v_cycle_factor(A, mg, cycles=40)
-    assert factor <= radius + 1e-6  # float32 fine-level rounding aside, ‖E e‖_A ≤ ρ(E) ‖e‖_A
-    assert factor >= radius - 0.05
