@@ -182,6 +182,36 @@ def test_interrupted_batch_keeps_rows_and_resumes_to_one_row_per_frame(batch):
     assert _temporaries(out) == [] and sorted(p.name for p in out.iterdir()) == ["a.npy", "b.npy", "c.npy"]
 
 
+@pytest.mark.skipif(sparsedepth.batch.csvlog.fcntl is None, reason="no advisory file locks on this platform")
+def test_second_batch_on_the_same_csv_is_refused_while_the_first_runs(batch):
+    # a second batch used to compact (replace) the CSV under the first one, whose later rows then went to the
+    # replaced file: the first reported every frame done while the CSV lacked their rows
+    frames, out, options, csv_path = batch
+    (frames / "depth_b.png").write_bytes(b"\x89PNG\r\n\x1a\n corrupt")
+    _run(frames, csv_path, options)  # b fails: its rerun appends a second row, so a start would compact
+    (frames / "depth_b.png").write_bytes((frames / "depth_a.png").read_bytes())
+    (out / "c.npy").unlink()  # c runs again too
+    refused = []
+
+    def second_batch(done, total, row):
+        before = csv_path.read_bytes()
+        with pytest.raises(ValueError, match="another batch"):
+            _run(frames, csv_path, options)
+        assert csv_path.read_bytes() == before  # the refused batch changed nothing
+        refused.append(row["name"])
+
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        summary = run_batch(find_frames(frames), csv_path, options=options, executor=pool, max_in_flight=1,
+                            progress=second_batch)
+    assert refused == ["b", "c"] and summary.succeeded == 3
+    rows = _rows(csv_path)
+    assert sorted(r["name"] for r in rows) == ["a", "b", "c"] and all(r["status"] == "ok" for r in rows)
+    assert not sparsedepth.batch.csvlog.lock_path(csv_path).exists()
+    calls = []
+    _run(frames, csv_path, options, calls)  # the lock ended with the batch
+    assert calls == []
+
+
 def test_torn_last_line_of_a_killed_driver_is_dropped(batch):
     frames, _, options, csv_path = batch
     _run(frames, csv_path, options)

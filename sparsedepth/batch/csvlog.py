@@ -5,23 +5,32 @@ appended and flushed as the frame finishes (:func:`append_row`).  The
 settings of the run (options and frame list) are kept as JSON beside it
 (:func:`settings_path`); a rerun with other settings is refused.  A CSV with
 several rows for a frame is compacted to the last one (:func:`compact`),
-rewritten atomically.
+rewritten atomically.  While a batch runs it holds an exclusive lock on
+``<csv>.lock`` (:func:`locked`), so that a second batch on the same CSV is
+refused instead of appending to a file the first one replaces.
 
 Imports the standard library, :mod:`sparsedepth.io` (atomic writes) and :mod:`sparsedepth.objective.weights`.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import io as _io
 import json
+import os
 from pathlib import Path
+
+try:
+    import fcntl
+except ImportError:  # Windows: no advisory locks, a second batch on the same CSV is not detected
+    fcntl = None
 
 from ..io import atomic_target
 from ..objective.weights import weights_settings
 
-__all__ = ["CSV_COLUMNS", "LINE_END", "HEADER", "settings_path", "fingerprint", "settings_difference", "csv_line",
+__all__ = ["CSV_COLUMNS", "LINE_END", "HEADER", "settings_path", "lock_path", "locked", "fingerprint", "settings_difference", "csv_line",
            "append_row", "read_log", "compact", "write_text_atomic", "start_log", "compact_file"]
 
 #: Columns of the batch CSV, in order.
@@ -40,6 +49,68 @@ def settings_path(csv_path) -> Path:
     """Where :func:`~sparsedepth.batch.run_batch` keeps the settings fingerprint of ``csv_path``: ``<csv>.settings.json``."""
     csv_path = Path(csv_path)
     return csv_path.with_name(csv_path.name + ".settings.json")
+
+
+def lock_path(csv_path) -> Path:
+    """The file a running batch locks so that no other batch writes ``csv_path`` at the same time: ``<csv>.lock``."""
+    csv_path = Path(csv_path)
+    return csv_path.with_name(csv_path.name + ".lock")
+
+
+def _holder(fd) -> str:
+    with contextlib.suppress(OSError, ValueError):
+        pid = int(os.pread(fd, 32, 0).decode("ascii").strip())
+        return f" (process {pid})"
+    return ""
+
+
+@contextlib.contextmanager
+def locked(csv_path: Path):
+    """Hold an exclusive lock on :func:`lock_path` of ``csv_path`` for the duration of the block.
+
+    A second batch on the same CSV would append rows to a file that the
+    first one replaces when it compacts it (rows lost), and would remove the
+    first one's temporary outputs; it is refused with a ``ValueError``
+    instead.  The lock (``flock``) ends with the process however it ends;
+    the lock file is removed when the block ends.  Where the platform or
+    the file system has no such locks, nothing is locked.
+    """
+    if fcntl is None:
+        yield
+        return
+    path = lock_path(csv_path)
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _holder(fd)
+            os.close(fd)
+            raise ValueError(
+                f"'{csv_path}' is being written by another batch{holder}, which holds '{path.name}'; wait for it "
+                "to end, or give another CSV path"
+            ) from None
+        except OSError:  # a file system without flock: run unlocked
+            os.close(fd)
+            yield
+            return
+        try:
+            current = os.stat(path)
+        except FileNotFoundError:
+            current = None
+        mine = os.fstat(fd)
+        if current is not None and (current.st_dev, current.st_ino) == (mine.st_dev, mine.st_ino):
+            break
+        os.close(fd)  # the holder before us removed the file we locked: lock the new one
+    try:
+        with contextlib.suppress(OSError):
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+        os.close(fd)
 
 
 def fingerprint(frames, options) -> dict:

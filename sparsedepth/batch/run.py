@@ -245,7 +245,8 @@ def run_batch(
         If ``frames`` is empty or has duplicate names, ``max_workers`` or
         ``max_in_flight`` is not a positive integer, or the CSV exists and
         was written with other settings (or ``resume=False``) while
-        ``overwrite`` is False.
+        ``overwrite`` is False, or another batch is running on the same CSV
+        (it holds ``<csv>.lock``, see :func:`~sparsedepth.batch.csvlog.locked`).
     TypeError
         If a frame is not one of the frame types.
     OSError
@@ -296,12 +297,13 @@ def run_batch(
     csv_path = Path(os.path.abspath(csv_path))
     if not csv_path.parent.is_dir():
         raise FileNotFoundError(f"folder of the CSV file '{csv_path}' does not exist")
-    kept = csvlog.start_log(csv_path, csvlog.fingerprint(frames, options), names, resume=resume, overwrite=overwrite)
-
-    latest = {name: row for name, row, _ in kept}
-    done_before = {name for name, row in latest.items() if _is_done(row, options)}
-    todo = [position for position, name in enumerate(names) if name not in done_before]
-    remove_temporaries([names[p] for p in todo], options)
-    if todo:
-        _run_frames(frames, todo, csv_path, options, executor, max_workers, max_in_flight, progress, latest)
+    with csvlog.locked(csv_path):
+        kept = csvlog.start_log(csv_path, csvlog.fingerprint(frames, options), names, resume=resume,
+                                overwrite=overwrite)
+        latest = {name: row for name, row, _ in kept}
+        done_before = {name for name, row in latest.items() if _is_done(row, options)}
+        todo = [position for position, name in enumerate(names) if name not in done_before]
+        remove_temporaries([names[p] for p in todo], options)
+        if todo:
+            _run_frames(frames, todo, csv_path, options, executor, max_workers, max_in_flight, progress, latest)
     return _summary(frames, latest, csv_path, skipped=len(frames) - len(todo))

@@ -24,6 +24,7 @@ from ..batch import (
     run_batch,
     settings_path,
 )
+from ..batch.csvlog import lock_path
 from .checks import cluster_address
 from .messages import UsageError, one_line, warnings_as_lines
 from .outputs import Named, check_distinct, check_writable
@@ -92,7 +93,8 @@ def _check_batch_files(args, frames) -> None:
             paths = [frame.path]
             flag, given = ("--nyu-mat", args.nyu_mat) if args.nyu_mat is not None else ("--batch", args.batch)
         inputs += [Named(flag, given, Path(path)) for path in paths]
-    outputs = [Named("--csv", args.csv, Path(args.csv)), Named("--csv", args.csv, settings_path(args.csv))]
+    outputs = [Named("--csv", args.csv, Path(args.csv)), Named("--csv", args.csv, settings_path(args.csv)),
+               Named("--csv", args.csv, lock_path(args.csv))]
     if args.outdir is not None:
         outputs += [Named("--outdir", args.outdir, Path(args.outdir) / f"{frame.name}.{args.out_format}")
                     for frame in frames]
