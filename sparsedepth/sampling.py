@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validation import check_count
+from ._validation import check_count, is_int, is_real
 
 __all__ = ["valid_depth_mask", "sample_mask", "sample_depth"]
 
@@ -30,8 +30,12 @@ def sample_mask(depth, *, fraction=None, count=None, seed=0) -> np.ndarray:
     Raises
     ------
     ValueError
-        Both or neither of ``fraction``/``count``; out-of-range values; a depth
-        map without a valid pixel; more samples requested than valid pixels.
+        Both or neither of ``fraction``/``count``; out-of-range values
+        (a negative ``seed`` included); a depth map without a valid pixel;
+        more samples requested than valid pixels.
+    TypeError
+        A ``fraction`` that is not a number, or a ``seed`` NumPy cannot seed
+        a generator with (e.g. a float).
     """
     depth = np.asarray(depth)
     if depth.ndim != 2:
@@ -43,6 +47,8 @@ def sample_mask(depth, *, fraction=None, count=None, seed=0) -> np.ndarray:
     if idx.size == 0:
         raise ValueError("depth has no valid pixel (finite and > 0) to sample from")
     if fraction is not None:
+        if not is_real(fraction):
+            raise TypeError(f"fraction must be a number in (0, 1]; got {type(fraction).__name__} {fraction!r}")
         fraction = float(fraction)
         if not (0 < fraction <= 1):
             raise ValueError(f"fraction must be in (0, 1], got {fraction}")
@@ -51,11 +57,21 @@ def sample_mask(depth, *, fraction=None, count=None, seed=0) -> np.ndarray:
         n = check_count(count, name="count")
         if n > idx.size:
             raise ValueError(f"count={n} exceeds the {idx.size} valid pixels of depth")
-    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    rng = seed if isinstance(seed, np.random.Generator) else _generator(seed)
     keep = rng.choice(idx, size=n, replace=False)
     mask = np.zeros(depth.shape, dtype=bool)
     mask.flat[keep] = True
     return mask
+
+
+def _generator(seed) -> np.random.Generator:
+    """``np.random.default_rng(seed)``, its errors naming ``seed``."""
+    if is_int(seed) and seed < 0:
+        raise ValueError(f"seed must be an integer >= 0 or a numpy.random.Generator, got {seed!r}")
+    try:
+        return np.random.default_rng(seed)
+    except (TypeError, ValueError) as exc:
+        raise type(exc)(f"seed must be an integer >= 0 or a numpy.random.Generator, got {seed!r} ({exc})") from None
 
 
 def sample_depth(depth, *, fraction=None, count=None, seed=0):

@@ -108,6 +108,20 @@ def test_edge_penalty_options_are_checked(files, capsys, argv, words):
     assert words in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv, flag", [
+    (["--keep-fraction", "0.1", "--seed", "-1"], "--seed"),  # was NumPy's "expected non-negative integer"
+    (["--keep-fraction", "0.1", "--seed", "1.5"], "--seed"),
+    (["--tol", "-1"], "--tol"),  # was "tol must be finite and >= 0", not the flag
+    (["--tol", "nan"], "--tol"),
+])
+def test_one_frame_bad_seed_or_tol_is_one_line_naming_the_flag(files, capsys, argv, flag):
+    rc = main(["--image", str(files / "rgb.png"), "--depth", str(files / "dense.png"), "--depth-scale", "mm",
+               "--out", str(files / "out.npy"), "-q", *argv])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and f"argument {flag}:" in err, err
+    assert not (files / "out.npy").exists()
+
+
 # ----------------------------------------------------------------------------- round trips
 @pytest.mark.parametrize("ext, atol", [(".npy", 1e-12), (".npz", 1e-12), (".h5", 1e-12), (".pfm", 1e-6)])
 def test_round_trip_float_formats(files, capsys, ext, atol):

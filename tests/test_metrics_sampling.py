@@ -79,3 +79,24 @@ def test_sample_count_must_be_an_integer_of_at_least_one(count):
 def test_sample_count_accepts_numpy_integers():
     depth = np.ones((10, 12))
     assert sample_mask(depth, count=np.int64(7), seed=0).sum() == 7
+
+
+@pytest.mark.parametrize("kwargs, kind, words", [
+    (dict(fraction=0.5, seed=-1), ValueError, "seed must be an integer >= 0"),  # NumPy's own: no argument named
+    (dict(fraction=0.5, seed=1.5), TypeError, "seed must be an integer >= 0"),
+    (dict(fraction=0.5, seed="7"), TypeError, "seed must be an integer >= 0"),
+    (dict(fraction="0.5"), TypeError, "fraction must be a number"),  # was float()'s "could not convert string"
+    (dict(fraction=[0.5]), TypeError, "fraction must be a number"),
+    (dict(fraction=True), TypeError, "fraction must be a number"),  # was read as 1.0: every pixel kept
+])
+def test_sampling_errors_name_the_argument(kwargs, kind, words):
+    depth = np.ones((5, 5))
+    with pytest.raises(kind, match=words):
+        sample_mask(depth, **kwargs)
+
+
+def test_sampling_accepts_numpy_scalars_and_generators():
+    depth = np.ones((5, 5))
+    a = sample_mask(depth, fraction=np.float32(0.4), seed=np.int64(3))
+    b = sample_mask(depth, fraction=0.4, seed=np.random.default_rng(3))
+    assert a.sum() == b.sum() == 10 and np.array_equal(a, b)

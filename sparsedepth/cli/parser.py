@@ -112,6 +112,16 @@ def _positive_int(text):
     return value
 
 
+def _nonnegative_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+    return value
+
+
 def _fraction(text):
     try:
         value = float(text)
@@ -280,7 +290,7 @@ def _add_simulation_options(parser) -> None:
     keep.add_argument("--keep-fraction", type=_fraction, metavar="F",
                       help=f"keep this fraction of the valid depth pixels (demo default {DEMO_KEEP_FRACTION}).")
     keep.add_argument("--keep-count", type=_positive_int, metavar="N", help="keep this many valid depth pixels.")
-    sim.add_argument("--seed", type=int, default=0, help="seed of the sampling (default 0).")
+    sim.add_argument("--seed", type=_nonnegative_int, default=0, help="seed of the sampling (default 0).")
 
 
 
@@ -310,7 +320,7 @@ def _add_method_options(parser) -> None:
     method.add_argument("--fast", action="store_true",
                         help="real-time mode: solve on a 2-4x coarser grid, upsample, refine by a few edge-aware "
                              "sweeps (about 10x faster, somewhat less accurate; python -m bench.fast_mode).")
-    method.add_argument("--tol", type=float, metavar="TOL", help="solver tolerance (meaning per solver).")
+    method.add_argument("--tol", type=_nonnegative, metavar="TOL", help="solver tolerance (meaning per solver).")
     method.add_argument("--max-iter", type=_positive_int, metavar="N", help="maximum solver iterations.")
     method.add_argument("--no-clip", dest="clip_to_observed", action="store_false",
                         help="keep completed depth outside the range of the observed depth (by default the map is "
