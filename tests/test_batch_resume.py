@@ -1,5 +1,6 @@
 """Batches: resuming, settings fingerprint, option checks, layouts, killed workers, signals (real subprocesses)."""
 
+import contextlib
 import csv
 import errno
 import multiprocessing
@@ -182,7 +183,6 @@ def test_interrupted_batch_keeps_rows_and_resumes_to_one_row_per_frame(batch):
     assert _temporaries(out) == [] and sorted(p.name for p in out.iterdir()) == ["a.npy", "b.npy", "c.npy"]
 
 
-@pytest.mark.skipif(sparsedepth.batch.csvlog.fcntl is None, reason="no advisory file locks on this platform")
 def test_second_batch_on_the_same_csv_is_refused_while_the_first_runs(batch):
     # a second batch used to compact (replace) the CSV under the first one, whose later rows then went to the
     # replaced file: the first reported every frame done while the CSV lacked their rows
@@ -210,6 +210,54 @@ def test_second_batch_on_the_same_csv_is_refused_while_the_first_runs(batch):
     calls = []
     _run(frames, csv_path, options, calls)  # the lock ended with the batch
     assert calls == []
+
+
+_KILLED_DRIVER = """
+import multiprocessing, os, pathlib, sys, time
+from sparsedepth.batch.csvlog import locked
+with locked(pathlib.Path(sys.argv[1])):
+    worker = multiprocessing.get_context("fork").Process(target=time.sleep, args=(60,))
+    worker.start()  # forked while the lock is held, as the default pool's workers are
+    print(worker.pid, flush=True)
+    os._exit(0)  # killed: no clean-up, the lock file stays and the worker lives on
+"""
+
+_PROBE = """
+import pathlib, sys
+from sparsedepth.batch.csvlog import locked
+try:
+    with locked(pathlib.Path(sys.argv[1])):
+        pass
+except ValueError as exc:
+    print(exc)
+    sys.exit(3)
+"""
+
+
+@pytest.mark.skipif(sparsedepth.batch.csvlog.fcntl is None or "fork" not in multiprocessing.get_all_start_methods(),
+                    reason="POSIX file locks and fork")
+def test_batch_lock_holds_across_processes_but_not_in_workers_of_a_killed_driver(tmp_path):
+    csv_path = tmp_path / "m.csv"
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+
+    def probe():
+        return subprocess.run([sys.executable, "-c", _PROBE, str(csv_path)], env=env, capture_output=True,
+                              text=True, timeout=120)
+
+    with sparsedepth.batch.csvlog.locked(csv_path):
+        refused = probe()
+    assert refused.returncode == 3 and "another batch" in refused.stdout, refused.stderr
+    with open(tmp_path / "pid", "w") as out:  # a file, not a pipe the orphan would keep open
+        subprocess.run([sys.executable, "-c", _KILLED_DRIVER, str(csv_path)], env=env, stdout=out, timeout=120)
+    orphan = int((tmp_path / "pid").read_text())
+    try:
+        assert sparsedepth.batch.csvlog.lock_path(csv_path).exists()
+        os.kill(orphan, 0)  # the worker lives on
+        again = probe()  # the orphaned worker must not keep the next run out
+        assert again.returncode == 0, again.stdout + again.stderr
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(orphan, signal.SIGKILL)
 
 
 def test_torn_last_line_of_a_killed_driver_is_dropped(batch):

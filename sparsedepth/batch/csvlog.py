@@ -17,14 +17,16 @@ from __future__ import annotations
 import contextlib
 import csv
 import dataclasses
+import errno
 import io as _io
 import json
 import os
+import threading
 from pathlib import Path
 
 try:
     import fcntl
-except ImportError:  # Windows: no advisory locks, a second batch on the same CSV is not detected
+except ImportError:  # Windows: no POSIX locks, only batches of one process are told apart
     fcntl = None
 
 from ..io import atomic_target
@@ -64,6 +66,17 @@ def _holder(fd) -> str:
     return ""
 
 
+_HELD: set[str] = set()  # lock files this process holds (POSIX locks do not conflict within one process)
+_HELD_GUARD = threading.Lock()
+
+
+def _refuse(csv_path: Path, path: Path, holder: str):
+    return ValueError(
+        f"'{csv_path}' is being written by another batch{holder}, which holds '{path.name}'; wait for it to end, "
+        "or give another CSV path"
+    )
+
+
 @contextlib.contextmanager
 def locked(csv_path: Path):
     """Hold an exclusive lock on :func:`lock_path` of ``csv_path`` for the duration of the block.
@@ -71,27 +84,42 @@ def locked(csv_path: Path):
     A second batch on the same CSV would append rows to a file that the
     first one replaces when it compacts it (rows lost), and would remove the
     first one's temporary outputs; it is refused with a ``ValueError``
-    instead.  The lock (``flock``) ends with the process however it ends;
-    the lock file is removed when the block ends.  Where the platform or
-    the file system has no such locks, nothing is locked.
+    instead, in another process or in this one.  The lock is a POSIX record
+    lock (``lockf``): it ends with the process however it ends, and worker
+    processes forked while it is held do not inherit it, so workers left
+    behind by a killed driver do not block the next run.  The lock file is
+    removed when the block ends.  Where the platform or the file system has
+    no such locks, only batches of this process are told apart.
     """
+    path = lock_path(csv_path)
+    key = os.path.abspath(path)
+    with _HELD_GUARD:
+        if key in _HELD:
+            raise _refuse(csv_path, path, f" (process {os.getpid()}, this one)")
+        _HELD.add(key)
+    try:
+        with _file_lock(csv_path, path):
+            yield
+    finally:
+        with _HELD_GUARD:
+            _HELD.discard(key)
+
+
+@contextlib.contextmanager
+def _file_lock(csv_path: Path, path: Path):
     if fcntl is None:
         yield
         return
-    path = lock_path(csv_path)
     while True:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = _holder(fd)
-            os.close(fd)
-            raise ValueError(
-                f"'{csv_path}' is being written by another batch{holder}, which holds '{path.name}'; wait for it "
-                "to end, or give another CSV path"
-            ) from None
-        except OSError:  # a file system without flock: run unlocked
-            os.close(fd)
+            fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            if exc.errno in (errno.EACCES, errno.EAGAIN):
+                holder = _holder(fd)
+                os.close(fd)
+                raise _refuse(csv_path, path, holder) from None
+            os.close(fd)  # a file system without locks: run unlocked
             yield
             return
         try:
