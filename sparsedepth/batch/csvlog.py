@@ -32,8 +32,9 @@ except ImportError:  # Windows: no POSIX locks, only batches of one process are 
 from ..io import atomic_target
 from ..objective.weights import weights_settings
 
-__all__ = ["CSV_COLUMNS", "LINE_END", "HEADER", "settings_path", "lock_path", "locked", "fingerprint", "settings_difference", "csv_line",
-           "append_row", "read_log", "compact", "write_text_atomic", "start_log", "compact_file"]
+__all__ = ["CSV_COLUMNS", "LINE_END", "HEADER", "settings_path", "lock_path", "locked", "fingerprint",
+           "settings_difference", "csv_line", "append_row", "read_log", "compact", "write_text_atomic", "start_log",
+           "compact_file"]
 
 #: Columns of the batch CSV, in order.
 CSV_COLUMNS = (
