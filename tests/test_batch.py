@@ -1,6 +1,9 @@
 """Batch: per-frame pipeline, folder pairing, NYU .mat ranges, CSV rows, failing frames, executors."""
 
 import csv
+import os
+import signal
+import sys
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 
@@ -345,3 +348,48 @@ def test_batch_applies_the_reader_options_to_every_frame(tmp_path, capsys):
         BatchOptions(min_depth=3.0, max_depth=2.0)
     with pytest.raises(TypeError, match="invalid_values"):
         BatchOptions(invalid_values=[2047])
+
+
+_DRIVER = """
+import os, sys
+from sparsedepth.batch.pool import new_pool
+pool = new_pool(1)
+print(pool.submit(os.getpid).result(), flush=True)
+os.kill(os.getpid(), 9)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the parent-death signal is Linux's prctl")
+def test_default_pool_workers_end_with_a_killed_driver():
+    import subprocess
+    import time
+
+    driver = subprocess.run([sys.executable, "-c", _DRIVER], capture_output=True, text=True, timeout=60)
+    assert driver.returncode == -9
+    worker = int(driver.stdout.split()[0])
+
+    def alive(pid):
+        try:
+            with open(f"/proc/{pid}/stat") as stat:
+                return stat.read().split(")")[-1].split()[0] != "Z"  # a zombie has ended
+        except FileNotFoundError:
+            return False
+
+    deadline = time.monotonic() + 20.0
+    while alive(worker) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not alive(worker)
+
+
+def test_end_with_parent_ends_a_process_whose_parent_is_gone():
+    import multiprocessing
+
+    from sparsedepth.batch.pool import end_with_parent
+
+    if not sys.platform.startswith("linux"):
+        assert end_with_parent(os.getppid()) is False
+        return
+    process = multiprocessing.get_context("fork").Process(target=end_with_parent, args=(-1,))  # not its parent
+    process.start()
+    process.join(20.0)
+    assert process.exitcode == -signal.SIGTERM
