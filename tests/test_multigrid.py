@@ -660,3 +660,27 @@ def test_restriction_of_rows_handed_out_band_by_band_equals_the_whole_product(mo
         ours = P.restrict_rows(rows_of, dtype)
         assert ours.dtype == dtype and len(read) > (1 if shape[0] > 4 else 0)
         np.testing.assert_array_equal(ours, P.T @ r.ravel())
+
+
+@pytest.mark.parametrize("shape", [(1, 5), (4, 1), (2, 3), (7, 8), (8, 7)])
+def test_operator_weights_per_class_equal_the_dense_weights(shape):
+    """Class storage (padded once): every class, padding and the prolongation read the weights the dense form has."""
+    from sparsedepth.linalg.multigrid.interpolation import operator_weights
+    from sparsedepth.linalg.multigrid.stencils import StencilSource, grid_stencil
+    from sparsedepth.linalg.multigrid.transfer import ClassProlongation
+
+    rng = np.random.default_rng(3)
+    A = random_system(shape, rng, jump=True)
+    offsets, S = grid_stencil(A, shape)
+    weights = operator_weights(offsets, StencilSource(offsets, shape, array=S), shape)
+    dense = ClassProlongation(weights, shape, np.float64).dense_weights()
+    h, w = shape
+    for py in range(min(h, 2)):
+        for px in range(min(w, 2)):
+            np.testing.assert_array_equal(weights.class_weights(py, px), dense[:, :, py::2, px::2])
+            for ey in (0, 1):
+                for ex in (0, 1):
+                    np.testing.assert_array_equal(weights.cls(ey, ex, py, px), dense[ey, ex, py::2, px::2])
+            for pad in (0, 1, 2):
+                expected = np.pad(dense[:, :, py::2, px::2], ((0, 0), (0, 0), (pad, pad + 1), (pad, pad + 1)))
+                np.testing.assert_array_equal(weights.padded_cls(py, px, pad), expected)

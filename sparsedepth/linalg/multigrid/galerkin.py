@@ -61,7 +61,7 @@ def galerkin_stencil(offsets, source, interp, shape, coarse_offsets, *, as_list=
     radius = max(max(abs(dy), abs(dx)) for dy, dx in offsets)
     pad = (radius + 1) // 2
     slot = {d: i for i, d in enumerate(coarse_offsets)}
-    separable = interp.full is None
+    separable = interp.separable
     if as_list:
         acc = [np.zeros((hc + 1, wc + 1)) for _ in coarse_offsets]
     else:

@@ -317,7 +317,7 @@ class GridMultigrid:
             fine, coarse = levels[li], levels[li + 1]
             if self.interpolation == "operator":
                 interp = operator_weights(fine.offsets, source, fine.shape)
-                fine.P = ClassProlongation(interp.full, self.coarse_dtype)
+                fine.P = ClassProlongation(interp, fine.shape, self.coarse_dtype)
             else:
                 interp = bilinear_weights(fine.shape)
                 if refill_p:
@@ -325,7 +325,7 @@ class GridMultigrid:
             banded = self._banded and coarse.shape[0] * coarse.shape[1] >= _BANDED_COARSE_PIXELS
             # a banded level is stored image by image from a list, each float64 image freed once stored
             S = galerkin_stencil(fine.offsets, source, interp, fine.shape, coarse.offsets, as_list=banded)
-            del source
+            del source, interp  # the fine level's weights are kept by its prolongation (float32 for operator ones)
             symmetric = (SymmetricStencil.from_stencil(coarse.offsets, S, dtype=self.coarse_dtype, copy=False)
                          if banded else None)
             if symmetric is not None:

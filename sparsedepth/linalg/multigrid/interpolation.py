@@ -16,17 +16,37 @@ __all__ = ["InterpolationWeights", "linear_weights_1d", "bilinear_weights", "ope
 class InterpolationWeights:
     """Prolongation weights ``W[ey, ex][y, x] = P[(y, x), (y//2+ey, x//2+ex)]``.
 
-    Stored either separably (``wy``: (2, H), ``wx``: (2, W)) or as full images
-    (``full``: (2, 2, H, W)).
+    Stored either separably (``wy``: (2, H), ``wx``: (2, W)), as full images
+    (``full``: (2, 2, H, W)), or per parity class ``(py, px)`` of the fine
+    pixels (``classes[py, px]``: (2, 2, ny + 2 pad + 1, nx + 2 pad + 1), the
+    class's weights zero-padded by ``pad`` before and ``pad + 1`` after on
+    each axis: the form the Galerkin product reads, so that it needs no
+    padded copy).
     """
 
-    def __init__(self, wy=None, wx=None, full=None):
+    def __init__(self, wy=None, wx=None, full=None, classes=None, pad=0):
         self.wy, self.wx, self.full = wy, wx, full
+        self.classes, self.pad = classes, int(pad)
+
+    @property
+    def separable(self) -> bool:
+        """True when stored as the 1-D factors ``wy``, ``wx``."""
+        return self.full is None and self.classes is None
+
+    def class_weights(self, py, px):
+        """All parent weights on the fine parity class (py, px), shape (2, 2, ny, nx) (a view where stored so)."""
+        if self.classes is not None:
+            padded = self.classes[py, px]
+            ny, nx = (n - 2 * self.pad - 1 for n in padded.shape[2:])
+            return padded[:, :, self.pad:self.pad + ny, self.pad:self.pad + nx]
+        if self.full is not None:
+            return self.full[:, :, py::2, px::2]
+        return self.wy[:, None, py::2, None] * self.wx[None, :, None, px::2]
 
     def cls(self, ey, ex, py, px):
         """Weights of parent (ey, ex) on the fine parity class (py, px)."""
-        if self.full is not None:
-            return self.full[ey, ex, py::2, px::2]
+        if self.full is not None or self.classes is not None:
+            return self.class_weights(py, px)[ey, ex]
         return self.wy[ey, py::2][:, None] * self.wx[ex, px::2][None, :]
 
     def padded_cls(self, ry, rx, pad, separable=False):
@@ -34,10 +54,15 @@ class InterpolationWeights:
 
         ``separable=True`` (bilinear only) returns the two 1-D factors
         ``(wy, wx)`` of shapes ``(2, ny)`` and ``(2, nx)`` instead of their
-        ``(2, 2, ny, nx)`` product.
+        ``(2, 2, ny, nx)`` product.  Weights stored per class with at least
+        this padding are returned as a view.
         """
-        if self.full is not None:
-            sub = self.full[:, :, ry::2, rx::2]
+        if self.classes is not None and pad <= self.pad:
+            trim = self.pad - pad
+            padded = self.classes[ry, rx]
+            return padded[:, :, trim:padded.shape[2] - trim, trim:padded.shape[3] - trim]
+        if self.full is not None or self.classes is not None:
+            sub = self.class_weights(ry, rx)
             return np.pad(sub, ((0, 0), (0, 0), (pad, pad + 1), (pad, pad + 1)))
         wy = np.pad(self.wy[:, ry::2], ((0, 0), (pad, pad + 1)))
         wx = np.pad(self.wx[:, rx::2], ((0, 0), (pad, pad + 1)))
@@ -80,16 +105,21 @@ def _window(arr, oy, ox, ny, nx):
     return out
 
 
-def operator_weights(offsets, source, shape):
+def operator_weights(offsets, source, shape, pad=1):
     """Dendy's black-box interpolation from a radius-1 (up to 9-point) stencil.
 
     Works on the parity classes that need each quantity (the collapsed
     stencils only on the pixels between two coarse points), so the
-    temporaries stay a fraction of ``H W``: besides the ``(2, 2, H, W)``
-    weights, about one ``H W`` image (8 MP: ~70 MB instead of ~1.5 GB).
+    temporaries stay a fraction of ``H W``: besides the weights (4 per
+    pixel), about one ``H W`` image (8 MP: ~70 MB instead of ~1.5 GB).  The
+    weights are stored per parity class, zero-padded by ``pad`` (the
+    padding the Galerkin product of a radius-1 stencil reads), so that
+    they are held once during the set-up.
     """
     h, w = shape
-    full = np.zeros((2, 2, h, w))
+    classes = {(py, px): np.zeros((2, 2, len(range(py, h, 2)) + 2 * pad + 1, len(range(px, w, 2)) + 2 * pad + 1))
+               for py in (0, 1) for px in (0, 1) if py < h and px < w}
+    weights = InterpolationWeights(classes=classes, pad=pad)
 
     def collapsed(part, axis, value):
         """Sum of the stencil images whose offset has ``offset[axis] == value``, on one parity class."""
@@ -110,11 +140,13 @@ def operator_weights(offsets, source, shape):
     wyN = _safe_ratio(-collapsed(part, 0, -1), c_mid, 0.5)
     wyS = _safe_ratio(-collapsed(part, 0, 1), c_mid, 0.5)
     del c_mid, part
-    full[0, 0, 0::2, 0::2] = 1.0
-    full[0, 0, 0::2, 1::2] = wxW
-    full[0, 1, 0::2, 1::2] = wxE
-    full[0, 0, 1::2, 0::2] = wyN
-    full[1, 0, 1::2, 0::2] = wyS
+    weights.class_weights(0, 0)[0, 0] = 1.0
+    if w > 1:
+        weights.class_weights(0, 1)[0, 0] = wxW
+        weights.class_weights(0, 1)[0, 1] = wxE
+    if h > 1:
+        weights.class_weights(1, 0)[0, 0] = wyN
+        weights.class_weights(1, 0)[1, 0] = wyS
     # cell centres (odd y, odd x): harmonic combination of the neighbours' rows
     ny, nx = h // 2, w // 2
     if ny and nx:
@@ -126,23 +158,24 @@ def operator_weights(offsets, source, shape):
             return c.get((dy, dx), zero)
 
         # neighbour N (y-1, x) is an (even, odd) pixel (row i of wxW); S (y+1, x) is row i+1;
-        # neighbour W (y, x-1) is an (odd, even) pixel (column j of wyN); E (y, x+1) is column j+1
-        xW_N, xE_N = _window(wxW, 0, 0, ny, nx), _window(wxE, 0, 0, ny, nx)
-        xW_S, xE_S = _window(wxW, 1, 0, ny, nx), _window(wxE, 1, 0, ny, nx)
-        yN_W, yS_W = _window(wyN, 0, 0, ny, nx), _window(wyS, 0, 0, ny, nx)
-        yN_E, yS_E = _window(wyN, 0, 1, ny, nx), _window(wyS, 0, 1, ny, nx)
+        # neighbour W (y, x-1) is an (odd, even) pixel (column j of wyN); E (y, x+1) is column j+1.
+        # Parent (ey, ex): its vertical neighbour's weight (row ey of wxW or wxE, by ex) and its
+        # horizontal neighbour's (column ex of wyN or wyS, by ey); one parent at a time, so that
+        # only two shifted windows exist at once
         centre = cc(0, 0)
-        parts = {
-            (0, 0): cc(-1, -1) + cc(-1, 0) * xW_N + cc(0, -1) * yN_W,
-            (0, 1): cc(-1, 1) + cc(-1, 0) * xE_N + cc(0, 1) * yN_E,
-            (1, 0): cc(1, -1) + cc(1, 0) * xW_S + cc(0, -1) * yS_W,
-            (1, 1): cc(1, 1) + cc(1, 0) * xE_S + cc(0, 1) * yS_E,
-        }
-        for (ey, ex), e in parts.items():
-            full[ey, ex, 1::2, 1::2] = _safe_ratio(-e, centre, 0.25)
-    # parents outside the coarse grid (even H or W) carry no weight
+        for ey in (0, 1):
+            for ex in (0, 1):
+                vertical = _window(wxE if ex else wxW, ey, 0, ny, nx)
+                horizontal = _window(wyS if ey else wyN, 0, ex, ny, nx)
+                e = cc(2 * ey - 1, 2 * ex - 1) + cc(2 * ey - 1, 0) * vertical + cc(0, 2 * ex - 1) * horizontal
+                del vertical, horizontal
+                weights.class_weights(1, 1)[ey, ex] = _safe_ratio(-e, centre, 0.25)
+                del e
+    # parents outside the coarse grid (even H or W) carry no weight: the last row (column) is of class 1
     if h % 2 == 0:
-        full[1, :, h - 1, :] = 0.0
+        for px in range(min(w, 2)):
+            weights.class_weights(1, px)[1, :, -1, :] = 0.0
     if w % 2 == 0:
-        full[:, 1, :, w - 1] = 0.0
-    return InterpolationWeights(full=full)
+        for py in range(min(h, 2)):
+            weights.class_weights(py, 1)[:, 1, :, -1] = 0.0
+    return weights

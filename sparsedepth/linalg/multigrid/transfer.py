@@ -171,15 +171,20 @@ class ClassProlongation:
     class instead of sparse products.
     """
 
-    def __init__(self, full, dtype):
-        h, w = full.shape[2:]
+    def __init__(self, weights, shape, dtype):
+        h, w = shape
         self.fine_shape, self.coarse_shape = (h, w), ((h + 1) // 2, (w + 1) // 2)
         self.shape = (h * w, self.coarse_shape[0] * self.coarse_shape[1])
         self.dtype = np.dtype(dtype)
-        # the weights full[ey, ex, y, x] (shape (2, 2, H, W)) of operator_weights, class by class
-        self.w01 = np.ascontiguousarray(full[0, :, 0::2, 1::2], dtype=self.dtype)
-        self.w10 = np.ascontiguousarray(full[:, 0, 1::2, 0::2], dtype=self.dtype)
-        self.w11 = np.ascontiguousarray(full[:, :, 1::2, 1::2], dtype=self.dtype)
+        # the weights W[ey, ex][y, x] of operator_weights (an InterpolationWeights), class by class
+        def part(py, px):  # an empty class (a grid of one row or column) as an empty array of its shape
+            if py < h and px < w:
+                return weights.class_weights(py, px)
+            return np.zeros((2, 2, len(range(py, h, 2)), len(range(px, w, 2))))
+
+        self.w01 = np.ascontiguousarray(part(0, 1)[0, :], dtype=self.dtype)
+        self.w10 = np.ascontiguousarray(part(1, 0)[:, 0], dtype=self.dtype)
+        self.w11 = np.ascontiguousarray(part(1, 1), dtype=self.dtype)
 
     def _padded(self, x):
         hc, wc = self.coarse_shape
