@@ -286,3 +286,45 @@ def test_certificate_of_a_general_sparse_operator_with_gradient_steps():
     for z in (np.ones(n), 1.0 + rng.random(n)):
         gap = cert.gap(z)
         assert np.isfinite(gap) and gap >= obj.value(z) - F_ref - 1e-12 * F_ref
+
+
+@pytest.mark.parametrize("fit", [dict(fit_steps=0, fit_max_iter=30, fit_correction=True),
+                                 dict(fit_steps=20, fit_max_iter=0)], ids=["corrected", "gradient-steps"])
+def test_low_memory_certificate_and_a_p_overwritten_give_the_same_gap(fit):
+    """low_memory (term-by-term gradient, a hierarchy per call, A not cached) and overwrite_p change no bound."""
+    image, sparse, mask, _ = make_problem((12, 13))
+    obj, coarse, _ = build_objective(image, sparse, mask, weights=L1)
+    out, _ = solve(obj, coarse.ravel(), solver="admm")
+    c = StackedL1(obj).weights
+    rng = np.random.default_rng(5)
+    p = c * rng.uniform(-1.0, 1.0, c.size)
+    z = np.maximum(out.z + 1e-3 * rng.standard_normal(obj.size), 0.0)
+    obj.clear_cache()
+    kept = Certificate(obj, **fit)
+    reference = [kept.gap(point, p=p, eps=1e-4) for point in (out.z, z)]
+    assert kept._precondition is not None  # kept for the next call
+    obj.clear_cache()
+    lean = Certificate(obj, low_memory=True, **fit)
+    for point, expected in zip((out.z, z), reference):
+        work = p.copy()
+        gap = lean.gap(point, p=work, eps=1e-4, overwrite_p=True)
+        assert gap == pytest.approx(expected, rel=1e-9, abs=1e-15)
+        assert lean._precondition is None and obj._normal is None  # nothing kept between calls
+    # overwrite_p alone: bit for bit the gap of an untouched p
+    work = p.copy()
+    assert kept.gap(z, p=work, eps=1e-4, overwrite_p=True) == reference[1]
+    assert not np.array_equal(work, p)  # its memory held the dual point
+
+
+def test_objective_constant_and_uncached_normal_equations():
+    image, sparse, mask, _ = make_problem((9, 10))
+    obj, _, _ = build_objective(image, sparse, mask, weights=L1)
+    constant = obj.constant()
+    A, b, c = obj.normal_equations(form="stencil", cache=False)
+    assert obj._normal is None
+    assert c == constant
+    z = np.random.default_rng(2).random(obj.size)
+    quadratic = sum(t.value(z) for t in obj.quadratic_terms)
+    assert float(z @ (A @ z) - 2 * b @ z + c) == pytest.approx(quadratic, rel=1e-12)
+    cached = obj.normal_equations(form="stencil")
+    assert obj._normal is not None and cached[2] == constant == obj.constant()

@@ -435,3 +435,32 @@ def test_admm_step_equals_the_update_written_out(monkeypatch, chunk, weights):
     assert set(l1.admm_step(out2, u, lam2, relax=1.9, scale=0.4)) == {"Kz_sq", "value"}
     np.testing.assert_array_equal(out2, out)
     np.testing.assert_array_equal(lam2, lam_out)
+
+
+@pytest.mark.parametrize("operator", ["gradient", "hessian"])
+@pytest.mark.parametrize("shape", [(1, 6), (5, 1), (6, 7)])
+def test_row_weight_passes_and_masked_products_equal_the_matrix_forms(shape, operator, monkeypatch):
+    """weight_chunks, clip, squared_adjoint and masked_normal_product against the CSR matrix of K and c."""
+    from sparsedepth.objective import l1 as _l1
+
+    monkeypatch.setattr(_l1, "CHUNK_ROWS", 5)  # several chunks
+    rng = np.random.default_rng(8)
+    K = sp.csr_matrix(gradient(shape) if operator == "gradient" else hessian_operator(shape))
+    l1 = StackedL1(_objective_with(shape, K, rng))
+    assert l1.grid_gradient == (operator == "gradient")
+    c = l1.weights
+    n = shape[0] * shape[1]
+    pieces = list(l1.weight_chunks())
+    assert len(pieces) > 1
+    np.testing.assert_array_equal(np.concatenate([w for _, w in pieces]), c)
+    assert [rows.start for rows, _ in pieces] == [0] + [rows.stop for rows, _ in pieces[:-1]]
+    v = 3.0 * rng.standard_normal(K.shape[0]) * np.maximum(c, 1e-3)
+    np.testing.assert_array_equal(l1.clip(v.copy()), np.clip(v, -c, c))
+    mask = rng.random(K.shape[0]) < 0.5
+    dense = K.toarray()
+    np.testing.assert_allclose(l1.squared_adjoint(mask), (dense**2).T @ mask, rtol=1e-14)
+    z = rng.standard_normal(n)
+    expected = dense.T @ (mask * (dense @ z))
+    np.testing.assert_allclose(l1.masked_normal_product(z, mask), expected, rtol=1e-12, atol=1e-12)
+    # bit for bit the product the certificate's fit used before: K^T (mask * K z)
+    np.testing.assert_array_equal(l1.masked_normal_product(z, mask), l1.adjoint(mask * l1.apply(z)))

@@ -152,6 +152,16 @@ class StackedL1:
                     yield slice(start + block + lo, start + block + hi), w, (None if r is None else r[lo:hi])
             start += m
 
+    def weight_chunks(self, chunk=None):
+        """``(rows, c[rows])`` over all rows, in chunks of at most ``chunk`` rows (default :data:`CHUNK_ROWS`).
+
+        For passes over the rows that need ``c`` without forming it: each
+        chunk's weights are a new array of the chunk's length, with the same
+        values as :attr:`weights`.
+        """
+        for rows, w, r in self._weight_chunks(chunk):
+            yield rows, (np.full(rows.stop - rows.start, w) if r is None else w * r)
+
     def max_weight(self) -> float:
         """``max_k c_k`` (0 for an empty ``K``)."""
         return max((w * (1.0 if r is None else float(np.max(r, initial=0.0))) for w, r, m in self._row_weights if m),
@@ -284,6 +294,63 @@ class StackedL1:
         out[:-1] -= vy
         out[1:] += vy
         return out.reshape(-1)
+
+    def masked_normal_product(self, v, mask):
+        """``Kᵀ (mask ⊙ K v)`` for ``v`` of shape (N,) and ``mask`` (bool) of shape (m,); returns shape (N,).
+
+        The product with ``K_Tᵀ K_T`` for the rows ``T`` where ``mask`` is
+        True.  For the grid gradient one axis at a time by slicing (no
+        temporary as long as ``K v``), bit for bit equal to
+        ``adjoint(mask * apply(v))``.
+        """
+        if not self.grid_gradient:
+            t = self.apply(v)
+            t *= mask
+            return self.adjoint(t)
+        H, W = self.shape
+        n = H * W
+        v2 = np.asarray(v, dtype=np.float64).reshape(H, W)
+        out = np.zeros((H, W))
+        d = np.subtract(v2[:, 1:], v2[:, :-1])
+        d *= mask[:n].reshape(H, W)[:, :-1]
+        out[:, :-1] -= d
+        out[:, 1:] += d
+        d = np.subtract(v2[1:], v2[:-1])
+        d *= mask[n:].reshape(H, W)[:-1]
+        out[:-1] -= d
+        out[1:] += d
+        return out.reshape(-1)
+
+    def squared_adjoint(self, v):
+        """``(K ∘ K)ᵀ v`` (``K ∘ K`` the entrywise square of ``K``) for ``v`` of shape (m,); returns shape (N,).
+
+        For a 0/1 ``v`` marking rows of pixel differences ``±1`` this is, per
+        pixel, the number of marked rows it is in (the diagonal of
+        ``Kᵀ diag(v) K``).  For the grid gradient by slicing, as :meth:`adjoint`.
+        """
+        if not self.grid_gradient:
+            K = self.matrix
+            return np.asarray(K.multiply(K).T @ np.asarray(v, dtype=np.float64)).ravel()
+        H, W = self.shape
+        n = H * W
+        v = np.asarray(v)  # a boolean v is read as 0/1 without a float copy
+        vx = v[:n].reshape(H, W)[:, :-1]  # the rows of the last column / row are zero
+        vy = v[n:].reshape(H, W)[:-1]
+        out = np.zeros((H, W))
+        out[:, :-1] += vx
+        out[:, 1:] += vx
+        out[:-1] += vy
+        out[1:] += vy
+        return out.reshape(-1)
+
+    def clip(self, v):
+        """``v`` clipped to ``[−c, c]`` in place (chunk by chunk, without forming ``c``); returns ``v``."""
+        for rows, c in self.weight_chunks():
+            part = v[rows]
+            np.minimum(part, c, out=part)
+            np.negative(c, out=c)
+            np.maximum(part, c, out=part)
+        return v
 
     def gram(self, offsets=None):
         """``KᵀK`` as a CSR matrix (the 5-point Neumann Laplacian for the grid gradient).

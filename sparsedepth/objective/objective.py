@@ -165,8 +165,8 @@ class Objective:
             grad += t.gradient(z)
         return grad
 
-    def normal_equations(self, *, form="csr"):
-        """``(A, b, c)`` with quadratic part ``= zᵀAz − 2bᵀz + c`` (cached).
+    def normal_equations(self, *, form="csr", cache=True):
+        """``(A, b, c)`` with quadratic part ``= zᵀAz − 2bᵀz + c`` (cached unless ``cache=False``).
 
         For the depth objective ``A = αM + β(∂xᵀ∂x + ∂yᵀ∂y) + δI`` (+ the
         optional terms) and ``b = αM z_obs + δ z_c``.
@@ -183,6 +183,10 @@ class Objective:
             :func:`~sparsedepth.linalg.preconditioners.make_preconditioner`);
             the CSR array instead when it is already cached or when a term's
             operator is a general sparse matrix.
+        cache : bool, default True
+            False: a triple assembled here is not kept (for a caller that
+            needs ``A`` once and holds it no longer than its own use); a
+            cached one is still returned.
 
         Notes
         -----
@@ -223,12 +227,22 @@ class Objective:
             A.sum_duplicates()
             A.sort_indices()
         b = np.zeros(n)
-        c = 0.0
         for t in self.quadratic_terms:
             b += t.normal_rhs(n)
+        normal = (A, b, self.constant())
+        if cache:
+            self._normal = normal
+        return normal
+
+    def constant(self) -> float:
+        """The constant ``c`` of :meth:`normal_equations` (the quadratic part at ``z = 0``), without assembling ``A``.
+        """
+        if self._normal is not None:
+            return self._normal[2]
+        c = 0.0
+        for t in self.quadratic_terms:
             c += t.constant()
-        self._normal = (A, b, c)
-        return self._normal
+        return c
 
     def clear_cache(self):
         """Forget the cached :meth:`normal_equations` (it is re-assembled on the next call).

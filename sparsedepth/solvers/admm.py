@@ -201,8 +201,11 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     too, and the polish merges ``A`` itself, which is faster; for the grid
     gradient ``K`` is never stored, the weights ``c`` are read chunk by chunk
     from the L1 term's row weights, and the ADMM vectors are ``u``, ``λ`` and
-    one work vector of ``2N`` entries each (the peak of a whole 8-megapixel
-    run is in ``docs/performance.md``, from ``bench/perf.py``).
+    one work vector of ``2N`` entries each.  On these frames the certificate
+    keeps nothing between checks (``low_memory``: its hierarchy of ``A`` and
+    ``A`` itself exist only during its solve) and forms its dual point in the
+    work vector (the peak of a whole 8-megapixel run is in
+    ``docs/performance.md``, from ``bench/perf.py``).
 
     Options: :class:`~sparsedepth.solvers.options.AdmmOptions`.
 
@@ -333,7 +336,7 @@ class _AdmmRun:
         self.polish = options.polish and l1.exact_pairs
         self.polish_args = dict(rounds=options.polish_rounds, rtol=options.polish_rtol,
                                 preconditioner=options.polish_preconditioner)
-        self.certificate = None  # built at the first check: one multigrid hierarchy of A for all checks
+        self.certificate = None  # built at the first check (see _new_certificate)
         self.certified = None  # (z, gap) of the last certificate
         self.refused = 0  # polish agreements the certificate refused
         self.F_floor = objective_floor(objective)
@@ -366,7 +369,8 @@ class _AdmmRun:
         self.S = combine(2.0, A0, rho, KtK)
         adapt = self.options.adapt_iters > 0
         self.A0 = self.KtK = None
-        if not adapt and objective.size >= active_set.KEEP_A_PIXELS:
+        self.lean = not adapt and objective.size >= active_set.KEEP_A_PIXELS
+        if self.lean:
             # S carries all the solver needs of A0: zᵀA0z = (zᵀSz − ρ‖Kz‖²)/2, and the polish reduces S
             # (penalty=rho); without rho adaptation neither A0 nor KᵀK is needed again
             del KtK, A0
@@ -418,7 +422,12 @@ class _AdmmRun:
             recorder(k, np.maximum(z, 0.0), inner=self.inner_total)
 
     def _new_certificate(self):
-        """The duality-gap certificate of this run (one multigrid hierarchy of ``A`` for all its checks).
+        """The duality-gap certificate of this run.
+
+        On frames where the run keeps ``A`` (below
+        :data:`~sparsedepth.solvers.active_set.KEEP_A_PIXELS` pixels) one
+        multigrid hierarchy of ``A`` serves all its checks; on larger ones the
+        certificate keeps nothing between checks (``low_memory``; see :meth:`_gap`).
 
         The dual point on the tied rows is ``ρλ`` clipped to ``[−c, c]``.  For
         a polished point the tied rows are those with ``|(Kz)_k| <=``
@@ -429,8 +438,19 @@ class _AdmmRun:
         """
         if self.polish:
             return Certificate(self.objective, nonnegative=True, fit_steps=0, fit_max_iter=DUAL_FIT_STEPS,
-                               fit_correction=True)
-        return Certificate(self.objective, nonnegative=True, fit_max_iter=0)
+                               fit_correction=True, low_memory=self.lean)
+        return Certificate(self.objective, nonnegative=True, fit_max_iter=0, low_memory=self.lean)
+
+    def _gap(self, z, **kwargs):
+        """The certificate's duality gap of ``z`` with the dual start ``ρλ`` (keyword arguments: ``eps``, ``tied``).
+
+        ``ρλ`` is written into the work vector, whose contents the next
+        iteration does not read, and the certificate forms its dual point there
+        (``overwrite_p``).
+        """
+        if self.certificate is None:
+            self.certificate = self._new_certificate()
+        return self.certificate.gap(z, p=np.multiply(self.lam, self.rho, out=self.spare), overwrite_p=True, **kwargs)
 
     def stop_on_residuals(self, tol):
         """Plain ADMM's stop: converged when the duality gap (tied rows: ``u = 0``) passes ``gap_tol`` too."""
@@ -440,7 +460,7 @@ class _AdmmRun:
                         f"(rho = {self.rho:.3g})")
         z_stop = np.maximum(self.z, 0.0)
         self.certificate = self._new_certificate()
-        gap = self.certificate.gap(z_stop, p=self.rho * self.lam, tied=self.u == 0)
+        gap = self._gap(z_stop, tied=self.u == 0)
         self.certified = (z_stop, gap)
         if not (np.isnan(gap) or gap <= gap_threshold(objective, objective.value(z_stop), gap_tol)):
             self.converged = False
@@ -489,9 +509,7 @@ class _AdmmRun:
         """The polishes agree: the duality gap of the best polished point decides (True: converged)."""
         objective, options, best = self.objective, self.options, self.best
         gap_tol = options.gap_tol
-        if self.certificate is None:
-            self.certificate = self._new_certificate()
-        gap = self.certificate.gap(best[1], p=self.rho * self.lam, eps=TIE_BAND)
+        gap = self._gap(best[1], eps=TIE_BAND)
         self.certified = (best[1], gap)
         if np.isnan(gap) or gap <= gap_threshold(objective, best[0], gap_tol):
             self.converged = True
@@ -547,9 +565,7 @@ class _AdmmRun:
         elif not self.certify:
             gap = float("nan")
         else:
-            if self.certificate is None:
-                self.certificate = self._new_certificate()
-            gap = self.certificate.gap(z, p=self.rho * self.lam, eps=TIE_BAND if self.polish else 0.0)
+            gap = self._gap(z, eps=TIE_BAND if self.polish else 0.0)
         if self.warm_note:
             self.message += f"; {self.warm_note}"
         return output(z, k, self.converged, self.message, recorder, gap=gap)

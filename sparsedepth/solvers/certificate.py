@@ -17,6 +17,7 @@ import scipy.sparse.linalg  # noqa: F401  (sp.linalg)
 
 from ..objective.l1 import StackedL1
 from ..linalg.krylov import dot, pcg
+from ..linalg.multigrid import GridMultigrid
 from ..linalg.preconditioners import make_preconditioner
 from ..objective.objective import QuadraticTerm
 
@@ -40,7 +41,7 @@ def curvature_lower_bound(objective) -> float:
 
 
 class Certificate:
-    r"""Duality-gap bounds for one objective, reusing its multigrid hierarchy between calls.
+    r"""Duality-gap bounds for one objective, reusing its multigrid hierarchy between calls (unless ``low_memory``).
 
     Parameters
     ----------
@@ -61,6 +62,16 @@ class Certificate:
         False: the least-squares fit replaces the start's tied rows; True: it
         corrects them (for a start that is close already, such as ADMM's
         multiplier).
+    low_memory : bool
+        False: the preconditioner of ``A`` (a multigrid hierarchy) is built at
+        the first call and reused by the next ones.  True, for the memory of
+        large frames where a caller such as ADMM checks rarely: ``2(Az − b)``
+        is summed term by term (:meth:`Objective.quadratic_gradient`), so
+        that ``A`` is assembled (:meth:`Objective.normal_equations`) only
+        after the dual point, for the solve; the hierarchy is built in each
+        call with a float64 fine level swept from ``A``'s own stencil (no
+        float32 copy of it) and dropped at the end of the call, like ``A``
+        (not left in the objective's cache).
 
     Attributes
     ----------
@@ -72,8 +83,9 @@ class Certificate:
     """
 
     def __init__(self, objective, *, nonnegative=True, rtol=1e-10, fit_steps=20, fit_max_iter=100,
-                 fit_correction=False):
+                 fit_correction=False, low_memory=False):
         self.objective = objective
+        self.low_memory = bool(low_memory)
         self.fit_correction = bool(fit_correction)
         self.nonnegative = bool(nonnegative)
         self.rtol = float(rtol)
@@ -86,12 +98,27 @@ class Certificate:
         self._K_norm_sq = None
 
     def _preconditioner(self, A):
-        if self._precondition is None:
-            try:
-                self._precondition = make_preconditioner(A, "grid", shape=self.objective.shape)
-            except (ValueError, np.linalg.LinAlgError, RuntimeError):
-                self._precondition = make_preconditioner(A, "jacobi")
+        """The preconditioner of ``A``: kept for the next call, or (``low_memory``) a new one each time."""
+        if self._precondition is not None:
+            return self._precondition
+        try:
+            if self.low_memory:
+                hierarchy = GridMultigrid(A, self.objective.shape, interpolation="auto", fine_precision="double")
+                return hierarchy.aspreconditioner()
+            self._precondition = make_preconditioner(A, "grid", shape=self.objective.shape)
+        except (ValueError, np.linalg.LinAlgError, RuntimeError):
+            self._precondition = make_preconditioner(A, "jacobi")
         return self._precondition
+
+    def _quadratic_gradient(self, z):
+        """``2(Az − b)``: with ``A`` and ``b`` (cached by the objective), or (``low_memory``) term by term."""
+        if self.low_memory:
+            return self.objective.quadratic_gradient(z)
+        A, b, _ = self.objective.normal_equations(form="stencil")  # products and a preconditioned solve: either form
+        g = A @ z
+        g -= b
+        g *= 2.0
+        return g
 
     def _k_norm_sq(self):
         """An upper bound on ``‖K‖₂²``: max absolute row sum times max absolute column sum."""
@@ -118,38 +145,80 @@ class Certificate:
         ``fit_max_iter`` CG steps, 0 skips it), then improved by
         ``fit_steps`` accelerated projected-gradient (FISTA) steps on ``‖g +
         Kᵀp‖²`` over the box.
+
+        Returns
+        -------
+        p, t, c : ndarray, shape (m,)
+            The dual point, ``t = K z`` and the row weights ``c``.
+        """
+        return self._dual(z, g, p=p, eps=eps, tied=tied), self.l1.apply(z), self.l1.weights
+
+    def _dual(self, z, g, *, p=None, eps=0.0, tied=None, overwrite_p=False):
+        """The dual point of :meth:`dual_point` alone; of the edge vectors only it and the tied rows are kept.
+
+        The start is formed chunk by chunk (:meth:`StackedL1.weight_chunks`),
+        so that neither ``c`` nor a temporary as long as ``K z`` is formed,
+        and ``K z`` is dropped before the fits.  With ``overwrite_p`` the
+        start is written into ``p`` when ``p`` is a float64 array of its own
+        (each chunk of ``p`` is read before it is overwritten).
         """
         l1 = self.l1
         t = l1.apply(z)
-        c = l1.weights
         tie = max(float(eps), 1e-12 * (1.0 + float(np.max(np.abs(z), initial=0.0))))
-        free = np.abs(t) <= tie
-        if tied is not None:
-            free |= np.asarray(tied, dtype=bool)
-        q = c * t / np.maximum(np.abs(t), eps if eps > 0 else np.finfo(float).tiny)
-        np.clip(q, -c, c, out=q)
+        floor = eps if eps > 0 else np.finfo(float).tiny
+        q = None
         if p is not None:
-            q[free] = np.clip(np.asarray(p, dtype=float)[free], -c[free], c[free])
+            given = p
+            p = np.asarray(p, dtype=float)
+            if overwrite_p and p is given and p.shape == t.shape and p.flags.c_contiguous and p.flags.writeable:
+                q = p
+        if q is None:
+            q = np.empty_like(t)
+        if tied is not None:
+            tied = np.asarray(tied, dtype=bool)
+        free = np.empty(t.shape, dtype=bool)
+        for rows, c in l1.weight_chunks():
+            t_k, q_k, free_k = t[rows], q[rows], free[rows]
+            a = np.abs(t_k)
+            np.less_equal(a, tie, out=free_k)
+            if tied is not None:
+                free_k |= tied[rows]
+            start = None if p is None else np.clip(p[rows], -c, c)  # read before q_k (maybe p's rows) is written
+            np.multiply(c, t_k, out=q_k)
+            q_k /= np.maximum(a, floor, out=a)
+            np.clip(q_k, -c, c, out=q_k)
+            if start is not None:
+                np.copyto(q_k, start, where=free_k)
+        del t, p, tied
         if self.fit_max_iter > 0 and free.any():
             q = self._least_squares_fit(q, free, g)
         if self.fit_steps > 0 and free.any():
-            step = 1.0 / self._k_norm_sq()
-            lo, hi = -c[free], c[free]
-            y = q.copy()
-            prev = q[free].copy()
-            s = 1.0
-            for _ in range(self.fit_steps):
-                grad = l1.apply(g + l1.adjoint(y))
-                new = np.clip(y[free] - step * grad[free], lo, hi)
-                s_new = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * s * s))
-                y[free] = new + ((s - 1.0) / s_new) * (new - prev)
-                prev, s = new, s_new
-            cand = q.copy()
-            cand[free] = prev
-            # keep the fit only if it lowered the residual it minimises
-            if _norm_sq(g + l1.adjoint(cand)) <= _norm_sq(g + l1.adjoint(q)):
-                q = cand
-        return q, t, c
+            q = self._projected_gradient_fit(q, free, g)
+        return q
+
+    def _projected_gradient_fit(self, q, free, g):
+        """``q`` improved on its tied rows by ``fit_steps`` FISTA steps on ``‖g + Kᵀq‖²`` over the box, if lower."""
+        l1 = self.l1
+        step = 1.0 / self._k_norm_sq()
+        c = l1.weights
+        lo, hi = -c[free], c[free]
+        del c
+        y = q.copy()
+        prev = q[free].copy()
+        s = 1.0
+        for _ in range(self.fit_steps):
+            grad = l1.apply(g + l1.adjoint(y))
+            new = np.clip(y[free] - step * grad[free], lo, hi)
+            s_new = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * s * s))
+            y[free] = new + ((s - 1.0) / s_new) * (new - prev)
+            prev, s = new, s_new
+        del y, grad, new, lo, hi
+        cand = q.copy()
+        cand[free] = prev
+        # keep the fit only if it lowered the residual it minimises
+        if _norm_sq(g + l1.adjoint(cand)) <= _norm_sq(g + l1.adjoint(q)):
+            return cand
+        return q
 
     def _least_squares_fit(self, q, free, g):
         r"""``q`` with its tied rows ``T`` replaced by the clipped least-squares fit of ``min ‖g + Kᵀq‖²``.
@@ -160,62 +229,84 @@ class Certificate:
         preconditioner, at most ``fit_max_iter`` steps); ``q⁰`` is ``q`` with
         ``q⁰_T = 0``, or ``q`` itself with ``fit_correction`` (the fit then
         corrects the start on the tied rows).  The fit is kept only if it
-        lowers ``‖g + Kᵀq‖``.
+        lowers ``‖g + Kᵀq‖``.  Memory: besides ``q`` and the tied rows'
+        mask, pixel vectors during the CG steps
+        (:meth:`StackedL1.masked_normal_product`), then the candidate.
         """
         l1 = self.l1
-        c_free = l1.weights[free]
-        base = q.copy()
+        h = l1.adjoint(q)
+        h += g  # g + Kᵀq
+        start_sq = _norm_sq(h)
         if not self.fit_correction:
-            base[free] = 0.0
-        h = g + l1.adjoint(base)
+            h = l1.adjoint(np.where(free, 0.0, q))
+            h += g
         labels, count = l1.tied_components(free)
-        sizes = np.bincount(labels, minlength=count)
-        rhs = -(h - (np.bincount(labels, weights=h, minlength=count) / sizes)[labels])
-        mask = free.astype(np.float64)
-        if l1.grid_gradient:
-            first, second = l1.pairs_where(free)
-            degree = np.bincount(first, minlength=h.size) + np.bincount(second, minlength=h.size)
-        else:
-            K = sp.csr_matrix(l1.matrix)
-            degree = np.asarray(K.multiply(K).T @ mask).ravel()
-        inv = np.where(degree > 0, 1.0 / np.maximum(degree, np.finfo(float).tiny), 1.0)
-        n = h.size
-        L = sp.linalg.LinearOperator((n, n), matvec=lambda v: l1.adjoint(mask * l1.apply(np.ravel(v))),
+        means = np.bincount(labels, weights=h, minlength=count)
+        means /= np.bincount(labels, minlength=count)
+        rhs = h - means[labels]
+        np.negative(rhs, out=rhs)
+        del h, labels, means
+        degree = l1.squared_adjoint(free)  # rows of K_T per pixel: the diagonal of K_TᵀK_T
+        inv = np.divide(1.0, degree, out=np.ones_like(degree), where=degree > 0)
+        del degree
+        n = rhs.size
+        L = sp.linalg.LinearOperator((n, n), matvec=lambda v: l1.masked_normal_product(np.ravel(v), free),
                                      dtype=np.float64)
         w, _, _, _ = pcg(L, rhs, M=lambda v: inv * v, rtol=1e-10, maxiter=self.fit_max_iter)
-        cand = q.copy()
-        cand[free] = np.clip(base[free] + l1.apply(w)[free], -c_free, c_free)
-        if _norm_sq(g + l1.adjoint(cand)) <= _norm_sq(g + l1.adjoint(q)):
+        del rhs, inv, L
+        cand = l1.apply(w)
+        del w
+        if self.fit_correction:
+            cand += q
+        l1.clip(cand)
+        np.copyto(cand, q, where=~free)
+        h = l1.adjoint(cand)
+        h += g
+        if _norm_sq(h) <= start_sq:
             return cand
         return q
 
-    def gap(self, z, *, p=None, eps=0.0, tied=None):
-        """:func:`duality_gap` of ``z`` (solver units); NaN when the solve with ``A`` fails."""
-        objective = self.objective
-        A, b, _ = objective.normal_equations(form="stencil")  # products and a preconditioned solve: either form
+    def gap(self, z, *, p=None, eps=0.0, tied=None, overwrite_p=False):
+        """:func:`duality_gap` of ``z`` (solver units); NaN when the solve with ``A`` fails.
+
+        ``p``, ``eps`` and ``tied``: see :meth:`dual_point`.  With
+        ``overwrite_p`` the dual point is formed in ``p``'s memory (a float64
+        array), whose contents are then undefined: for a caller whose ``p``
+        is a work vector.  The dual point is formed first and reduced to
+        ``r`` before the preconditioner of ``A`` is built or used, so that
+        the edge vectors and the multigrid hierarchy are not held together.
+        """
         z = np.asarray(z, dtype=np.float64).ravel()
-        if self.nonnegative:
+        if self.nonnegative and np.any(z < 0.0):
             z = np.maximum(z, 0.0)
-        g = A @ z
-        g -= b
-        g *= 2.0
+        g = self._quadratic_gradient(z)
         first = 0.0
         r = g
         if self.l1 is not None:
-            q, t, c = self.dual_point(z, g, p=p, eps=eps, tied=tied)
-            first = float(np.sum(np.maximum(c * np.abs(t) - q * t, 0.0)))
-            r = g + self.l1.adjoint(q)
+            q = self._dual(z, g, p=p, eps=eps, tied=tied, overwrite_p=overwrite_p)
+            del p, tied
+            first = self._complementarity(z, q)
+            r = self.l1.adjoint(q)
+            del q
+            r += g
+        del g
         if self.nonnegative:
             mu = np.where(z <= 0.0, np.maximum(r, 0.0), 0.0)
-            r = r - mu
+            r -= mu
             first += max(dot(mu, z), 0.0)  # 0 up to rounding: mu is nonzero where z = 0 only
+            del mu
+        del z
         if not np.all(np.isfinite(r)):
             return float("nan")
         if not np.any(r):
             return first
-        y, _, ok, _ = pcg(A, r, M=self._preconditioner(A), rtol=self.rtol, maxiter=2000)
+        A = self.objective.normal_equations(form="stencil", cache=not self.low_memory)[0]
+        precondition = self._preconditioner(A)
+        y, _, ok, _ = pcg(A, r, M=precondition, rtol=self.rtol, maxiter=2000)
+        del precondition
         e = r - A @ y
-        quad = dot(y, r + e)  # = 2yᵀr − yᵀAy
+        r += e  # r + e
+        quad = dot(y, r)  # = 2yᵀr − yᵀAy
         if self.proven:
             quad += dot(e, e) / self.curvature
         elif not ok:
@@ -223,6 +314,17 @@ class Certificate:
         if not np.isfinite(quad):
             return float("nan")
         return first + 0.25 * max(quad, 0.0)
+
+    def _complementarity(self, z, q):
+        """``Σ_k max(c_k |t_k| − q_k t_k, 0)`` with ``t = K z``, chunk by chunk."""
+        t = self.l1.apply(z)
+        total = 0.0
+        for rows, c in self.l1.weight_chunks():
+            t_k = t[rows]
+            c *= np.abs(t_k)
+            c -= q[rows] * t_k
+            total += float(np.sum(np.maximum(c, 0.0, out=c)))
+        return total
 
 
 def _norm_sq(v):

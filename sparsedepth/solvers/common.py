@@ -140,13 +140,13 @@ def objective_floor(objective):
     (all targets zero, e.g. an all-zero depth map) gives the floor
     ``1e-13 · N`` (``F* = 0`` there and every change is noise at depth ~1).
     """
-    _, _, c = objective.normal_equations(form="stencil")  # c only: the cached form, no conversion
+    c = objective.constant()
     return 1e-13 * (abs(c) if c > 0 else float(objective.size))
 
 
 def gap_threshold(objective, F, gap_tol):
     """``gap_tol · max(F, floor)``, ``floor = 1e-7 F(0)`` (``1e-7 N`` when ``F(0) = 0``), in solver units."""
-    _, _, c = objective.normal_equations(form="stencil")  # c only: the cached form, no conversion
+    c = objective.constant()
     return float(gap_tol) * max(float(F), 1e-7 * (abs(c) if c > 0 else float(objective.size)))
 
 
