@@ -122,6 +122,25 @@ def test_one_frame_bad_seed_or_tol_is_one_line_naming_the_flag(files, capsys, ar
     assert not (files / "out.npy").exists()
 
 
+def test_too_few_valid_pixels_name_the_flags(files, capsys):
+    """--keep-count above the valid count, an all-zero --mask and a --downsample that leaves nothing name the flag."""
+    depth = sd.read_depth(files / "sparse.png", scale=1000)
+    valid = int(np.count_nonzero(np.isfinite(depth) & (depth > 0)))
+    np.save(files / "none.npy", np.zeros(depth.shape, dtype=bool))
+    cases = [(["--depth", str(files / "sparse.png"), "--keep-count", str(valid + 1)], f"--keep-count {valid + 1}"),
+             (["--depth", str(files / "sparse.png"), "--mask", str(files / "none.npy")], "--mask"),
+             (["--depth", str(files / "sparse.png"), "--downsample", "1000"], "--downsample 1000")]
+    for argv, words in cases:
+        rc = main(["--image", str(files / "rgb.png"), "--depth-scale", "mm", "--out", str(files / "out.npy"), "-q",
+                   *argv])
+        err = capsys.readouterr().err
+        assert rc == 2 and err.count("\n") == 1 and words in err, err
+        assert not (files / "out.npy").exists()
+    rc = main(["--image", str(files / "rgb.png"), "--depth", str(files / "sparse.png"), "--depth-scale", "mm",
+               "--keep-count", str(valid), "--out", str(files / "out.npy"), "-q"])
+    assert rc == 0  # every valid pixel is a count the sampling can keep
+
+
 # ----------------------------------------------------------------------------- round trips
 @pytest.mark.parametrize("ext, atol", [(".npy", 1e-12), (".npz", 1e-12), (".h5", 1e-12), (".pfm", 1e-6)])
 def test_round_trip_float_formats(files, capsys, ext, atol):
@@ -460,3 +479,22 @@ def test_clamp_is_one_warning_line_and_no_clip_keeps_the_unclamped_map(files, ca
     assert main([*argv, "--no-clip", "--out", str(files / "b.npy")]) == 0
     assert "warning:" not in capsys.readouterr().err
     np.testing.assert_allclose(np.load(files / "b.npy"), clamped.depth, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("truth_given", [False, True])
+def test_table_without_metrics_says_why(truth_given):
+    """No score: without ground truth the table asks for --truth; with one that has nothing to score it says so."""
+    import io
+    from types import SimpleNamespace
+
+    from sparsedepth.cli.report import print_table
+
+    depth = np.ones((4, 5))
+    truth = np.where(np.eye(4, 5, dtype=bool), 1.0, 0.0) if truth_given else None
+    outcome = SimpleNamespace(depth=depth, observed=np.eye(4, 5, dtype=bool), result=None, metrics=None,
+                              method="complete (amg)", runtime=0.5, truth=truth)
+    stream = io.StringIO()
+    print_table(outcome, "frame", stream)
+    text = stream.getvalue()
+    assert ("give --truth" in text) is not truth_given
+    assert ("no valid pixel that was not observed" in text) is truth_given

@@ -142,8 +142,10 @@ def print_table(outcome, description, stream) -> None:
             print(f"--max-uncertainty: {summary['removed']} pixels ({summary['removed'] / h / w:.1%}) left missing",
                   file=stream)
     if outcome.metrics is None:
-        print(f"{outcome.method}: {outcome.runtime:.2f} s; no ground truth to score against "
-              "(give --truth, or a dense --depth with --keep-fraction)", file=stream)
+        why = ("no ground truth to score against (give --truth, or a dense --depth with --keep-fraction)"
+               if outcome.truth is None else
+               "nothing to score: the ground truth has no valid pixel that was not observed")
+        print(f"{outcome.method}: {outcome.runtime:.2f} s; {why}", file=stream)
         return
     print(f"scored on {outcome.metrics.count} pixels not observed", file=stream)
     print(f"{'method':<28} {'RMSE [m]':>9} {'MAE [m]':>9} {'REL':>8} {'δ1':>7} {'time [s]':>9}", file=stream)

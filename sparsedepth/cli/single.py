@@ -21,6 +21,7 @@ from ..batch import evaluate_frame
 from ..datasets import load_motorcycle
 from ..io import KINECT_NYU, read_calib, read_depth, read_image, read_mask
 from ..io import depth_to_points, depth_writer, ply_writer, resolve_scale
+from ..sampling import valid_depth_mask
 from ..visualize import colorize_depth
 from .camera import KINECT_CALIB, frame_intrinsics, intrinsics_source
 from .messages import UsageError, one_line, warnings_as_lines
@@ -297,6 +298,24 @@ def _writers(args, planned, outcome, image, report, png_scale, intrinsics=None) 
     return items
 
 
+def _check_observable(args, mode, depth, mask) -> None:
+    """UsageError naming the flags when the (downsampled, masked) depth has no valid pixel or fewer than --keep-count."""
+    if depth.ndim != 2 or depth.dtype.kind not in "uif":
+        return  # the library names what is wrong with such a depth
+    valid = valid_depth_mask(depth)
+    if mask is not None and mask.shape == depth.shape:
+        valid &= mask
+    count = int(valid.sum())
+    source = "the demo's depth" if mode == "demo" else f"--depth '{args.depth}'"
+    if count == 0:
+        limits = ([f"--mask '{args.mask}'"] if getattr(args, "mask", None) else []) + (
+            [f"--downsample {args.downsample}"] if args.downsample and args.downsample > 1 else [])
+        within = f" with {' and '.join(limits)} applied" if limits else ""
+        raise UsageError(f"{source} has no valid pixel (finite and > 0){within}: nothing to complete from")
+    if args.keep_count is not None and args.keep_count > count:
+        raise UsageError(f"--keep-count {args.keep_count} exceeds the {count} valid pixels of {source}")
+
+
 def run_one(args, argv, mode, stdout, stderr) -> int:
     """The demo or one frame of the user's files: complete or fill it, write every output or none, print the table.
 
@@ -305,6 +324,7 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
     """
     weights, weights_given = weights_of(args)
     image, depth, mask, truth, prior, description, keep_fraction, intrinsics = _load_frame(args, mode, stderr)
+    _check_observable(args, mode, depth, mask)
     png_scale = args.out_scale if args.out_scale is not None else (args.depth_scale or 1000.0)
     png_scale = resolve_scale(png_scale)
     planned = plan_outputs(args, mode)
