@@ -4,9 +4,10 @@ A kernel that applies many NumPy operations to a whole image reads and writes
 each of its temporaries from memory once per operation.  Applied to a band of
 a few hundred kilobytes at a time, the same operations keep their partial
 results in cache.  The stencil product (:mod:`.stencil`), the tap sums of
-:class:`~.operators.StencilOperator`, the image pair distances (:mod:`.edges`)
-and the edge-aware sweeps (:mod:`.resample`) cut their rows with these two
-functions.
+:class:`~.operators.StencilOperator`, the image pair distances (:mod:`.edges`),
+the edge-aware sweeps (:mod:`.resample`) and the band-wise multigrid sweeps
+(:class:`sparsedepth.linalg.multigrid.bands.BandedStencil`) cut their rows with
+these two functions.
 
 May import NumPy only.
 """

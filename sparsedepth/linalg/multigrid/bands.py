@@ -23,6 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 from pyamg import amg_core
 
+from ...grid.rowbands import row_bands, rows_per_band
 from ...grid.stencil import SymmetricStencil, stencil_to_csr
 
 __all__ = ["BandedStencil", "FullStencil"]
@@ -126,7 +127,7 @@ class BandedStencil:
         self.radius = R = max(max(abs(dy), abs(dx)) for dy, dx in A.offsets)
         self._wp = W + 2 * R
         K = len(A.offsets)
-        self._rows = max(1, min(H, _BAND_VALUES // (W * K)))
+        self._rows = min(H, rows_per_band(W * K, _BAND_VALUES))
         self._delta = np.array([dy * self._wp + dx for dy, dx in A.offsets])
         self._patterns = {}
         # flat start in A.data of each offset's coefficients for pixel 0 (may be negative): entry (p, k) of a band
@@ -159,9 +160,8 @@ class BandedStencil:
         return self._patterns[rows]
 
     def _bands(self, reverse=False):
-        H, B = self.grid_shape[0], self._rows
-        starts = list(range(0, H, B))
-        return [(y0, min(H, y0 + B)) for y0 in (starts[::-1] if reverse else starts)]
+        bands = [(rows.start, rows.stop) for rows in row_bands(0, self.grid_shape[0], self._rows)]
+        return bands[::-1] if reverse else bands
 
     def _fill(self, y0, y1):
         """Write the CSR values of image rows ``y0:y1`` into their band matrix; returns its flat values.
