@@ -112,6 +112,22 @@ def test_dual_point_from_admm_multiplier_and_the_nonnegativity_multiplier():
     assert curvature_lower_bound(obj) == pytest.approx(L1.delta)
 
 
+def test_dual_point_is_the_clipped_sign_of_the_edges_with_its_edges_and_weights():
+    """Without fits, the public dual point is c·sign(Kz) off the tied rows and within [−c, c] on all of them."""
+    image, sparse, mask, _ = make_problem((10, 11))
+    obj, coarse, _ = build_objective(image, sparse, mask, weights=L1)
+    l1 = StackedL1(obj)
+    z = np.maximum(coarse.ravel() + 0.3 * np.random.default_rng(6).standard_normal(obj.size), 0.0)
+    assert l1.grid_gradient
+    p, t, c = Certificate(obj, fit_steps=0, fit_max_iter=0).dual_point(z, np.zeros(obj.size))
+    np.testing.assert_allclose(t, sd.grid.gradient(obj.shape) @ z, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(c, l1.weights)
+    assert np.all(np.abs(p) <= c)
+    moving = np.abs(t) > 1e-12 * (1.0 + z.max())
+    assert moving.any()
+    np.testing.assert_allclose(p[moving], c[moving] * np.sign(t[moving]), rtol=1e-15)
+
+
 @pytest.mark.parametrize("fit", [dict(fit_steps=0, fit_max_iter=30, fit_correction=True),
                                  dict(fit_steps=0, fit_max_iter=0)], ids=["corrected", "unfitted"])
 @pytest.mark.parametrize("eps", [0.0, 1e-4, 1e-2])

@@ -308,7 +308,7 @@ def _check_observable(args, mode, depth, mask) -> None:
     count = int(valid.sum())
     source = "the demo's depth" if mode == "demo" else f"--depth '{args.depth}'"
     if count == 0:
-        limits = ([f"--mask '{args.mask}'"] if getattr(args, "mask", None) else []) + (
+        limits = ([f"--mask '{args.mask}'"] if args.mask else []) + (
             [f"--downsample {args.downsample}"] if args.downsample and args.downsample > 1 else [])
         within = f" with {' and '.join(limits)} applied" if limits else ""
         raise UsageError(f"{source} has no valid pixel (finite and > 0){within}: nothing to complete from")
