@@ -608,3 +608,21 @@ def test_folder_pair_with_truth_folder(tmp_path):
     sd.write_depth(tmp_path / "gt" / "f1.npy", depth)
     (frame,) = find_frame_pairs(tmp_path / "img", tmp_path / "raw", truth_folder=tmp_path / "gt")
     assert frame.truth == str(tmp_path / "gt" / "f1.npy") and frame.name == "f1"
+
+
+@pytest.mark.parametrize("folder, flag", [("raw", "--batch-depths"), ("gt", "--batch-truths"), ("img", "--batch")])
+def test_batch_output_onto_a_paired_input_names_its_folder_flag(tmp_path, capsys, folder, flag):
+    for sub in ("img", "raw", "gt"):
+        (tmp_path / sub).mkdir()
+    image, depth = _scene()
+    iio.imwrite(tmp_path / "img" / "f1.png", image)
+    sd.write_depth(tmp_path / "raw" / "f1.png", depth, scale=1000)
+    sd.write_depth(tmp_path / "gt" / "f1.png", depth, scale=1000)
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    rc = main(["--batch", str(tmp_path / "img"), "--batch-depths", str(tmp_path / "raw"), "--batch-truths",
+               str(tmp_path / "gt"), "--outdir", str(tmp_path / folder), "--out-format", "png",
+               "--csv", str(tmp_path / "m.csv"), "--workers", "1", "-q", *FAST_FLAGS])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1, err
+    assert f"is the same file as {flag} '{tmp_path / folder}'" in err, err
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before

@@ -87,12 +87,12 @@ def _check_batch_files(args, frames) -> None:
     inputs = []
     for frame in frames:
         if isinstance(frame, FileFrame):
-            paths = [p for p in (frame.image, frame.depth, frame.truth) if p is not None]
-            flag, given = "--batch", args.batch
+            paths = (frame.image, frame.depth, frame.truth)
+            inputs += [Named(flag, given, Path(path)) for (flag, given), path in zip(_file_sources(args), paths)
+                       if path is not None]
         else:
-            paths = [frame.path]
             flag, given = ("--nyu-mat", args.nyu_mat) if args.nyu_mat is not None else ("--batch", args.batch)
-        inputs += [Named(flag, given, Path(path)) for path in paths]
+            inputs.append(Named(flag, given, Path(frame.path)))
     outputs = [Named("--csv", args.csv, Path(args.csv)), Named("--csv", args.csv, settings_path(args.csv)),
                Named("--csv", args.csv, lock_path(args.csv))]
     if args.outdir is not None:
@@ -100,6 +100,14 @@ def _check_batch_files(args, frames) -> None:
                     for frame in frames]
     check_distinct(outputs, inputs)
     check_writable(outputs)
+
+
+def _file_sources(args):
+    """The flag and value each of a file frame's image, depth and truth paths comes from."""
+    batch = ("--batch", args.batch)
+    depths = ("--batch-depths", args.batch_depths) if args.batch_depths is not None else batch
+    truths = ("--batch-truths", args.batch_truths) if args.batch_truths is not None else batch
+    return batch, depths, truths
 
 
 def _duration(seconds: float) -> str:
