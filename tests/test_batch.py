@@ -107,6 +107,29 @@ def test_find_frames_pairs_by_name(tmp_path):
     assert frames[2].depth is None
 
 
+def test_frames_whose_files_do_not_pair_fail_with_the_reason(tmp_path):
+    image, depth = _scene()
+    for key in ("ok", "two_images", "two_depths", "two_truths", "alone"):
+        _write_frame(tmp_path, key, image, depth)
+        sd.write_depth(tmp_path / f"gt_{key}.npy", depth)
+    iio.imwrite(tmp_path / "rgb_two_images.jpg", image)
+    sd.write_depth(tmp_path / "depth_two_depths.npy", depth)
+    sd.write_depth(tmp_path / "gt_two_truths.png", depth, scale=1000)
+    (tmp_path / "depth_alone.png").unlink()
+    frames = {f.name: f for f in find_frames(tmp_path, truth_prefix="gt_")}
+    assert frames["ok"].problem is None and frames["ok"].truth == str(tmp_path / "gt_ok.npy")
+    options = BatchOptions(keep_fraction=0.1, weights=FAST, solver="direct", depth_scale="mm")
+    summary = run_batch(list(frames.values()), tmp_path / "m.csv", options=options,
+                        executor=ThreadPoolExecutor(1))
+    assert (summary.succeeded, summary.failed) == (1, 4)
+    errors = {row["name"]: row["error"] for row in _read_csv(tmp_path / "m.csv")}
+    assert errors["ok"] == ""
+    assert "several images are named 'two_images' (rgb_two_images.jpg, rgb_two_images.png)" in errors["two_images"]
+    assert "several depth files" in errors["two_depths"] and "depth_two_depths.npy" in errors["two_depths"]
+    assert "several ground-truth files" in errors["two_truths"] and "gt_two_truths.png" in errors["two_truths"]
+    assert errors["alone"] == f"ValueError: no depth file for image '{tmp_path / 'rgb_alone.png'}'"
+
+
 def test_find_frames_errors(tmp_path):
     with pytest.raises(FileNotFoundError):
         find_frames(tmp_path / "absent")

@@ -35,12 +35,16 @@ class FileFrame:
 
     ``depth`` is None when no depth file was found for the image (the frame
     is then reported as failed); ``truth`` is an optional ground-truth depth.
+    ``problem`` says why the frame cannot be completed when its files could
+    not be paired (several images of one name, no or several depth files,
+    several truth files); the batch reports it as the frame's error.
     """
 
     name: str
     image: str
     depth: str | None
     truth: str | None = None
+    problem: str | None = None
 
 
 @dataclass(frozen=True)
@@ -77,6 +81,23 @@ def _stem_map(folder: Path, prefix: str, extensions) -> dict[str, list[Path]]:
         if path.is_file() and path.name.startswith(prefix) and path.suffix.lower() in extensions:
             found.setdefault(path.stem[len(prefix):], []).append(path)
     return found
+
+
+def _paired(name: str, images: list[Path], depths: list[Path], truths: list[Path]) -> FileFrame:
+    """The frame ``name`` of its candidate files; ``depth`` None and ``problem`` set unless they pair up."""
+    images, depths, truths = sorted(images), sorted(depths), sorted(truths)
+    image = str(images[0])
+    if len(images) > 1:
+        problem = f"several images are named '{name}' ({_some_names(images)}); keep one"
+    elif not depths:
+        problem = f"no depth file for image '{image}'"
+    elif len(depths) > 1:
+        problem = f"several depth files for image '{image}' ({_some_names(depths)}); keep one"
+    elif len(truths) > 1:
+        problem = f"several ground-truth files for image '{image}' ({_some_names(truths)}); keep one"
+    else:
+        return FileFrame(name=name, image=image, depth=str(depths[0]), truth=str(truths[0]) if truths else None)
+    return FileFrame(name=name, image=image, depth=None, problem=problem)
 
 
 def _files(folder: Path, extensions) -> list[Path]:
@@ -142,16 +163,7 @@ def find_frames(folder, *, image_prefix: str = "rgb_", depth_prefix: str = "dept
             "(command line: --depth-prefix)"
         )
     truths = _stem_map(folder, truth_prefix, _DEPTH_EXTENSIONS) if truth_prefix else {}
-    frames = []
-    for key in sorted(images):
-        if len(images[key]) > 1:
-            image, depth = str(sorted(images[key])[0]), None  # ambiguous: reported by the batch
-        else:
-            image = str(images[key][0])
-            depth = str(depths[key][0]) if len(depths.get(key, ())) == 1 else None
-        truth = str(truths[key][0]) if len(truths.get(key, ())) == 1 else None
-        frames.append(FileFrame(name=key, image=image, depth=depth, truth=truth))
-    return frames
+    return [_paired(key, images[key], depths.get(key, []), truths.get(key, [])) for key in sorted(images)]
 
 
 def find_frame_pairs(image_folder, depth_folder, *, truth_folder=None) -> list[FileFrame]:
@@ -198,13 +210,7 @@ def find_frame_pairs(image_folder, depth_folder, *, truth_folder=None) -> list[F
     truths = {}
     if truth_folder is not None:
         truths = _stem_map(check_folder(truth_folder, "truth folder"), "", _DEPTH_EXTENSIONS)
-    frames = []
-    for key in sorted(images):
-        image = str(sorted(images[key])[0])
-        depth = str(depths[key][0]) if len(depths.get(key, ())) == 1 and len(images[key]) == 1 else None
-        truth = str(truths[key][0]) if len(truths.get(key, ())) == 1 else None
-        frames.append(FileFrame(name=key, image=image, depth=depth, truth=truth))
-    return frames
+    return [_paired(key, images[key], depths.get(key, []), truths.get(key, [])) for key in sorted(images)]
 
 
 def nyu_h5_frames(folder) -> list[NYUH5Frame]:

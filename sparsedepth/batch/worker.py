@@ -42,8 +42,10 @@ def _read_frame(source, options: BatchOptions):
     if isinstance(source, NYUH5Frame):
         image, depth = read_nyu_h5(source.path)
         return image, depth, None
+    if source.problem is not None:
+        raise ValueError(source.problem)
     if source.depth is None:
-        raise ValueError(f"no (unique) depth file for image '{source.image}'")
+        raise ValueError(f"no depth file for image '{source.image}'")
     image = read_image(source.image, max_pixels=options.max_pixels)
     reader = dict(scale=options.depth_scale, byteorder=options.byteorder, invalid_values=options.invalid_values,
                   min_depth=options.min_depth, max_depth=options.max_depth, max_pixels=options.max_pixels)
