@@ -46,6 +46,28 @@ def test_tiff_refuses_what_float32_cannot_hold(tmp_path):
     assert os.listdir(tmp_path) == []
 
 
+def test_a_tiff_of_several_images_is_refused_and_its_previews_are_ignored(tmp_path, capsys):
+    rng = np.random.default_rng(1)
+    stack = rng.uniform(0.5, 9.0, (2, 12, 14)).astype(np.float32)
+    tifffile.imwrite(tmp_path / "stack.tif", stack)  # two full pages: which one is the depth?
+    with pytest.raises(ValueError, match="TIFF of 2 images"):
+        sd.read_depth(tmp_path / "stack.tif")
+    tifffile.imwrite(tmp_path / "frames.tif", rng.integers(0, 255, (3, 12, 14, 3), dtype=np.uint8))
+    with pytest.raises(ValueError, match="TIFF of 3 images"):
+        sd.read_image(tmp_path / "frames.tif")
+    with tifffile.TiffWriter(tmp_path / "pyramid.tif") as writer:  # a full page and a reduced preview
+        writer.write(stack[1])
+        writer.write(stack[1][::2, ::2], subfiletype=1)
+    np.testing.assert_array_equal(sd.read_depth(tmp_path / "pyramid.tif"), stack[1].astype(np.float64))
+    image, _ = make_scene()
+    iio.imwrite(tmp_path / "rgb.png", image)
+    rc = main(["--image", str(tmp_path / "rgb.png"), "--depth", str(tmp_path / "stack.tif"),
+               "--out", str(tmp_path / "out.npy"), *FAST])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "--depth" in err and "TIFF of 2 images" in err, err
+    assert not (tmp_path / "out.npy").exists()
+
+
 def test_cli_out_tif_is_the_completed_depth_in_float32(tmp_path, capsys):
     image, depth = make_scene((20, 30))
     iio.imwrite(tmp_path / "rgb.png", image)

@@ -167,8 +167,9 @@ def read_depth(path, *, scale=None, calib=None, key: str | None = None, byteorde
     ----------
     path : str or os.PathLike
         One of ``.png``, ``.pgm``, ``.pnm`` (integer image), ``.tif`` /
-        ``.tiff`` (16-bit integer or float32, first page), ``.pfm``,
-        ``.npy``, ``.npz``, ``.h5`` / ``.hdf5``.
+        ``.tiff`` (16-bit integer or float32; a stack of full-size pages is
+        refused, reduced previews are ignored), ``.pfm``, ``.npy``,
+        ``.npz``, ``.h5`` / ``.hdf5``.
     scale : float or str, optional
         Divisor applied to the stored values, or a preset name from
         :data:`DEPTH_SCALES`.  **Required** whenever the stored values are

@@ -92,11 +92,25 @@ def _read_pillow(path: Path, max_pixels: int | None, where: str, label: str) -> 
             return np.asarray(iio.imread(path, plugin="pillow"))
 
 
+def _check_one_image(handle: tifffile.TiffFile, where: str) -> None:
+    """Refuse a TIFF of several full-size pages (a stack); reduced-resolution previews are allowed."""
+    with as_value_error(where, decode_error):
+        images = 1 + sum(1 for page in handle.pages[1:] if not page.is_reduced)
+    if images > 1:
+        raise ValueError(f"{where} is a TIFF of {images} images (pages); save the one to use as a file of its own.")
+
+
 def read_tiff(path: Path, max_pixels: int | None, where: str, label: str) -> np.ndarray:
-    """First page of a TIFF with tifffile (keeps 16-bit and float32 samples)."""
+    """The one image of a TIFF with tifffile (keeps 16-bit and float32 samples).
+
+    Reduced-resolution pages (previews, pyramid levels) after the first are
+    ignored; a file of several full images (a stack) is refused, since which
+    of them to complete cannot be guessed.
+    """
     with as_value_error(where, decode_error):
         handle = tifffile.TiffFile(path)
     with handle:
+        _check_one_image(handle, where)
         with as_value_error(where, decode_error):
             page = handle.pages[0]
             shape = tuple(int(n) for n in page.shape)
@@ -175,6 +189,11 @@ def read_image(path, *, byteorder: str | None = None, max_pixels: int | None = M
     if ext in NETPBM_EXTENSIONS:
         image = read_netpbm(path, byteorder, max_pixels, where, label)
     else:
+        if ext in TIFF_EXTENSIONS:
+            with as_value_error(where, decode_error):
+                handle = tifffile.TiffFile(path)
+            with handle:
+                _check_one_image(handle, where)
         image = _read_pillow(path, max_pixels, where, label("max_pixels"))
     return _normalise_image(image, where)
 
