@@ -108,6 +108,15 @@ def test_edge_penalty_options_are_checked(files, capsys, argv, words):
     assert words in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("method", ["complete", "colorization"])
+def test_fill_method_without_fill_holes_is_refused(files, capsys, method):
+    rc = main(["--image", str(files / "rgb.png"), "--depth", str(files / "sparse.png"), "--depth-scale", "mm",
+               "--out", str(files / "out.npy"), "-q", "--fill-method", method])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and f"--fill-method {method}" in err and "--fill-holes" in err, err
+    assert not (files / "out.npy").exists()
+
+
 @pytest.mark.parametrize("argv, flag", [
     (["--keep-fraction", "0.1", "--seed", "-1"], "--seed"),  # was NumPy's "expected non-negative integer"
     (["--keep-fraction", "0.1", "--seed", "1.5"], "--seed"),

@@ -51,6 +51,11 @@ def _check_combinations(args) -> str:
         raise UsageError("--mask, --truth, --calib and --depth-key need --image and --depth")
     if mode == "demo" and args.fill_holes:
         raise UsageError("--fill-holes needs --image and --depth (raw depth), or --batch/--nyu-mat")
+    if args.fill_method is not None and not args.fill_holes:
+        raise UsageError(f"--fill-method {args.fill_method} chooses how --fill-holes fills; add --fill-holes or "
+                          "drop --fill-method")
+    if args.fill_method is None:
+        args.fill_method = "colorization"
     if args.fill_holes and (args.keep_fraction is not None or args.keep_count is not None):
         raise UsageError("--keep-fraction/--keep-count simulate sparse input; they do not apply to --fill-holes")
     colorization = args.fill_holes and args.fill_method == "colorization"
@@ -221,7 +226,10 @@ def cluster_address(args):
 
 
 def check_options(args) -> str:
-    """Check the parsed options together; return the mode: ``"demo"``, ``"files"`` or ``"batch"``."""
+    """Check the parsed options together; return the mode: ``"demo"``, ``"files"`` or ``"batch"``.
+
+    ``args.fill_method`` left unset becomes ``"colorization"`` (it is only given with ``--fill-holes``).
+    """
     mode = _check_combinations(args)
     _check_batch_flags(args, mode)
     _check_reader_options(args, mode)

@@ -326,9 +326,9 @@ def _add_method_options(parser) -> None:
                              "clamped to [smallest, largest] observed value and the clamped pixels are counted).")
     method.add_argument("--fill-holes", action="store_true",
                         help="hole filling: every valid pixel of --depth is observed, the output is dense.")
-    method.add_argument("--fill-method", choices=FILL_METHODS, default="colorization",
-                        help="hole-filling method: colorization (NYU toolbox fill_depth_colorization, default) "
-                             "or complete (this package's objective).")
+    method.add_argument("--fill-method", choices=FILL_METHODS,
+                        help="with --fill-holes, the hole-filling method: colorization (NYU toolbox "
+                             "fill_depth_colorization, default) or complete (this package's objective).")
 
 
 
