@@ -7,7 +7,8 @@ concept is refused with the same exception and message everywhere:
   ``>= 1``), :func:`check_positive_real` / :func:`check_nonnegative_real`
   (algorithm parameters: weights, tolerances, ``alpha``, ``kappa``),
   :func:`check_positive_finite` (physical quantities: depth scales, focal
-  lengths, baselines; a non-number is a ``TypeError``);
+  lengths, baselines); a non-number (a numeric string included) is a
+  ``TypeError``, a number out of range a ``ValueError``;
 - grid shapes: :func:`check_grid_shape`, :func:`check_same_shape`;
 - images, depth and masks: :func:`as_float_image`, :func:`as_depth_and_mask`,
   :func:`check_bool_mask`;
@@ -79,23 +80,26 @@ def check_count(value, *, name: str) -> int:
     return int(value)
 
 
+def _real_number(value, name: str) -> float:
+    """``value`` as a float; ``TypeError`` unless it is a real number (a 0-d array of one counts, a bool does not)."""
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value[()]
+    if not is_real(value):
+        raise TypeError(f"{name} must be a real number, got {type(value).__name__} {value!r}")
+    return float(value)
+
+
 def check_positive_real(value, *, name: str) -> float:
-    """Return ``value`` as a float; ``ValueError`` unless it converts to a finite number ``> 0``."""
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
+    """Return ``value`` as a float: ``TypeError`` unless a real number, ``ValueError`` unless finite and ``> 0``."""
+    number = _real_number(value, name)
     if not np.isfinite(number) or number <= 0:
         raise ValueError(f"{name} must be finite and > 0, got {number!r}")
     return number
 
 
 def check_nonnegative_real(value, *, name: str) -> float:
-    """Return ``value`` as a float; ``ValueError`` unless it converts to a finite number ``>= 0``."""
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    """Return ``value`` as a float: ``TypeError`` unless a real number, ``ValueError`` unless finite and ``>= 0``."""
+    number = _real_number(value, name)
     if not np.isfinite(number) or number < 0:
         raise ValueError(f"{name} must be finite and >= 0, got {number!r}")
     return number

@@ -288,19 +288,19 @@ def test_negative_depth_is_rejected_like_complete_depth():
     np.testing.assert_array_equal(colorization_fill(grey, sparse, mask=ok), expected)
 
 
-@pytest.mark.parametrize("options, message", [
-    ({"mask": "known_as_int"}, "mask must be a boolean array"),
-    ({"alpha": 0.0}, "alpha must be finite and > 0"),
-    ({"rtol": "tight"}, "rtol must be a positive number"),
-    ({"window_radius": 0}, "window_radius must be an integer >= 1"),
-    ({"window_radius": True}, "window_radius must be an integer >= 1"),
-    ({"maxiter": 2.0}, "maxiter must be an integer >= 1"),
+@pytest.mark.parametrize("options, error, message", [
+    ({"mask": "known_as_int"}, ValueError, "mask must be a boolean array"),
+    ({"alpha": 0.0}, ValueError, "alpha must be finite and > 0"),
+    ({"rtol": "tight"}, TypeError, "rtol must be a real number"),
+    ({"window_radius": 0}, ValueError, "window_radius must be an integer >= 1"),
+    ({"window_radius": True}, ValueError, "window_radius must be an integer >= 1"),
+    ({"maxiter": 2.0}, ValueError, "maxiter must be an integer >= 1"),
 ])
-def test_fill_option_checks(options, message):
+def test_fill_option_checks(options, error, message):
     grey, depth, known = _hand_made_frame()
     if options.get("mask") == "known_as_int":
         options = {"mask": known.astype(int)}
-    with pytest.raises(ValueError, match=message):
+    with pytest.raises(error, match=message):
         colorization_fill(grey, np.where(known, depth, 0.0), **options)
 
 

@@ -266,7 +266,7 @@ def test_bad_weight_is_refused_naming_the_field(value):
 
 
 def test_eps_that_is_not_a_number_and_row_weights_are_refused():
-    with pytest.raises(ValueError, match="local_linear_eps must be a number"):
+    with pytest.raises(TypeError, match="local_linear_eps must be a real number"):
         sd.Weights(local_linear_eps="small")
     K = local_linear_operator(np.zeros((4, 4)), 1e-3)
     with pytest.raises(ValueError, match="row_weights"):

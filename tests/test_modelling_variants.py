@@ -145,10 +145,17 @@ def test_geodesic_fill_is_closer_to_a_piecewise_truth_than_the_nearest_fill():
 
 
 @pytest.mark.parametrize("field", ["edge_sigma", "fill_contrast", "depth_jump"])
-@pytest.mark.parametrize("bad", [-1.0, float("nan"), "x"])
-def test_modelling_fields_reject_bad_values_naming_the_field(field, bad):
-    with pytest.raises(ValueError, match=field):
+@pytest.mark.parametrize("bad, error", [(-1.0, ValueError), (float("nan"), ValueError), ("x", TypeError),
+                                        ("1", TypeError), (True, TypeError), (None, TypeError)])
+def test_modelling_fields_reject_bad_values_naming_the_field(field, bad, error):
+    with pytest.raises(error, match=field):
         sd.Weights(**{field: bad})
+
+
+@pytest.mark.parametrize("value", [2, np.float32(2.0), np.int64(2), np.array(2.0)])
+def test_weights_take_any_real_number_as_a_float(value):
+    weights = sd.Weights(alpha=value, kappa=value)
+    assert type(weights.alpha) is float and weights.alpha == 2.0 and weights.kappa == 2.0
 
 
 def test_paper_weights_switch_the_modelling_fields_off():

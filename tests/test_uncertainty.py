@@ -237,7 +237,7 @@ def test_uncertainty_ranks_errors_on_a_real_frame():
     (dict(uncertainty="yes"), TypeError),
     (dict(max_uncertainty=-1.0), ValueError),
     (dict(max_uncertainty=float("nan")), ValueError),
-    (dict(max_uncertainty="far"), ValueError),
+    (dict(max_uncertainty="far"), TypeError),
 ])
 def test_bad_uncertainty_arguments(kwargs, error):
     image, truth, sparse, mask = _scene()

@@ -127,25 +127,28 @@ def test_grey_image_accepted(inputs):
 
 # --- the shared number and mask rules (one rule per concept, used by the colorization fill, the
 # edge weights, the objective and the weights)
-@pytest.mark.parametrize("value", [1, 2.5, np.float32(0.1), "3"])
+@pytest.mark.parametrize("value", [1, 2.5, np.float32(0.1), np.int64(3), np.array(0.25)])
 def test_check_positive_real_accepts_and_converts(value):
     from sparsedepth._validation import check_positive_real
 
-    assert check_positive_real(value, name="alpha") == float(value)
+    number = check_positive_real(value, name="alpha")
+    assert type(number) is float and number == float(value)
 
 
-@pytest.mark.parametrize("value, message", [
-    (0.0, "alpha must be finite and > 0, got 0.0"),
-    (-1, r"alpha must be finite and > 0, got -1.0"),
-    (np.inf, "alpha must be finite and > 0"),
-    (np.nan, "alpha must be finite and > 0"),
-    ("abc", "alpha must be a positive number, got 'abc'"),
-    (None, "alpha must be a positive number, got None"),
+@pytest.mark.parametrize("value, error, message", [
+    (0.0, ValueError, "alpha must be finite and > 0, got 0.0"),
+    (-1, ValueError, r"alpha must be finite and > 0, got -1.0"),
+    (np.inf, ValueError, "alpha must be finite and > 0"),
+    (np.nan, ValueError, "alpha must be finite and > 0"),
+    ("abc", TypeError, "alpha must be a real number, got str 'abc'"),
+    ("3", TypeError, "alpha must be a real number, got str '3'"),
+    (True, TypeError, "alpha must be a real number, got bool True"),
+    (None, TypeError, "alpha must be a real number, got NoneType None"),
 ])
-def test_check_positive_real_rejects(value, message):
+def test_check_positive_real_rejects(value, error, message):
     from sparsedepth._validation import check_positive_real
 
-    with pytest.raises(ValueError, match=message):
+    with pytest.raises(error, match=message):
         check_positive_real(value, name="alpha")
 
 
@@ -158,8 +161,10 @@ def test_check_nonnegative_real():
         check_nonnegative_real(-0.5, name="kappa")
     with pytest.raises(ValueError, match="kappa must be finite and >= 0"):
         check_nonnegative_real(np.nan, name="kappa")
-    with pytest.raises(ValueError, match="kappa must be a number, got 'x'"):
-        check_nonnegative_real("x", name="kappa")
+    assert check_nonnegative_real(np.array(1.5), name="kappa") == 1.5
+    for bad in ("x", "1", True, None, [1.0], np.array([1.0])):
+        with pytest.raises(TypeError, match="kappa must be a real number"):
+            check_nonnegative_real(bad, name="kappa")
 
 
 @pytest.mark.parametrize("value", [1, 7, np.int64(3)])
@@ -189,22 +194,22 @@ def test_check_bool_mask():
         check_bool_mask(mask, (4, 3), shape_name="raw_depth")
 
 
-@pytest.mark.parametrize("kappa", ["strong", None, [1.0]])
-def test_edge_weights_reject_a_non_number_kappa_with_value_error(kappa):
-    # the shared non-negative-number rule: a ValueError naming kappa, not NumPy's TypeError from isfinite
+@pytest.mark.parametrize("kappa", ["strong", "10", None, [1.0]])
+def test_edge_weights_reject_a_non_number_kappa_with_a_type_error_naming_it(kappa):
+    # the shared non-negative-number rule: a TypeError naming kappa (a numeric string is not converted)
     from sparsedepth.objective import edge_weights, pair_edge_weights
 
     image = np.zeros((4, 5))
-    with pytest.raises(ValueError, match="kappa must be a number"):
+    with pytest.raises(TypeError, match="kappa must be a real number"):
         edge_weights(image, kappa)
-    with pytest.raises(ValueError, match="kappa must be a number"):
+    with pytest.raises(TypeError, match="kappa must be a real number"):
         pair_edge_weights(image, kappa)
 
 
-def test_objective_rejects_a_non_number_l1_smoothing_with_value_error():
+def test_objective_rejects_a_non_number_l1_smoothing_with_a_type_error():
     from sparsedepth.objective import Objective
 
-    with pytest.raises(ValueError, match="l1_smoothing must be a positive number"):
+    with pytest.raises(TypeError, match="l1_smoothing must be a real number"):
         Objective((2, 3), [], l1_smoothing="small")
     with pytest.raises(ValueError, match="l1_smoothing must be finite and > 0"):
         Objective((2, 3), [], l1_smoothing=0.0)
