@@ -252,14 +252,14 @@ class IrlsOptions(SolverOptions):
         with ε continuation (for L1 terms on the pixel grid); ``"reweighting"``:
         plain majorise–minimise reweighting, whose exact ``F`` never
         increases.  See :func:`~sparsedepth.solvers.irls.solve_irls`.
-    newton_rtol : float, default 1e-2
+    newton_rtol : float, default 5e-2
         Relative residual of each Newton system's PCG solve.
     newton_max_inner : int, default 30
         PCG steps per Newton system at most.
     newton_tol : float, default 1e-3
         ``ε`` shrinks when the smoothed problem's relative gradient is below
         it (or after ``level_steps`` Newton steps).
-    level_steps : int, default 3
+    level_steps : int, default 2
         Newton steps per ``ε`` at most (at ``eps_min``: unlimited).
     tie_band : float, optional
         Rows with ``|(Kz)_k| <=`` it count as tied in the duality gap
@@ -291,10 +291,10 @@ class IrlsOptions(SolverOptions):
     inner_max_iter: int = _option(500)
     preconditioner: str = _option("grid", choices=_PRECONDITIONERS)
     method: str = _option("newton", kind=str, choices=("newton", "reweighting"))
-    newton_rtol: float = _option(1e-2)
+    newton_rtol: float = _option(5e-2)
     newton_max_inner: int = _option(30)
     newton_tol: float = _option(1e-3)
-    level_steps: int = _option(3)
+    level_steps: int = _option(2)
     tie_band: float | None = _option(None, kind=float, positive=True, depth_unit=True)
     certify_below: float | None = _option(None, kind=float, positive=True, depth_unit=True)
     finish: str = _option("admm", kind=str, choices=("admm", "none"))
