@@ -66,3 +66,14 @@ def test_bad_anchors_are_rejected():
         sd.DensitySchedule(((0.1, dict(values, delta=-1.0)),))
     with pytest.raises(TypeError):
         sd.DensitySchedule(((0.1, values),), base={"alpha": 1.0})
+
+
+def test_an_interior_anchor_gives_its_own_values_exactly():
+    low = sd.DEFAULT_WEIGHTS.replace(kappa=50.0, delta=1e-4)
+    mid = sd.DEFAULT_WEIGHTS.replace(kappa=50.0, delta=3e-4)
+    high = sd.DEFAULT_WEIGHTS.replace(kappa=100.0, delta=1e-3)
+    schedule = sd.DensitySchedule.from_weights(((0.003, low), (0.01, mid), (0.05, high)))
+    w = schedule.weights(0.01)
+    assert (w.kappa, w.delta) == (50.0, 3e-4)
+    for fraction, values in schedule.anchors:
+        assert {name: getattr(schedule.weights(fraction), name) for name in DENSITY_FIELDS} == values

@@ -372,9 +372,12 @@ class DensitySchedule:
 
 
 def _between(a: float, b: float, t: float) -> float:
-    """Geometric interpolation of two non-negative values (linear when either is 0), ``t`` in [0, 1]."""
-    if a == b:
+    """Geometric interpolation of two non-negative values (linear when either is 0), ``t`` in [0, 1]; exactly ``a``
+    at ``t = 0`` (an anchor's own values at its fraction) and ``b`` at ``t = 1``."""
+    if a == b or t <= 0:
         return a
+    if t >= 1:
+        return b
     if a > 0 and b > 0:
         return math.exp((1 - t) * math.log(a) + t * math.log(b))
     return (1 - t) * a + t * b
