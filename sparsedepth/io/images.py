@@ -12,8 +12,9 @@ Imports NumPy, Pillow, imageio, tifffile, :mod:`sparsedepth._validation` and
 from __future__ import annotations
 
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Mapping
+from typing import Iterator, Mapping
 
 import imageio.v3 as iio
 import numpy as np
@@ -92,12 +93,18 @@ def _read_pillow(path: Path, max_pixels: int | None, where: str, label: str) -> 
             return np.asarray(iio.imread(path, plugin="pillow"))
 
 
-def _check_one_image(handle: tifffile.TiffFile, where: str) -> None:
-    """Refuse a TIFF of several full-size pages (a stack); reduced-resolution previews are allowed."""
+@contextmanager
+def _tiff_of_one_image(path: Path, where: str) -> Iterator[tifffile.TiffFile]:
+    """The open TIFF, refused when it holds several full-size pages (a stack); reduced previews are allowed."""
     with as_value_error(where, decode_error):
-        images = 1 + sum(1 for page in handle.pages[1:] if not page.is_reduced)
-    if images > 1:
-        raise ValueError(f"{where} is a TIFF of {images} images (pages); save the one to use as a file of its own.")
+        handle = tifffile.TiffFile(path)
+    with handle:
+        with as_value_error(where, decode_error):
+            images = 1 + sum(1 for page in handle.pages[1:] if not page.is_reduced)
+        if images > 1:
+            raise ValueError(f"{where} is a TIFF of {images} images (pages); save the one to use as a file of its "
+                             "own.")
+        yield handle
 
 
 def read_tiff(path: Path, max_pixels: int | None, where: str, label: str) -> np.ndarray:
@@ -107,10 +114,7 @@ def read_tiff(path: Path, max_pixels: int | None, where: str, label: str) -> np.
     ignored; a file of several full images (a stack) is refused, since which
     of them to complete cannot be guessed.
     """
-    with as_value_error(where, decode_error):
-        handle = tifffile.TiffFile(path)
-    with handle:
-        _check_one_image(handle, where)
+    with _tiff_of_one_image(path, where) as handle:
         with as_value_error(where, decode_error):
             page = handle.pages[0]
             shape = tuple(int(n) for n in page.shape)
@@ -190,10 +194,8 @@ def read_image(path, *, byteorder: str | None = None, max_pixels: int | None = M
         image = read_netpbm(path, byteorder, max_pixels, where, label)
     else:
         if ext in TIFF_EXTENSIONS:
-            with as_value_error(where, decode_error):
-                handle = tifffile.TiffFile(path)
-            with handle:
-                _check_one_image(handle, where)
+            with _tiff_of_one_image(path, where):  # Pillow decodes the first page whatever follows it
+                pass
         image = _read_pillow(path, max_pixels, where, label("max_pixels"))
     return _normalise_image(image, where)
 
