@@ -37,6 +37,9 @@ the parts listed before it, NumPy, SciPy, pyamg, scikit-image and h5py;
 ``priors``
     A dense depth map the user brings (``complete_depth(..., prior=)``):
     checks and the least-squares scale/shift alignment to the samples.
+``registration``
+    Image-to-depth registration: :func:`shift_image` and the cross-validated
+    :func:`estimate_image_shift` (imports ``grid``).
 ``visualize``
     :func:`colorize_depth`: a depth map as an RGB picture (NumPy only).
 ``objective/``
@@ -88,6 +91,7 @@ from .baselines import biharmonic_fill, colorization_baseline, linear_fill, near
 from .completion import FAST_WEIGHTS, choose_solver, complete_depth
 from .grid.geodesic import geodesic_fill
 from .priors import PRIOR_ALIGNMENTS, align_prior
+from .registration import ImageShift, estimate_image_shift, shift_image
 from .metrics import DepthMetrics, depth_metrics
 from .objective.objective import AbsTerm, Objective, QuadraticTerm, RobustTerm, build_objective, edge_weights
 from .objective.robust import PENALTIES, RobustPenalty, robust_penalty
@@ -138,6 +142,9 @@ __all__ = [
     "geodesic_fill",
     "align_prior",
     "PRIOR_ALIGNMENTS",
+    "shift_image",
+    "estimate_image_shift",
+    "ImageShift",
     "linear_fill",
     "biharmonic_fill",
     "colorization_baseline",

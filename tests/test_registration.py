@@ -1,0 +1,138 @@
+"""Image-to-depth registration: shift_image against explicit loops, estimate_image_shift on scenes of known shift."""
+
+import numpy as np
+import pytest
+
+import sparsedepth as sd
+
+
+def _loop_shift(image, dy, dx):
+    H, W = image.shape[:2]
+    out = np.empty_like(image)
+    for y in range(H):
+        for x in range(W):
+            out[y, x] = image[min(max(y - dy, 0), H - 1), min(max(x - dx, 0), W - 1)]
+    return out
+
+
+@pytest.mark.parametrize("shift", [(0, 0), (1, 0), (0, -2), (-3, 2), (2, 7), (-9, -1)])
+@pytest.mark.parametrize("channels", [None, 3])
+def test_shift_image_matches_an_explicit_loop(shift, channels):
+    rng = np.random.default_rng(1)
+    shape = (5, 6) if channels is None else (5, 6, channels)
+    image = rng.integers(0, 255, size=shape, dtype=np.uint8)
+    out = sd.shift_image(image, shift)
+    assert out.dtype == image.dtype and out.shape == image.shape
+    np.testing.assert_array_equal(out, _loop_shift(image, *shift))
+
+
+def test_shift_image_accepts_numpy_integers_and_keeps_the_input():
+    image = np.arange(12.0).reshape(3, 4)
+    before = image.copy()
+    out = sd.shift_image(image, np.array([1, -1]))
+    np.testing.assert_array_equal(image, before)
+    np.testing.assert_array_equal(out[1:, :-1], image[:-1, 1:])
+
+
+@pytest.mark.parametrize("shift", [(1.0, 0), (True, 0), "ab", 3, (1, 2, 3), None])
+def test_shift_image_refuses_a_shift_that_is_not_two_integers(shift):
+    with pytest.raises(TypeError, match="shift"):
+        sd.shift_image(np.zeros((3, 3)), shift)
+
+
+def test_shift_image_refuses_a_one_dimensional_image():
+    with pytest.raises(ValueError, match="image"):
+        sd.shift_image(np.zeros(5), (0, 1))
+
+
+def _scene(offset, shape=(64, 80), regions=14, seed=0):
+    """A piecewise-constant scene: Voronoi regions with random depth and colour; the image moved by ``offset``."""
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform((0, 0), shape, size=(regions, 2))
+    yy, xx = np.mgrid[:shape[0], :shape[1]]
+    labels = np.argmin((yy[..., None] - centres[:, 0]) ** 2 + (xx[..., None] - centres[:, 1]) ** 2, axis=-1)
+    depth = rng.uniform(1.0, 5.0, regions)[labels]
+    image = sd.shift_image(rng.uniform(0.0, 1.0, (regions, 3))[labels], offset)
+    mask = rng.random(shape) < 0.2
+    return image, np.where(mask, depth, 0.0), mask
+
+
+@pytest.mark.parametrize("offset", [(0, 0), (0, 2), (-1, 0), (2, -1), (-2, -2)])
+def test_estimate_recovers_the_shift_that_undoes_a_known_offset(offset):
+    image, sparse, mask = _scene(offset)
+    estimate = sd.estimate_image_shift(image, sparse, mask, max_shift=2)
+    assert estimate.shift == (-offset[0], -offset[1])
+    assert estimate.errors.shape == (5, 5)
+    assert estimate.errors.min() == estimate.errors[2 - offset[0], 2 - offset[1]]
+    if offset == (0, 0):
+        assert estimate.gain == 1.0
+    else:
+        assert estimate.gain == pytest.approx(estimate.errors[2, 2] / estimate.errors.min()) and estimate.gain > 1
+    # the estimated shift moves the image back onto the depth (away from the repeated border)
+    truth_image, _, _ = _scene((0, 0))
+    np.testing.assert_array_equal(sd.shift_image(image, estimate.shift)[2:-2, 2:-2], truth_image[2:-2, 2:-2])
+
+
+def test_errors_are_the_held_out_mean_absolute_error_of_a_geodesic_fill():
+    """One candidate's error recomputed from geodesic_fill and the documented split (every group predicted)."""
+    image, sparse, mask = _scene((1, 0), shape=(24, 30), regions=6)
+    estimate = sd.estimate_image_shift(image, sparse, mask, max_shift=1, folds=3, fill_contrast=5.0, seed=4)
+    samples = np.flatnonzero(mask)
+    group = np.empty(samples.size, dtype=int)
+    group[np.random.default_rng(4).permutation(samples.size)] = np.arange(samples.size) % 3
+    total = 0.0
+    for g in range(3):
+        kept = mask.copy()
+        kept.ravel()[samples[group == g]] = False
+        fill = sd.geodesic_fill(sd.shift_image(image, (-1, 1)), sparse, kept, contrast=5.0)
+        total += np.abs(fill.ravel() - sparse.ravel())[samples[group == g]].sum()
+    assert estimate.errors[0, 2] == pytest.approx(total / samples.size, rel=1e-12)
+
+
+def test_without_image_contrast_every_shift_scores_alike_and_none_is_taken():
+    image, sparse, mask = _scene((0, 2))
+    estimate = sd.estimate_image_shift(image, sparse, mask, max_shift=1, fill_contrast=0.0)
+    np.testing.assert_allclose(estimate.errors, estimate.errors[1, 1], rtol=1e-12)
+    assert estimate.shift == (0, 0) and estimate.gain == pytest.approx(1.0)
+
+
+def test_min_gain_keeps_the_unshifted_image_unless_the_shift_wins_by_that_factor():
+    image, sparse, mask = _scene((0, 2))
+    estimate = sd.estimate_image_shift(image, sparse, mask, max_shift=2)
+    assert estimate.gain > 1
+    held = sd.estimate_image_shift(image, sparse, mask, max_shift=2, min_gain=estimate.gain * 1.01)
+    assert held.shift == (0, 0) and held.best == estimate.shift == (0, -2)
+    np.testing.assert_array_equal(held.errors, estimate.errors)
+
+
+def test_the_estimate_is_deterministic_for_a_seed():
+    image, sparse, mask = _scene((1, 1), seed=3)
+    a = sd.estimate_image_shift(image, sparse, mask, max_shift=1, seed=7)
+    b = sd.estimate_image_shift(image, sparse, mask, max_shift=1, seed=7)
+    np.testing.assert_array_equal(a.errors, b.errors)
+
+
+@pytest.mark.parametrize("kwargs, error, match", [
+    (dict(max_shift=-1), ValueError, "max_shift"),
+    (dict(max_shift=1.5), TypeError, "max_shift"),
+    (dict(folds=1), ValueError, "folds"),
+    (dict(fill_contrast=-1.0), ValueError, "fill_contrast"),
+    (dict(fill_contrast="5"), TypeError, "fill_contrast"),
+    (dict(min_gain=0.5), ValueError, "min_gain"),
+    (dict(seed=-1), ValueError, "seed"),
+    (dict(seed=1.0), TypeError, "seed"),
+])
+def test_estimate_refuses_bad_arguments(kwargs, error, match):
+    image, sparse, mask = _scene((0, 0), shape=(16, 16), regions=4)
+    with pytest.raises(error, match=match):
+        sd.estimate_image_shift(image, sparse, mask, **kwargs)
+
+
+def test_estimate_needs_two_samples_per_fold_and_matching_shapes():
+    image = np.zeros((10, 10))
+    mask = np.zeros((10, 10), bool)
+    mask.ravel()[:7] = True
+    with pytest.raises(ValueError, match="at least 8 observed"):
+        sd.estimate_image_shift(image, np.where(mask, 1.0, 0.0), mask, folds=4)
+    with pytest.raises(ValueError):
+        sd.estimate_image_shift(np.zeros((9, 10)), np.ones((10, 10)))
