@@ -343,6 +343,10 @@ def test_killed_worker_is_replaced_and_its_frames_run_again(tmp_path):
         ({"out_format": ".jpg"}, "out_format", ValueError),
         ({"downsample": 0}, "downsample", ValueError),
         ({"task": "guess"}, "task", ValueError),
+        ({"image_shift": "left"}, "image_shift", ValueError),
+        ({"image_shift": (1, 0.5)}, "image_shift", TypeError),
+        ({"image_shift": (1, 2, 3)}, "image_shift", TypeError),
+        ({"image_shift": 2}, "image_shift", TypeError),
     ],
 )
 def test_bad_batch_options_are_one_error(kwargs, option, kind):

@@ -149,6 +149,8 @@ def fingerprint(frames, options) -> dict:
     settings["weights"] = weights_settings(options.weights)
     if settings["quality"] == "default":  # batches of the default solve match settings files from before the field
         del settings["quality"]
+    if settings["image_shift"] is None:  # matches settings files that do not name the field
+        del settings["image_shift"]
     data = {
         "format": _SETTINGS_FORMAT,
         "options": settings,

@@ -7,8 +7,8 @@ holes of raw depth), compute the nearest-neighbour baseline and score both
 against ground truth on the pixels the method did not see.
 
 Imports NumPy and the library below :mod:`sparsedepth.batch` (completion,
-hole filling, baselines, metrics, sampling, validation); no file is read or
-written here.
+hole filling, baselines, metrics, registration, sampling, validation); no
+file is read or written here.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from ..holes import FILL_METHODS, fill_holes
 from ..holes.fill import hole_fill_weights
 from ..metrics import DepthMetrics, depth_metrics
 from ..objective import DensitySchedule, Weights
+from ..registration import check_shift, estimate_image_shift, shift_image
 from ..result import CompletionResult
 from ..sampling import sample_mask, valid_depth_mask
 
@@ -66,6 +67,13 @@ class FrameOutcome:
         The solver result (None for the colorization fill).
     uncertainty : ndarray, (H, W), or None
         ``result.uncertainty`` when it was asked for.
+    image_shift : tuple of int
+        ``(dy, dx)`` by which the image was moved (:func:`~sparsedepth.shift_image`)
+        before the method ran; ``(0, 0)`` when it was not moved.
+    image_shift_fallback : str or None
+        With ``image_shift="auto"``: why no shift could be estimated (the
+        message of :func:`~sparsedepth.estimate_image_shift`'s ``ValueError``;
+        ``image_shift`` is then ``(0, 0)``); None otherwise.
     """
 
     depth: np.ndarray
@@ -81,6 +89,8 @@ class FrameOutcome:
     nearest_runtime: float
     result: CompletionResult | None = None
     uncertainty: np.ndarray | None = None
+    image_shift: tuple[int, int] = (0, 0)
+    image_shift_fallback: str | None = None
 
 
 def _depth_2d(depth, name):
@@ -97,6 +107,33 @@ def _check_task(task, fill_method, keep_fraction, keep_count) -> None:
         raise ValueError(f"unknown fill method {fill_method!r}; choose one of {list(FILL_METHODS)}")
     if task == "fill" and (keep_fraction is not None or keep_count is not None):
         raise ValueError("keep_fraction/keep_count simulate sparse input; they do not apply to task='fill'")
+
+
+def _check_image_shift(image_shift):
+    """``image_shift`` as None, ``"auto"`` or ``(dy, dx)`` ints; ``ValueError`` for another string, ``TypeError``
+    for anything else that is not a pair of integers."""
+    if image_shift is None:
+        return None
+    if isinstance(image_shift, str):
+        if image_shift != "auto":
+            raise ValueError(f"image_shift must be None, 'auto' or a pair of integers (dy, dx), got {image_shift!r}")
+        return image_shift
+    return check_shift(image_shift, name="image_shift")
+
+
+def _registered(image, sparse, observed, image_shift):
+    """(image moved by the shift, (dy, dx), why ``"auto"`` fell back to no shift or None)."""
+    fallback = None
+    if image_shift is None:
+        shift = (0, 0)
+    elif image_shift == "auto":
+        try:
+            shift = estimate_image_shift(image, sparse, observed).shift
+        except ValueError as exc:  # too few samples to estimate from: the frame is completed unshifted
+            shift, fallback = (0, 0), " ".join(str(exc).split())
+    else:
+        shift = image_shift
+    return (image if shift == (0, 0) else shift_image(image, shift)), shift, fallback
 
 
 def _valid_pixels(image, values, mask) -> np.ndarray:
@@ -166,6 +203,7 @@ def evaluate_frame(
     quality: str = "default",
     prior=None,
     prior_alignment: str = "scale_shift",
+    image_shift=None,
 ) -> FrameOutcome:
     """Complete (or hole-fill) one frame and score it and the nearest-neighbour baseline.
 
@@ -201,6 +239,16 @@ def evaluate_frame(
         Passed to :func:`~sparsedepth.complete_depth`: a dense depth map the
         user brings, aligned to the observations and completed around (not
         with the colorization fill, which refuses it).
+    image_shift : None, "auto" or pair of int
+        Register the image to the depth before the method runs: ``(dy, dx)``
+        moves the image content ``dy`` rows down and ``dx`` columns right
+        (:func:`~sparsedepth.shift_image`, border repeated); ``"auto"``
+        estimates the shift from the observations the method is given
+        (after ``mask`` and the sampling) with
+        :func:`~sparsedepth.estimate_image_shift` at its defaults, and uses no
+        shift, silently, when there are too few of them to estimate from
+        (``FrameOutcome.image_shift_fallback`` says why).  ``None``: the image
+        as it is.  The nearest-neighbour baseline does not use the image.
 
     Returns
     -------
@@ -212,10 +260,13 @@ def evaluate_frame(
     ------
     ValueError
         Unknown task or fill method, inconsistent shapes, no valid depth, a
-        sampling option with ``task="fill"``, and the errors of the functions
-        called.
+        sampling option with ``task="fill"``, a string ``image_shift`` other
+        than ``"auto"``, and the errors of the functions called.
+    TypeError
+        An ``image_shift`` that is not None, a string or a pair of integers.
     """
     _check_task(task, fill_method, keep_fraction, keep_count)
+    image_shift = _check_image_shift(image_shift)
     if task == "fill" and fill_method == "colorization" and (uncertainty or max_uncertainty is not None):
         raise ValueError("uncertainty and max_uncertainty estimate the completion solver's error; the colorization "
                          "fill has none: use fill_method='complete'")
@@ -236,6 +287,7 @@ def evaluate_frame(
     else:
         observed = valid
     sparse = np.where(observed, values, np.nan)
+    image, shift, fallback = _registered(image, sparse, observed, image_shift)
 
     dense, method, result, runtime = _run_method(
         image, sparse, observed, task, fill_method,
@@ -251,5 +303,6 @@ def evaluate_frame(
     return FrameOutcome(
         depth=dense, observed=observed, sparse=sparse, nearest=nearest, truth=truth, scored=scored, metrics=metrics,
         nearest_metrics=nearest_metrics, method=method, runtime=runtime, nearest_runtime=nearest_runtime,
-        result=result, uncertainty=None if result is None else result.uncertainty,
+        result=result, uncertainty=None if result is None else result.uncertainty, image_shift=shift,
+        image_shift_fallback=fallback,
     )

@@ -6,7 +6,8 @@ attribute names the field, so that the command line can name its flag.
 
 Imports the standard library, :mod:`sparsedepth._validation`,
 :mod:`sparsedepth.io` (scales, pixel limit), the solver and fill-method
-names, the completion qualities and :class:`~sparsedepth.Weights`.
+names, the completion qualities, :class:`~sparsedepth.Weights` and the shift
+check of :mod:`sparsedepth.registration`.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from ..io import MAX_PIXELS
 from ..io import resolve_scale
 from ..objective import DensitySchedule, Weights
 from ..completion import QUALITIES
+from ..registration import check_shift
 from ..solvers import SOLVERS
 from .evaluate import TASKS
 
@@ -91,6 +93,12 @@ class BatchOptions:
         Passed to :func:`~sparsedepth.complete_depth`: ``"fast"`` is the
         real-time mode (with ``solver="auto"``, no ``tol`` or ``max_iter``;
         not with the colorization fill).
+    image_shift : None, "auto" or pair of int
+        Passed to :func:`~sparsedepth.batch.evaluate.evaluate_frame`: move
+        each frame's image ``(dy, dx)`` pixels (after ``downsample``) to
+        register it to the depth, or ``"auto"`` to estimate the shift per
+        frame from its own samples (no shift when a frame has too few);
+        ``None`` (default): no shift.  A pair is stored as a tuple of ints.
 
     Raises
     ------
@@ -122,6 +130,7 @@ class BatchOptions:
     max_pixels: int | None = MAX_PIXELS
     clip_to_observed: bool = True
     quality: str = "default"
+    image_shift: tuple[int, int] | str | None = None
 
     def __post_init__(self):
         if self.task not in TASKS:
@@ -189,6 +198,7 @@ class BatchOptions:
             raise _option_error("clip_to_observed", f"clip_to_observed must be True or False, got "
                                 f"{self.clip_to_observed!r}", TypeError)
         self._check_quality()
+        self._check_image_shift()
         if self.out_dir is not None:
             if not isinstance(self.out_dir, (str, os.PathLike)):
                 raise _option_error("out_dir", f"out_dir must be a str or os.PathLike, got "
@@ -197,6 +207,21 @@ class BatchOptions:
                 raise _option_error("out_dir", f"output folder '{self.out_dir}' does not exist; create it first",
                                     FileNotFoundError)
 
+
+    def _check_image_shift(self):
+        """``image_shift`` is None, ``"auto"`` or a pair of integers, stored as a tuple of ints."""
+        if self.image_shift is None:
+            return
+        if isinstance(self.image_shift, str):
+            if self.image_shift != "auto":
+                raise _option_error("image_shift", f"image_shift must be None, 'auto' or a pair of integers "
+                                    f"(dy, dx), got {self.image_shift!r}")
+            return
+        try:
+            shift = check_shift(self.image_shift, name="image_shift")
+        except TypeError as exc:
+            raise _option_error("image_shift", str(exc), TypeError) from None
+        object.__setattr__(self, "image_shift", shift)  # frozen: a list or NumPy pair is kept as a tuple of ints
 
     def _check_quality(self):
         """``quality`` is a known mode; the fast mode takes no solver settings and no colorization fill."""

@@ -107,7 +107,7 @@ def process_frame(position: int, source, options: BatchOptions) -> dict:
                 keep_count=options.keep_count, seed=np.random.default_rng([options.seed, position]),
                 fill_method=options.fill_method, weights=options.weights, solver=options.solver,
                 tol=options.tol, max_iter=options.max_iter, clip_to_observed=options.clip_to_observed,
-                quality=options.quality,
+                quality=options.quality, image_shift=options.image_shift,
             )
         row.update(height=depth.shape[0], width=depth.shape[1], observed=int(out.observed.sum()),
                    method=out.method, runtime=f"{out.runtime:.3f}",
