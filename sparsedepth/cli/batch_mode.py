@@ -38,7 +38,7 @@ _OPTION_FLAGS = {
     "max_iter": "--max-iter", "depth_scale": "--depth-scale", "downsample": "--downsample", "out_dir": "--outdir",
     "out_format": "--out-format", "out_scale": "--out-scale", "clip_to_observed": "--no-clip",
     "byteorder": "--byteorder", "invalid_values": "--invalid-value", "min_depth": "--min-depth",
-    "max_depth": "--max-depth", "max_pixels": "--max-pixels", "quality": "--fast",
+    "max_depth": "--max-depth", "max_pixels": "--max-pixels", "quality": "--fast", "image_shift": "--image-shift",
 }
 
 
@@ -58,7 +58,7 @@ def _batch_options(args, weights) -> BatchOptions:
             out_scale=args.out_scale if args.out_scale is not None else (args.depth_scale or 1000.0),
             byteorder=args.byteorder, invalid_values=tuple(args.invalid_values or ()), min_depth=args.min_depth,
             max_depth=args.max_depth, max_pixels=args.max_pixels, clip_to_observed=args.clip_to_observed,
-            quality="fast" if args.fast else "default",
+            quality="fast" if args.fast else "default", image_shift=args.image_shift,
         )
     except (ValueError, TypeError, OSError) as exc:
         flag = _OPTION_FLAGS.get(getattr(exc, "option", None))

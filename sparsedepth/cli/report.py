@@ -73,6 +73,7 @@ def build_report(args, argv, outcome, description, weights, weights_given, png_s
         },
         "output_png_scale": png_scale,
         "intrinsics": None if intrinsics is None else dict(zip(("fx", "fy", "cx", "cy"), map(float, intrinsics))),
+        "image_shift": list(outcome.image_shift),
     }
     if getattr(args, "prior", None) is not None:
         report["prior"] = {"file": args.prior, "alignment": args.prior_alignment or "scale_shift"}
@@ -121,11 +122,14 @@ def _uncertainty_summary(outcome) -> dict:
     return summary
 
 
-def print_table(outcome, description, stream) -> None:
-    """The frame, the solver's exit and the nearest-neighbour vs method table, on ``stream``."""
+def print_table(outcome, description, stream, image_shift=None) -> None:
+    """The frame, the image shift (when ``image_shift``, the ``--image-shift`` value, is given), the solver's exit
+    and the nearest-neighbour vs method table, on ``stream``."""
     h, w = outcome.depth.shape
     n_obs = int(outcome.observed.sum())
     print(f"{description}: {h}x{w}, {n_obs} observed pixels ({n_obs / (h * w):.1%})", file=stream)
+    if image_shift is not None:
+        print(_image_shift_line(outcome, image_shift), file=stream)
     if outcome.result is not None:
         r = outcome.result
         print(f"solver {r.solver}: {'converged' if r.converged else 'NOT converged'} after {r.iterations} "
@@ -152,6 +156,18 @@ def print_table(outcome, description, stream) -> None:
     for name, m, t in (("nearest neighbour", outcome.nearest_metrics, outcome.nearest_runtime),
                        (outcome.method, outcome.metrics, outcome.runtime)):
         print(f"{name:<28} {m.rmse:9.4f} {m.mae:9.4f} {m.rel:8.4f} {m.delta1:7.4f} {t:9.2f}", file=stream)
+
+
+def _image_shift_line(outcome, image_shift) -> str:
+    """The table's line of the shift that moved the image, and where it came from."""
+    dy, dx = outcome.image_shift
+    if image_shift != "auto":
+        source = f"--image-shift {image_shift[0]},{image_shift[1]}"
+    elif outcome.image_shift_fallback is None:
+        source = "estimated by --image-shift auto"
+    else:
+        source = "--image-shift auto found too few samples to estimate a shift"
+    return f"image moved by dy = {dy} rows, dx = {dx} columns ({source})"
 
 
 _DPI = 100

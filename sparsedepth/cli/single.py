@@ -21,6 +21,7 @@ from ..batch import evaluate_frame
 from ..datasets import load_motorcycle
 from ..io import KINECT_NYU, read_calib, read_depth, read_image, read_mask
 from ..io import depth_to_points, depth_writer, ply_writer, resolve_scale
+from ..registration import shift_image
 from ..sampling import valid_depth_mask
 from ..visualize import colorize_depth
 from .camera import KINECT_CALIB, frame_intrinsics, intrinsics_source
@@ -229,11 +230,12 @@ def _load_frame(args, mode, stream):
 
 
 def _evaluate(args, image, depth, mask, truth, prior, keep_fraction, weights, stream):
-    """:func:`~sparsedepth.batch.evaluate_frame` with the options; warnings and solver progress go to ``stream``."""
+    """:func:`~sparsedepth.batch.evaluate_frame` with the options; warnings and solver progress go to ``stream``,
+    and so does a warning line when ``--image-shift auto`` found too few samples to estimate a shift from."""
     complete_fill = args.fill_holes and args.fill_method == "complete"
     use_solver = not args.fill_holes or complete_fill
     with warnings_as_lines(stream):
-        return evaluate_frame(
+        outcome = evaluate_frame(
             image, depth, mask=mask, truth=truth, task="fill" if args.fill_holes else "complete",
             keep_fraction=keep_fraction, keep_count=args.keep_count, seed=args.seed,
             fill_method=args.fill_method, weights=weights if use_solver else None,
@@ -242,8 +244,11 @@ def _evaluate(args, image, depth, mask, truth, prior, keep_fraction, weights, st
             clip_to_observed=args.clip_to_observed,
             uncertainty=wants_uncertainty(args), max_uncertainty=args.max_uncertainty,
             quality="fast" if args.fast else "default",
-            prior=prior, prior_alignment=args.prior_alignment or "scale_shift",
+            prior=prior, prior_alignment=args.prior_alignment or "scale_shift", image_shift=args.image_shift,
         )
+    if outcome.image_shift_fallback is not None:
+        print(f"warning: --image-shift auto: {outcome.image_shift_fallback}; the image is not moved", file=stream)
+    return outcome
 
 
 def _array_writer(target, values, png_scale):
@@ -334,6 +339,8 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
                      f"the depth of {'the demo' if mode == 'demo' else '--depth'}")
 
     outcome = _evaluate(args, image, depth, mask, truth, prior, keep_fraction, weights, stderr)
+    if outcome.image_shift != (0, 0):
+        image = shift_image(image, outcome.image_shift)  # the figure and the point cloud show the registered image
 
     # every output is encoded and checked before any file is touched; commit writes all or none
     _check_png_range(outcome.depth, png_scale, png_targets, "the completed depth")
@@ -344,7 +351,7 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
     if any(target.flag == "--outdir" for _, target in planned) and "figure.png" not in kinds and not args.quiet:
         print("note: matplotlib is not installed, no figure.png (pip install 'sparsedepth[plot]')", file=stderr)
 
-    print_table(outcome, description, stdout)
+    print_table(outcome, description, stdout, image_shift=args.image_shift)
     for path in written:
         print(f"wrote {path}", file=stdout)
     return 0
