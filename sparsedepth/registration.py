@@ -25,7 +25,7 @@ from ._validation import (
 )
 from .grid.geodesic import geodesic_fill
 
-__all__ = ["ImageShift", "shift_image", "estimate_image_shift", "check_shift"]
+__all__ = ["ImageShift", "shift_image", "estimate_image_shift", "check_shift", "check_image_shift"]
 
 
 def check_shift(shift, *, name: str = "shift") -> tuple[int, int]:
@@ -37,6 +37,21 @@ def check_shift(shift, *, name: str = "shift") -> tuple[int, int]:
     if len(pair) != 2 or not all(is_int(v) for v in pair):
         raise TypeError(f"{name} must be a pair of integers (dy, dx), got {shift!r}")
     return int(pair[0]), int(pair[1])
+
+
+def check_image_shift(value, *, name: str = "image_shift"):
+    """An ``image_shift`` option: None, ``"auto"`` or ``(dy, dx)`` ints.
+
+    ``ValueError`` for a string other than ``"auto"``, ``TypeError`` for
+    anything else that is not a pair of integers.
+    """
+    if value is None:
+        return None
+    if isinstance(value, str):
+        if value != "auto":
+            raise ValueError(f"{name} must be None, 'auto' or a pair of integers (dy, dx), got {value!r}")
+        return value
+    return check_shift(value, name=name)
 
 
 def shift_image(image, shift) -> np.ndarray:

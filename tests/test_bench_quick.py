@@ -177,3 +177,28 @@ def test_committed_uncertainty_doc_is_a_full_run():
     text = (REPO / "docs" / "uncertainty.md").read_text()
     assert "Command: `python -m bench.uncertainty`" in text or "Command: `python -m bench.uncertainty --out" in text
     assert "Quick mode" not in text
+
+
+def test_registration_calibration_sums_the_densest_inputs_errors_by_sample_count():
+    """The calibrated shift: each densest input's error map weighted by its sample count; sparser inputs ignored."""
+    registration = load("registration")
+    import sparsedepth as sd
+
+    class Fake:
+        def __init__(self, fraction, errors, samples):
+            self.fraction, self.mask = fraction, np.zeros(samples + 5, bool)
+            self.mask[:samples] = True
+            self.estimate = sd.ImageShift(shift=(0, 0), errors=np.asarray(errors, float), gain=1.0)
+
+    centre_wins = np.array([[5.0, 5, 5], [5, 1, 5], [5, 5, 5]])
+    corner_wins = np.array([[0.5, 5, 5], [5, 2, 5], [5, 5, 5]])
+    # a sparse input that prefers the corner strongly is ignored; the two dense ones weigh 30 and 10 samples
+    inputs = [Fake(0.01, np.full((3, 3), 9.0) - 8.9 * (np.arange(9) == 0).reshape(3, 3), 100),
+              Fake(0.1, centre_wins, 30), Fake(0.1, corner_wins, 10)]
+    estimate = registration.calibrated_estimate(inputs)
+    np.testing.assert_allclose(estimate.errors, 30 * centre_wins + 10 * corner_wins)
+    assert estimate.best == (0, 0) and estimate.gain == pytest.approx(1.0)
+    inputs[1] = Fake(0.1, centre_wins, 1)
+    estimate = registration.calibrated_estimate(inputs)
+    assert estimate.best == (-1, -1) and estimate.gain == pytest.approx((1 + 20) / (5 + 5))
+    assert registration.shift_of(estimate, 2.0) == (-1, -1) and registration.shift_of(estimate, 2.2) == (0, 0)

@@ -25,7 +25,7 @@ from ..holes import FILL_METHODS, fill_holes
 from ..holes.fill import hole_fill_weights
 from ..metrics import DepthMetrics, depth_metrics
 from ..objective import DensitySchedule, Weights
-from ..registration import check_shift, estimate_image_shift, shift_image
+from ..registration import check_image_shift, estimate_image_shift, shift_image
 from ..result import CompletionResult
 from ..sampling import sample_mask, valid_depth_mask
 
@@ -107,18 +107,6 @@ def _check_task(task, fill_method, keep_fraction, keep_count) -> None:
         raise ValueError(f"unknown fill method {fill_method!r}; choose one of {list(FILL_METHODS)}")
     if task == "fill" and (keep_fraction is not None or keep_count is not None):
         raise ValueError("keep_fraction/keep_count simulate sparse input; they do not apply to task='fill'")
-
-
-def _check_image_shift(image_shift):
-    """``image_shift`` as None, ``"auto"`` or ``(dy, dx)`` ints; ``ValueError`` for another string, ``TypeError``
-    for anything else that is not a pair of integers."""
-    if image_shift is None:
-        return None
-    if isinstance(image_shift, str):
-        if image_shift != "auto":
-            raise ValueError(f"image_shift must be None, 'auto' or a pair of integers (dy, dx), got {image_shift!r}")
-        return image_shift
-    return check_shift(image_shift, name="image_shift")
 
 
 def _registered(image, sparse, observed, image_shift):
@@ -266,7 +254,7 @@ def evaluate_frame(
         An ``image_shift`` that is not None, a string or a pair of integers.
     """
     _check_task(task, fill_method, keep_fraction, keep_count)
-    image_shift = _check_image_shift(image_shift)
+    image_shift = check_image_shift(image_shift)
     if task == "fill" and fill_method == "colorization" and (uncertainty or max_uncertainty is not None):
         raise ValueError("uncertainty and max_uncertainty estimate the completion solver's error; the colorization "
                          "fill has none: use fill_method='complete'")

@@ -23,7 +23,7 @@ from ..io import MAX_PIXELS
 from ..io import resolve_scale
 from ..objective import DensitySchedule, Weights
 from ..completion import QUALITIES
-from ..registration import check_shift
+from ..registration import check_image_shift
 from ..solvers import SOLVERS
 from .evaluate import TASKS
 
@@ -207,20 +207,12 @@ class BatchOptions:
                 raise _option_error("out_dir", f"output folder '{self.out_dir}' does not exist; create it first",
                                     FileNotFoundError)
 
-
     def _check_image_shift(self):
         """``image_shift`` is None, ``"auto"`` or a pair of integers, stored as a tuple of ints."""
-        if self.image_shift is None:
-            return
-        if isinstance(self.image_shift, str):
-            if self.image_shift != "auto":
-                raise _option_error("image_shift", f"image_shift must be None, 'auto' or a pair of integers "
-                                    f"(dy, dx), got {self.image_shift!r}")
-            return
         try:
-            shift = check_shift(self.image_shift, name="image_shift")
-        except TypeError as exc:
-            raise _option_error("image_shift", str(exc), TypeError) from None
+            shift = check_image_shift(self.image_shift)
+        except (TypeError, ValueError) as exc:
+            raise _option_error("image_shift", str(exc), type(exc)) from None
         object.__setattr__(self, "image_shift", shift)  # frozen: a list or NumPy pair is kept as a tuple of ints
 
     def _check_quality(self):

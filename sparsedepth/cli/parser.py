@@ -376,10 +376,10 @@ def _add_method_options(parser) -> None:
                              "up, left; border repeated) before completion or hole filling, in pixels of the frame "
                              "completed (after --downsample); e.g. 0,-2.  Some RGB-D sensors (Kinect v1, TUM RGB-D) "
                              "leave the depth edges 1-3 px off the image edges.  auto estimates the shift per frame "
-                             "from the frame's own depth samples (sparsedepth.estimate_image_shift; noisy below about "
-                             "5 %% observed, no shift when a frame has too few samples; 100 image-aware fills, about "
-                             "half a minute for 640x480): a sensor's shift is better measured once and given as "
-                             "DY,DX.  The figure and --ply colours use the moved image.")
+                             "from the frame's own depth samples (sparsedepth.estimate_image_shift, 100 image-aware "
+                             "fills: several times the completion's time; no shift when a frame has too few samples); "
+                             "docs/registration.md measures it.  A sensor's shift is better measured once on dense "
+                             "frames and given as DY,DX.  The figure and --ply colours use the moved image.")
 
 
 
