@@ -9,8 +9,9 @@ every seed, :func:`sparsedepth.estimate_image_shift` estimates the image's shift
 the input is then completed with the default weights: unshifted, with the image shifted by the estimate of that
 input, and with one shift per frame calibrated on its densest (10 %) inputs (their held-out errors summed; a
 stand-in for measuring a sensor's shift once on dense frames and giving it to every frame), with the ``min_gain``
-threshold chosen on the tuning frames and without a threshold.  The score is the RMSE on the hidden valid pixels
-over the nearest fill's, as in ``docs/density.md``.
+threshold chosen on the tuning frames and without a threshold.  The calibration's 10 % inputs are samples of the
+same frame whose inputs are scored (two numbers fitted per frame; a sensor's other frames were not available).
+The score is the RMSE on the hidden valid pixels over the nearest fill's, as in ``docs/density.md``.
 
 May import :mod:`sparsedepth`, :mod:`bench.harness` and :mod:`bench.frames`.
 """
@@ -131,7 +132,7 @@ def main(argv=None) -> int:
 def report_text(args, argv, tune, report, inputs, pooled, ways, gain, gain_scores, seconds) -> str:
     lines = H.tuned_report_header("Image-to-depth registration", H.command_line("registration", argv), args, seconds,
                                   tune, report)
-    lines += ["", __doc__.split("\n\n")[2].replace("\n", " "), ""]
+    lines += ["", __doc__.split("\n\n")[3].replace("\n", " "), ""]
     lines += ["`min_gain` on the tuning frames (mean RMSE / nearest; the largest of the best is kept):", ""]
     per_input, calibrated = gain_scores
     lines.append(H.markdown_table(["min_gain", "per-input estimate", "calibrated on the 10 % inputs"],
