@@ -245,6 +245,7 @@ def read_depth(path, *, scale=None, calib=None, key: str | None = None, byteorde
     Examples
     --------
     >>> import numpy as np, tempfile, os
+    >>> from sparsedepth.io import read_depth, write_depth
     >>> fname = os.path.join(tempfile.mkdtemp(), "depth.png")
     >>> write_depth(fname, np.array([[1.5, np.nan]]), scale=1000)
     >>> read_depth(fname, scale="mm")

@@ -130,6 +130,7 @@ def write_depth(path, depth, *, scale=1000.0) -> None:
     Examples
     --------
     >>> import numpy as np, tempfile, os
+    >>> from sparsedepth.io import read_depth, write_depth
     >>> fname = os.path.join(tempfile.mkdtemp(), "depth.npy")
     >>> write_depth(fname, np.array([[1.0, np.nan]]))
     >>> read_depth(fname)
