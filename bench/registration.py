@@ -75,11 +75,9 @@ class Input:
 
 
 def calibrated_estimate(inputs) -> sd.ImageShift:
-    """The shift of the smallest summed held-out error over the densest of ``inputs`` (each sample counts once)."""
+    """The densest of ``inputs`` pooled by :func:`sparsedepth.pool_image_shifts` (each sample counts once)."""
     densest = max(i.fraction for i in inputs)
-    total = sum(i.estimate.errors * np.count_nonzero(i.mask) for i in inputs if i.fraction == densest)
-    return sd.ImageShift(shift=(0, 0), errors=total, gain=float(total[total.shape[0] // 2, total.shape[1] // 2]
-                                                                 / total.min()))
+    return sd.pool_image_shifts([i.estimate for i in inputs if i.fraction == densest])
 
 
 def shift_of(estimate: sd.ImageShift, gain: float) -> tuple[int, int]:

@@ -39,7 +39,7 @@ the parts listed before it, NumPy, SciPy, pyamg, scikit-image and h5py;
     checks and the least-squares scale/shift alignment to the samples.
 ``registration``
     Image-to-depth registration: :func:`shift_image` and the cross-validated
-    :func:`estimate_image_shift` (imports ``grid``).
+    :func:`estimate_image_shift`, :func:`pool_image_shifts` (imports ``grid``).
 ``visualize``
     :func:`colorize_depth`: a depth map as an RGB picture (NumPy only).
 ``objective/``
@@ -91,7 +91,7 @@ from .baselines import biharmonic_fill, colorization_baseline, linear_fill, near
 from .completion import FAST_WEIGHTS, choose_solver, complete_depth
 from .grid.geodesic import geodesic_fill
 from .priors import PRIOR_ALIGNMENTS, align_prior
-from .registration import ImageShift, estimate_image_shift, shift_image
+from .registration import ImageShift, estimate_image_shift, pool_image_shifts, shift_image
 from .metrics import DepthMetrics, depth_metrics
 from .objective.objective import AbsTerm, Objective, QuadraticTerm, RobustTerm, build_objective, edge_weights
 from .objective.robust import PENALTIES, RobustPenalty, robust_penalty
@@ -144,6 +144,7 @@ __all__ = [
     "PRIOR_ALIGNMENTS",
     "shift_image",
     "estimate_image_shift",
+    "pool_image_shifts",
     "ImageShift",
     "linear_fill",
     "biharmonic_fill",

@@ -25,7 +25,8 @@ from ._validation import (
 )
 from .grid.geodesic import geodesic_fill
 
-__all__ = ["ImageShift", "shift_image", "estimate_image_shift", "check_shift", "check_image_shift"]
+__all__ = ["ImageShift", "shift_image", "estimate_image_shift", "pool_image_shifts", "check_shift",
+           "check_image_shift"]
 
 
 def check_shift(shift, *, name: str = "shift") -> tuple[int, int]:
@@ -95,7 +96,7 @@ def shift_image(image, shift) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ImageShift:
-    """The result of :func:`estimate_image_shift`.
+    """The result of :func:`estimate_image_shift` (or of :func:`pool_image_shifts`).
 
     Attributes
     ----------
@@ -107,11 +108,15 @@ class ImageShift:
         ``errors[R + dy, R + dx]`` is that of the shift ``(dy, dx)``.
     gain : float
         ``errors`` of the unshifted image over the smallest ``errors`` (>= 1).
+    samples : int
+        The held-out observations ``errors`` is the mean over (every observed
+        pixel of the input, or of all the pooled inputs).
     """
 
     shift: tuple[int, int]
     errors: np.ndarray
     gain: float
+    samples: int
 
     @property
     def best(self) -> tuple[int, int]:
@@ -171,8 +176,9 @@ def estimate_image_shift(image, sparse_depth, mask=None, *, max_shift: int = 2, 
 
     The estimate rests on the samples next to depth edges: with few samples
     (about 1 % of the pixels or fewer) it is noisy, so a sensor's shift is
-    better estimated once over several of its frames (sum the ``errors`` of
-    each and take the smallest) and then given to every frame.
+    better estimated once over several of its frames (:func:`pool_image_shifts`
+    sums the ``errors`` of each, weighted by ``samples``, and takes the
+    smallest) and then given to every frame.
 
     Examples
     --------
@@ -216,13 +222,96 @@ def estimate_image_shift(image, sparse_depth, mask=None, *, max_shift: int = 2, 
                 fill = geodesic_fill(moved, depth, kept, contrast=fill_contrast)
                 total += float(np.abs(fill.ravel()[samples[held]] - values[held]).sum())
             errors[i, j] = total / samples.size
+    return _chosen(errors, samples.size, min_gain)
+
+
+def pool_image_shifts(estimates, *, min_gain: float = 1.0) -> ImageShift:
+    """One shift from several estimates (e.g. of frames of one sensor): their errors averaged over all their samples.
+
+    Parameters
+    ----------
+    estimates : sequence of ImageShift
+        From :func:`estimate_image_shift` (or earlier pools), all with error
+        maps of the same size (the same ``max_shift``).
+    min_gain : float
+        The pooled shift is returned only if the unshifted image's pooled
+        error is at least ``min_gain`` times the smallest; otherwise
+        ``(0, 0)``.
+
+    Returns
+    -------
+    ImageShift
+        ``errors`` the pooled error map, ``samples`` the total of the
+        estimates' samples, ``gain`` and ``shift`` from the pooled errors as
+        in :func:`estimate_image_shift`.
+
+    Raises
+    ------
+    ValueError
+        If ``estimates`` is empty, the error maps differ in size, a
+        ``samples`` count is not positive or ``min_gain < 1``.
+    TypeError
+        If an item is not an :class:`ImageShift` or ``min_gain`` is not a
+        number.
+
+    Notes
+    -----
+    With ``E_i`` the error map of estimate ``i`` (a mean over its ``n_i``
+    held-out samples)::
+
+        E = Σ_i n_i E_i / Σ_i n_i,        n = Σ_i n_i,
+
+    the mean held-out error over every sample of every estimate, each
+    sample counting once.  With ``E_0`` the entry of the unshifted image and
+    ``s*`` the candidate of the smallest entry (ties: the shortest shift),
+    ``gain = E_0 / min E`` and ``shift = s*`` if ``gain > 1`` and
+    ``gain >= min_gain``, else ``(0, 0)``.  A single estimate pools to
+    itself (with ``min_gain`` applied again).
+
+    An estimate from a few sparse samples is noisy; summing the held-out
+    errors of several inputs before taking the smallest is what makes a
+    sensor's shift reliable (``docs/registration.md``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> a = ImageShift(shift=(0, 1), errors=np.array([[3.0, 3, 3], [3, 2, 1], [3, 3, 3]]), gain=2.0, samples=30)
+    >>> b = ImageShift(shift=(0, 0), errors=np.array([[3.0, 3, 3], [3, 1, 3], [3, 3, 3]]), gain=1.0, samples=10)
+    >>> pooled = pool_image_shifts([a, b])
+    >>> pooled.errors[1]
+    array([3.  , 1.75, 1.5 ])
+    >>> pooled.shift, pooled.samples, round(pooled.gain, 3)
+    ((0, 1), 40, 1.167)
+    """
+    min_gain = check_nonnegative_real(min_gain, name="min_gain")
+    if min_gain < 1:
+        raise ValueError(f"min_gain must be >= 1, got {min_gain!r}")
+    estimates = list(estimates)
+    if not estimates:
+        raise ValueError("pool_image_shifts needs at least one estimate")
+    for item in estimates:
+        if not isinstance(item, ImageShift):
+            raise TypeError(f"pool_image_shifts pools ImageShift objects, got {type(item).__name__}")
+    shape = np.shape(estimates[0].errors)
+    for item in estimates:
+        if np.shape(item.errors) != shape:
+            raise ValueError(f"the error maps must have the same size (the same max_shift); got {shape} and "
+                             f"{np.shape(item.errors)}")
+        if not is_int(item.samples) or item.samples < 1:
+            raise ValueError(f"every estimate needs a positive samples count, got {item.samples!r}")
+    samples = sum(int(item.samples) for item in estimates)
+    errors = sum(np.asarray(item.errors, dtype=float) * int(item.samples) for item in estimates) / samples
+    return _chosen(errors, samples, min_gain)
+
+
+def _chosen(errors, samples: int, min_gain: float) -> ImageShift:
+    """The ImageShift of an error map: its gain, and its best candidate if the gain passes ``min_gain``."""
+    R = errors.shape[0] // 2
     smallest = float(errors.min())
-    unshifted = float(errors[max_shift, max_shift])
+    unshifted = float(errors[R, R])
     gain = unshifted / smallest if smallest > 0 else (1.0 if unshifted == 0 else np.inf)
-    estimate = ImageShift(shift=(0, 0), errors=errors, gain=gain)
-    if gain > 1 and gain >= min_gain:
-        estimate = ImageShift(shift=_smallest_best(errors), errors=errors, gain=gain)
-    return estimate
+    shift = _smallest_best(errors) if gain > 1 and gain >= min_gain else (0, 0)
+    return ImageShift(shift=shift, errors=errors, gain=gain, samples=int(samples))
 
 
 def _smallest_best(errors) -> tuple[int, int]:

@@ -186,9 +186,8 @@ def test_registration_calibration_sums_the_densest_inputs_errors_by_sample_count
 
     class Fake:
         def __init__(self, fraction, errors, samples):
-            self.fraction, self.mask = fraction, np.zeros(samples + 5, bool)
-            self.mask[:samples] = True
-            self.estimate = sd.ImageShift(shift=(0, 0), errors=np.asarray(errors, float), gain=1.0)
+            self.fraction = fraction
+            self.estimate = sd.ImageShift(shift=(0, 0), errors=np.asarray(errors, float), gain=1.0, samples=samples)
 
     centre_wins = np.array([[5.0, 5, 5], [5, 1, 5], [5, 5, 5]])
     corner_wins = np.array([[0.5, 5, 5], [5, 2, 5], [5, 5, 5]])
@@ -196,8 +195,8 @@ def test_registration_calibration_sums_the_densest_inputs_errors_by_sample_count
     inputs = [Fake(0.01, np.full((3, 3), 9.0) - 8.9 * (np.arange(9) == 0).reshape(3, 3), 100),
               Fake(0.1, centre_wins, 30), Fake(0.1, corner_wins, 10)]
     estimate = registration.calibrated_estimate(inputs)
-    np.testing.assert_allclose(estimate.errors, 30 * centre_wins + 10 * corner_wins)
-    assert estimate.best == (0, 0) and estimate.gain == pytest.approx(1.0)
+    np.testing.assert_allclose(estimate.errors, (30 * centre_wins + 10 * corner_wins) / 40)
+    assert estimate.samples == 40 and estimate.best == (0, 0) and estimate.gain == pytest.approx(1.0)
     inputs[1] = Fake(0.1, centre_wins, 1)
     estimate = registration.calibrated_estimate(inputs)
     assert estimate.best == (-1, -1) and estimate.gain == pytest.approx((1 + 20) / (5 + 5))

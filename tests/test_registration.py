@@ -136,3 +136,78 @@ def test_estimate_needs_two_samples_per_fold_and_matching_shapes():
         sd.estimate_image_shift(image, np.where(mask, 1.0, 0.0), mask, folds=4)
     with pytest.raises(ValueError):
         sd.estimate_image_shift(np.zeros((9, 10)), np.ones((10, 10)))
+
+
+def test_the_estimate_counts_its_samples():
+    image, sparse, mask = _scene((0, 2), shape=(24, 30), regions=6)
+    assert sd.estimate_image_shift(image, sparse, mask, max_shift=1).samples == int(mask.sum())
+
+
+def _made(errors, samples, shift=(0, 0)):
+    return sd.ImageShift(shift=shift, errors=np.asarray(errors, float), gain=1.0, samples=samples)
+
+
+def test_pool_averages_the_error_maps_weighted_by_their_samples():
+    rng = np.random.default_rng(5)
+    maps = [rng.uniform(1.0, 2.0, (5, 5)) for _ in range(3)]
+    counts = [7, 40, 13]
+    pooled = sd.pool_image_shifts([_made(e, n) for e, n in zip(maps, counts)])
+    expected = (7 * maps[0] + 40 * maps[1] + 13 * maps[2]) / 60
+    np.testing.assert_allclose(pooled.errors, expected, rtol=1e-12)
+    assert pooled.samples == 60
+    assert pooled.gain == pytest.approx(expected[2, 2] / expected.min(), rel=1e-12)
+    k = np.unravel_index(np.argmin(expected), expected.shape)
+    best = (int(k[0]) - 2, int(k[1]) - 2)
+    assert pooled.best == best
+    assert pooled.shift == (best if expected[2, 2] > expected.min() else (0, 0))
+
+
+def test_pool_lets_many_samples_outvote_a_strong_sparse_preference():
+    centre = np.array([[5.0, 5, 5], [5, 1, 5], [5, 5, 5]])   # unshifted best by 1
+    corner = np.array([[0.5, 5, 5], [5, 2, 5], [5, 5, 5]])   # (-1, -1) best by 1.5
+    # 30 x 1 + 10 x 2 = 50 at the centre against 30 x 5 + 10 x 0.5 = 155 at the corner: no shift
+    pooled = sd.pool_image_shifts([_made(centre, 30), _made(corner, 10, shift=(-1, -1))])
+    assert pooled.shift == (0, 0) and pooled.gain == pytest.approx(1.0)
+    np.testing.assert_allclose(pooled.errors[1, 1], 50 / 40)
+    # 1 x 1 + 10 x 2 = 21 at the centre against 1 x 5 + 10 x 0.5 = 10 at the corner: the corner, gain 2.1
+    pooled = sd.pool_image_shifts([_made(centre, 1), _made(corner, 10)])
+    assert pooled.shift == (-1, -1) and pooled.gain == pytest.approx(2.1)
+    np.testing.assert_allclose(pooled.errors[0, 0], 10 / 11)
+
+
+def test_pool_min_gain_keeps_the_unshifted_image_unless_the_pool_wins_by_that_factor():
+    centre = np.array([[5.0, 5, 5], [5, 1, 5], [5, 5, 5]])
+    corner = np.array([[0.5, 5, 5], [5, 2, 5], [5, 5, 5]])
+    estimates = [_made(centre, 1), _made(corner, 10)]
+    assert sd.pool_image_shifts(estimates, min_gain=2.0).shift == (-1, -1)
+    held = sd.pool_image_shifts(estimates, min_gain=2.2)
+    assert held.shift == (0, 0) and held.best == (-1, -1) and held.gain == pytest.approx(2.1)
+
+
+def test_pooling_one_estimate_gives_that_estimate():
+    image, sparse, mask = _scene((0, 2))
+    estimate = sd.estimate_image_shift(image, sparse, mask, max_shift=2)
+    pooled = sd.pool_image_shifts([estimate])
+    assert pooled.shift == estimate.shift == (0, -2)
+    np.testing.assert_allclose(pooled.errors, estimate.errors, rtol=1e-12)
+    assert pooled.samples == estimate.samples and pooled.gain == pytest.approx(estimate.gain, rel=1e-12)
+    held = sd.estimate_image_shift(image, sparse, mask, max_shift=2, min_gain=estimate.gain * 1.01)
+    assert sd.pool_image_shifts([held], min_gain=estimate.gain * 1.01).shift == held.shift == (0, 0)
+
+
+def test_pooling_two_frames_of_one_offset_finds_it():
+    estimates = [sd.estimate_image_shift(*_scene((1, 0), seed=s), max_shift=2) for s in (0, 1)]
+    pooled = sd.pool_image_shifts(estimates)
+    assert pooled.shift == (-1, 0)
+    assert pooled.samples == sum(e.samples for e in estimates)
+
+
+def test_pool_refuses_nothing_other_types_and_maps_of_different_sizes():
+    with pytest.raises(ValueError, match="at least one"):
+        sd.pool_image_shifts([])
+    with pytest.raises(TypeError, match="ImageShift"):
+        sd.pool_image_shifts([_made(np.ones((3, 3)), 4), np.ones((3, 3))])
+    with pytest.raises(ValueError, match="same size"):
+        sd.pool_image_shifts([_made(np.ones((3, 3)), 4), _made(np.ones((5, 5)), 4)])
+    with pytest.raises(ValueError, match="min_gain"):
+        sd.pool_image_shifts([_made(np.ones((3, 3)), 4)], min_gain=0.5)
