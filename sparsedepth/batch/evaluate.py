@@ -29,7 +29,7 @@ from ..registration import check_image_shift, estimate_image_shift, shift_image
 from ..result import CompletionResult
 from ..sampling import sample_mask, valid_depth_mask
 
-__all__ = ["TASKS", "FrameOutcome", "evaluate_frame"]
+__all__ = ["TASKS", "FrameOutcome", "evaluate_frame", "frame_observations"]
 
 #: ``"complete"``: depth completion from (possibly simulated) sparse input;
 #: ``"fill"``: hole filling of raw depth (every valid pixel observed).
@@ -137,6 +137,24 @@ def _valid_pixels(image, values, mask) -> np.ndarray:
     if not valid.any():
         raise ValueError("depth has no valid pixel (all 0, NaN or inf, or outside the mask); nothing to complete from")
     return valid
+
+
+def frame_observations(image, depth, *, mask=None, keep_fraction=None, keep_count=None, seed=0):
+    """The observations :func:`evaluate_frame` gives the method: ``(values, valid, observed, sparse)``.
+
+    ``values`` is ``depth`` as float64, ``valid`` its valid pixels (within
+    ``mask``), ``observed`` those kept by the sampling (all of ``valid``
+    without ``keep_fraction``/``keep_count``) and ``sparse`` the depth at
+    ``observed``, NaN elsewhere.  ``ValueError`` for inconsistent shapes or
+    no valid pixel.
+    """
+    values = _depth_2d(depth, "depth")
+    valid = _valid_pixels(image, values, mask)
+    if keep_fraction is not None or keep_count is not None:
+        observed = sample_mask(np.where(valid, values, np.nan), fraction=keep_fraction, count=keep_count, seed=seed)
+    else:
+        observed = valid
+    return values, valid, observed, np.where(observed, values, np.nan)
 
 
 def _run_method(image, sparse, observed, task, fill_method, solve_options):
@@ -261,20 +279,13 @@ def evaluate_frame(
     if task == "fill" and fill_method == "colorization" and prior is not None:
         raise ValueError("prior is completed around by the solver; the colorization fill does not take it: use "
                          "fill_method='complete'")
-    values = _depth_2d(depth, "depth")
-    valid = _valid_pixels(image, values, mask)
-    sampled = keep_fraction is not None or keep_count is not None
+    values, valid, observed, sparse = frame_observations(image, depth, mask=mask, keep_fraction=keep_fraction,
+                                                         keep_count=keep_count, seed=seed)
     if truth is not None:
         truth = _depth_2d(truth, "truth")
         check_same_shape(truth.shape, values.shape, "truth", "depth")
-    elif sampled:
+    elif keep_fraction is not None or keep_count is not None:
         truth = np.where(valid, values, np.nan)
-
-    if sampled:
-        observed = sample_mask(np.where(valid, values, np.nan), fraction=keep_fraction, count=keep_count, seed=seed)
-    else:
-        observed = valid
-    sparse = np.where(observed, values, np.nan)
     image, shift, fallback = _registered(image, sparse, observed, image_shift)
 
     dense, method, result, runtime = _run_method(

@@ -96,9 +96,13 @@ class BatchOptions:
     image_shift : None, "auto" or pair of int
         Passed to :func:`~sparsedepth.batch.evaluate.evaluate_frame`: move
         each frame's image ``(dy, dx)`` pixels (after ``downsample``) to
-        register it to the depth, or ``"auto"`` to estimate the shift per
-        frame from its own samples (no shift when a frame has too few);
-        ``None`` (default): no shift.  A pair is stored as a tuple of ints.
+        register it to the depth.  ``"auto"``: the batch measures one shift
+        on up to 8 of its frames, spread evenly over the batch (each read and
+        sampled as it is completed, done frames included, so that a rerun
+        measures the same shift), pools their estimates
+        (:func:`~sparsedepth.pool_image_shifts`) and uses it for every frame;
+        (0, 0) when no frame gives an estimate (too few samples).  ``None``
+        (default): no shift.  A pair is stored as a tuple of ints.
 
     Raises
     ------
@@ -250,6 +254,13 @@ class BatchSummary:
         no row is scored.
     scored : int
         Rows in that mean.
+    image_shift : tuple of int or None
+        The ``(dy, dx)`` every frame's image was moved by: the option's pair,
+        or with ``image_shift="auto"`` the shift measured for the batch
+        ((0, 0) when no frame gave an estimate); None without the option.
+    image_shift_frames : int or None
+        With ``image_shift="auto"``: the frames the shift was measured on
+        (those that gave an estimate); None otherwise.
     """
 
     total: int
@@ -259,3 +270,5 @@ class BatchSummary:
     skipped: int = 0
     rmse_ratio: float | None = None
     scored: int = 0
+    image_shift: tuple[int, int] | None = None
+    image_shift_frames: int | None = None

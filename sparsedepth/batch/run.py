@@ -11,10 +11,13 @@ Depth V2 labeled ``.mat`` (:func:`~sparsedepth.batch.nyu_frames`) - on any
 is read inside the worker, which writes its output atomically and returns
 only a small row of metrics; the driver alone writes the CSV, one row per
 frame, flushed as the frame finishes.  A rerun with the same settings
-resumes: frames already done are skipped and the others run.  The library
+resumes: frames already done are skipped and the others run.  With
+``image_shift="auto"`` one image shift is measured on a few frames of the
+batch before the frames run, and used for all of them.  The library
 never prints: progress goes to an optional callback.
 
-Imports NumPy and the other modules of :mod:`sparsedepth.batch`.
+Imports NumPy, :mod:`sparsedepth.registration` (the pooling of shift
+estimates) and the other modules of :mod:`sparsedepth.batch`.
 """
 
 from __future__ import annotations
@@ -31,13 +34,17 @@ from typing import Callable, Sequence
 import numpy as np
 
 from .._validation import is_int
+from ..registration import pool_image_shifts
 from . import csvlog
 from .frames import absolute_frame
 from .options import BatchOptions, BatchSummary
 from .pool import default_workers, new_pool, stop_pool
-from .worker import error_text, process_frame, remove_temporaries
+from .worker import error_text, estimate_frame_shift, process_frame, remove_temporaries
 
-__all__ = ["run_batch"]
+__all__ = ["run_batch", "SHIFT_FRAMES", "shift_positions"]
+
+#: With ``image_shift="auto"``, the batch's one shift is measured on this many of its frames (at most).
+SHIFT_FRAMES = 8
 
 
 def _is_done(row: dict, options: BatchOptions) -> bool:
@@ -167,6 +174,69 @@ def _checked_options(options, max_workers, max_in_flight) -> BatchOptions:
     return options
 
 
+def shift_positions(n: int, k: int = SHIFT_FRAMES) -> list[int]:
+    """Positions of the (at most ``k``) frames of ``n`` a batch measures its image shift on: spread evenly.
+
+    ``round(linspace(0, n - 1, min(k, n)))``: the first and the last frame
+    and the others evenly between (distinct, as the step is at least 1).
+    """
+    return [int(p) for p in np.round(np.linspace(0, n - 1, min(k, n)))]
+
+
+def _measured_shift(frames, options, executor, max_workers):
+    """(the pooled ImageShift or None, frames it pools) of the frames at :func:`shift_positions`.
+
+    Each estimate runs on the executor (a pool of ``max_workers`` made and
+    ended here by default); one the executor fails to return is computed in
+    this process, so that the measurement does not depend on the executor.
+    """
+    positions = shift_positions(len(frames))
+    own = executor is None
+    pool = new_pool(min(max_workers or default_workers(), len(positions))) if own else executor
+    futures = []
+    stopped = False
+    try:
+        for position in positions:
+            try:
+                futures.append(pool.submit(estimate_frame_shift, position, frames[position], options))
+            except Exception:  # noqa: BLE001 - an executor that takes no work: estimated here
+                futures.append(None)
+        estimates = []
+        for position, future in zip(positions, futures):
+            try:
+                if future is None:
+                    raise CancelledError
+                estimates.append(future.result())
+            except (Exception, CancelledError):  # noqa: BLE001 - the executor failed, not the frame
+                estimates.append(estimate_frame_shift(position, frames[position], options))
+    except BaseException:
+        stopped = True
+        raise
+    finally:
+        if own:
+            stop_pool(pool, terminate=stopped)
+        elif stopped:
+            for future in futures:
+                if future is not None:
+                    future.cancel()
+    estimates = [e for e in estimates if e is not None]
+    return (pool_image_shifts(estimates) if estimates else None), len(estimates)
+
+
+def _batch_shift(frames, options, executor, max_workers):
+    """(options with the batch's shift, the shift or None, frames measured on or None).
+
+    ``image_shift="auto"`` becomes the shift pooled over the frames at
+    :func:`shift_positions` ((0, 0) when none gives an estimate); other
+    options are as given.
+    """
+    if options.image_shift != "auto":
+        return options, options.image_shift, None
+    pooled, measured = _measured_shift(frames, options, executor, max_workers)
+    shift = (0, 0) if pooled is None else pooled.shift
+    return dataclasses.replace(options, image_shift=shift), shift, measured
+
+
 def _summary(frames, latest, csv_path, skipped) -> BatchSummary:
     rows = [latest[f.name] for f in frames if f.name in latest]
     succeeded = sum(row.get("status") == "ok" for row in rows)
@@ -288,6 +358,17 @@ def run_batch(
     and the frames it was running are run once more before they count as
     failed.
 
+    *Image shift.*  With ``options.image_shift="auto"`` the batch first
+    measures one shift: :func:`estimate_frame_shift` on the frames at
+    :func:`shift_positions` (up to :data:`SHIFT_FRAMES`, spread evenly over
+    ``frames``, done frames included), each read and sampled as it is
+    completed; the estimates are pooled (:func:`~sparsedepth.pool_image_shifts`)
+    and every frame runs with that shift ((0, 0) when no frame gives an
+    estimate).  The measurement depends only on the frames and the options,
+    so a rerun uses the same shift; it runs on the executor, also when
+    every frame is done (the summary reports it).  The settings file keeps
+    ``"auto"``.
+
     Memory is bounded by the frames in flight: each worker reads its own
     frame from disk and returns only a row.
     """
@@ -304,6 +385,8 @@ def run_batch(
         done_before = {name for name, row in latest.items() if _is_done(row, options)}
         todo = [position for position, name in enumerate(names) if name not in done_before]
         remove_temporaries([names[p] for p in todo], options)
+        options, shift, measured = _batch_shift(frames, options, executor, max_workers)
         if todo:
             _run_frames(frames, todo, csv_path, options, executor, max_workers, max_in_flight, progress, latest)
-    return _summary(frames, latest, csv_path, skipped=len(frames) - len(todo))
+    summary = _summary(frames, latest, csv_path, skipped=len(frames) - len(todo))
+    return dataclasses.replace(summary, image_shift=shift, image_shift_frames=measured)

@@ -4,10 +4,13 @@
 a Dask task): it reads the frame, runs
 :func:`~sparsedepth.batch.evaluate_frame`, writes the output depth
 atomically and returns the row as a dict.  A failing frame becomes an error
-row, never an exception.
+row, never an exception.  :func:`estimate_frame_shift` reads and samples a
+frame the same way and estimates its image shift (for a batch's
+``image_shift="auto"``).
 
-Imports NumPy, :mod:`sparsedepth.io`, :mod:`sparsedepth.result` and the
-frame, option and evaluation modules of :mod:`sparsedepth.batch`.
+Imports NumPy, :mod:`sparsedepth.io`, :mod:`sparsedepth.registration`,
+:mod:`sparsedepth.result` and the frame, option and evaluation modules of
+:mod:`sparsedepth.batch`.
 """
 
 from __future__ import annotations
@@ -22,11 +25,12 @@ import numpy as np
 
 from ..io import NYUDepthV2Labeled, read_depth, read_image, read_nyu_h5, write_depth
 from ..result import ClampWarning
-from .evaluate import evaluate_frame
+from ..registration import ImageShift, estimate_image_shift
+from .evaluate import evaluate_frame, frame_observations
 from .frames import NYUFrame, NYUH5Frame
 from .options import BatchOptions
 
-__all__ = ["process_frame", "output_path", "remove_temporaries", "error_text", "one_line"]
+__all__ = ["process_frame", "estimate_frame_shift", "output_path", "remove_temporaries", "error_text", "one_line"]
 
 
 def _read_frame(source, options: BatchOptions):
@@ -52,6 +56,40 @@ def _read_frame(source, options: BatchOptions):
     depth = read_depth(source.depth, **reader)
     truth = None if source.truth is None else read_depth(source.truth, **reader)
     return image, depth, truth
+
+
+def _prepared(source, options: BatchOptions):
+    """(image, depth, truth) of one frame as the batch completes it: read, then ``options.downsample``."""
+    image, depth, truth = _read_frame(source, options)
+    step = options.downsample
+    if step > 1:
+        image, depth = image[::step, ::step], depth[::step, ::step]
+        truth = None if truth is None else truth[::step, ::step]
+    return image, depth, truth
+
+
+def _sampling_seed(position: int, options: BatchOptions) -> np.random.Generator:
+    """The sampling seed of the frame at ``position``: ``default_rng([options.seed, position])``."""
+    return np.random.default_rng([options.seed, position])
+
+
+def estimate_frame_shift(position: int, source, options: BatchOptions) -> ImageShift | None:
+    """Worker: the image shift estimated from one frame's observations, None if the frame gives none.
+
+    The frame is read, downsampled and sampled exactly as :func:`process_frame`
+    does (same seed), and :func:`~sparsedepth.estimate_image_shift` runs at its
+    defaults on the observations the method would be given.  A frame that
+    fails to read, or has too few observations to estimate from, gives None
+    (its own row reports a read error when it runs).
+    """
+    try:
+        image, depth, _ = _prepared(source, options)
+        _, _, observed, sparse = frame_observations(image, depth, keep_fraction=options.keep_fraction,
+                                                    keep_count=options.keep_count,
+                                                    seed=_sampling_seed(position, options))
+        return estimate_image_shift(image, sparse, observed)
+    except Exception:  # noqa: BLE001 - a frame without an estimate is left out of the measurement
+        return None
 
 
 def _fmt(value):
@@ -94,17 +132,13 @@ def process_frame(position: int, source, options: BatchOptions) -> dict:
     """
     row = {"position": position, "name": source.name, "status": "ok"}
     try:
-        image, depth, truth = _read_frame(source, options)
-        step = options.downsample
-        if step > 1:
-            image, depth = image[::step, ::step], depth[::step, ::step]
-            truth = None if truth is None else truth[::step, ::step]
+        image, depth, truth = _prepared(source, options)
         with warnings.catch_warnings():
             # the row's "clamped" column carries it; a worker never prints
             warnings.simplefilter("ignore", ClampWarning)
             out = evaluate_frame(
                 image, depth, truth=truth, task=options.task, keep_fraction=options.keep_fraction,
-                keep_count=options.keep_count, seed=np.random.default_rng([options.seed, position]),
+                keep_count=options.keep_count, seed=_sampling_seed(position, options),
                 fill_method=options.fill_method, weights=options.weights, solver=options.solver,
                 tol=options.tol, max_iter=options.max_iter, clip_to_observed=options.clip_to_observed,
                 quality=options.quality, image_shift=options.image_shift,

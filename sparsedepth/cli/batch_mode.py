@@ -176,6 +176,7 @@ def _on_signal(signum, frame):  # noqa: ARG001 - signal handler API
 def run_batch_mode(args, stderr) -> int:
     """Run the batch of the options; print the summary line; return the exit code (see :mod:`sparsedepth.cli.command`).
 
+    With ``--image-shift`` a second line gives the shift the batch used.
     SIGINT and SIGTERM stop the batch with its finished rows kept (exit codes
     130 and 143); the previous signal handlers are restored at the end.
     """
@@ -218,4 +219,9 @@ def run_batch_mode(args, stderr) -> int:
         f"; mean RMSE / nearest-neighbour RMSE {summary.rmse_ratio:.3f} over {summary.scored} scored frames"
     print(f"{summary.succeeded} of {summary.total} frames done, {summary.failed} failed, {summary.skipped} skipped "
           f"(done before){ratio}; metrics in {summary.csv_path}", file=sys.stdout)
+    if summary.image_shift is not None:
+        dy, dx = summary.image_shift
+        how = "given" if summary.image_shift_frames is None else \
+            f"measured on {summary.image_shift_frames} frame{'' if summary.image_shift_frames == 1 else 's'}"
+        print(f"image shift for the batch: dy = {dy}, dx = {dx} ({how})", file=sys.stdout)
     return 1 if summary.failed else 0

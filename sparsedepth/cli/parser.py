@@ -375,11 +375,13 @@ def _add_method_options(parser) -> None:
                         help="register the image to the depth: move it DY rows down and DX columns right (negative: "
                              "up, left; border repeated) before completion or hole filling, in pixels of the frame "
                              "completed (after --downsample); e.g. 0,-2.  Some RGB-D sensors (Kinect v1, TUM RGB-D) "
-                             "leave the depth edges 1-3 px off the image edges.  auto estimates the shift per frame "
-                             "from the frame's own depth samples (sparsedepth.estimate_image_shift, 100 image-aware "
-                             "fills: several times the completion's time; no shift when a frame has too few samples); "
-                             "docs/registration.md measures it.  A sensor's shift is better measured once on dense "
-                             "frames and given as DY,DX.  The figure and --ply colours use the moved image.")
+                             "leave the depth edges 1-3 px off the image edges.  auto estimates the shift from the "
+                             "frame's own depth samples (sparsedepth.estimate_image_shift, 100 image-aware fills: "
+                             "several times the completion's time; no shift when a frame has too few samples); in a "
+                             "batch, auto measures one shift on up to 8 of its frames (spread evenly, estimates "
+                             "pooled by sparsedepth.pool_image_shifts) and uses it for all.  docs/registration.md "
+                             "measures it.  A sensor's shift is better measured once on dense frames and given as "
+                             "DY,DX.  The figure and --ply colours use the moved image.")
 
 
 
