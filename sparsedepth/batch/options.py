@@ -255,11 +255,11 @@ class BatchSummary:
     scored : int
         Rows in that mean.
     image_shift : tuple of int or None
-        The ``(dy, dx)`` every frame's image was moved by: the option's pair,
+        The ``(dy, dx)`` every frame's image is moved by: the option's pair,
         or with ``image_shift="auto"`` the shift measured for the batch
         ((0, 0) when no frame gave an estimate); None without the option.
     image_shift_frames : int or None
-        With ``image_shift="auto"``: the frames the shift was measured on
+        With ``image_shift="auto"``: the frames the shift is measured on
         (those that gave an estimate); None otherwise.
     """
 
