@@ -42,6 +42,7 @@ __all__ = [
     "is_int",
     "is_real",
     "check_count",
+    "check_nonnegative_count",
     "check_positive_real",
     "check_nonnegative_real",
     "check_positive_finite",
@@ -77,6 +78,13 @@ def check_count(value, *, name: str) -> int:
     """Return ``value`` as an int; ``ValueError`` unless it is an integer (not a bool) ``>= 1``."""
     if not is_int(value) or value < 1:
         raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
+def check_nonnegative_count(value, *, name: str) -> int:
+    """Return ``value`` as an int; ``ValueError`` unless it is an integer (not a bool) ``>= 0``."""
+    if not is_int(value) or value < 0:
+        raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
     return int(value)
 
 

@@ -19,6 +19,7 @@ from ._validation import (
     as_depth_and_mask,
     as_float_image,
     check_count,
+    check_nonnegative_count,
     check_nonnegative_real,
     check_same_shape,
     is_int,
@@ -158,10 +159,11 @@ def estimate_image_shift(image, sparse_depth, mask=None, *, max_shift: int = 2, 
     ------
     ValueError
         For inconsistent shapes, a bad image, fewer than ``2 * folds``
-        observed pixels, ``max_shift < 0``, ``folds < 2``, a negative
-        ``fill_contrast``, ``min_gain < 1`` or a negative ``seed``.
+        observed pixels, ``max_shift``, ``folds`` or ``seed`` that is not an
+        integer (``max_shift, seed >= 0``, ``folds >= 2``), a negative
+        ``fill_contrast`` or ``min_gain < 1``.
     TypeError
-        If a count, ``seed`` or ``min_gain`` is not a number of the right kind.
+        If ``fill_contrast`` or ``min_gain`` is not a number.
 
     Notes
     -----
@@ -189,7 +191,7 @@ def estimate_image_shift(image, sparse_depth, mask=None, *, max_shift: int = 2, 
     >>> estimate_image_shift(image, np.where(mask, depth, 0), mask).shift
     (0, -2)
     """
-    max_shift = _check_nonnegative_int(max_shift, "max_shift")
+    max_shift = check_nonnegative_count(max_shift, name="max_shift")
     folds = check_count(folds, name="folds")
     if folds < 2:
         raise ValueError(f"folds must be an integer >= 2, got {folds}")
@@ -197,7 +199,7 @@ def estimate_image_shift(image, sparse_depth, mask=None, *, max_shift: int = 2, 
     min_gain = check_nonnegative_real(min_gain, name="min_gain")
     if min_gain < 1:
         raise ValueError(f"min_gain must be >= 1, got {min_gain!r}")
-    seed = _check_nonnegative_int(seed, "seed")
+    seed = check_nonnegative_count(seed, name="seed")
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     img = as_float_image(image)
     check_same_shape(img.shape[:2], depth.shape, "image", "sparse_depth")
@@ -321,12 +323,3 @@ def _smallest_best(errors) -> tuple[int, int]:
     order = np.lexsort(((dy ** 2 + dx ** 2).ravel(), errors.ravel()))
     k = int(order[0])
     return int(dy.ravel()[k]), int(dx.ravel()[k])
-
-
-def _check_nonnegative_int(value, name: str) -> int:
-    """``value`` as an int: ``TypeError`` unless an integer (not a bool), ``ValueError`` if negative."""
-    if not is_int(value):
-        raise TypeError(f"{name} must be an integer >= 0, got {type(value).__name__} {value!r}")
-    if value < 0:
-        raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
-    return int(value)

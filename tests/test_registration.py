@@ -114,13 +114,14 @@ def test_the_estimate_is_deterministic_for_a_seed():
 
 @pytest.mark.parametrize("kwargs, error, match", [
     (dict(max_shift=-1), ValueError, "max_shift"),
-    (dict(max_shift=1.5), TypeError, "max_shift"),
+    (dict(max_shift=1.5), ValueError, "max_shift"),
     (dict(folds=1), ValueError, "folds"),
     (dict(fill_contrast=-1.0), ValueError, "fill_contrast"),
     (dict(fill_contrast="5"), TypeError, "fill_contrast"),
     (dict(min_gain=0.5), ValueError, "min_gain"),
     (dict(seed=-1), ValueError, "seed"),
-    (dict(seed=1.0), TypeError, "seed"),
+    (dict(seed=1.0), ValueError, "seed"),
+    (dict(seed=True), ValueError, "seed"),
 ])
 def test_estimate_refuses_bad_arguments(kwargs, error, match):
     image, sparse, mask = _scene((0, 0), shape=(16, 16), regions=4)

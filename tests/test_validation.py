@@ -232,3 +232,19 @@ def test_clamp_warning_points_at_the_caller():
     assert clamp[0].filename == __file__
     assert f"{result.clamped} of 120 pixels" in str(clamp[0].message)
     assert np.all((result.depth >= 1.0) & (result.depth <= 5.0))
+
+
+@pytest.mark.parametrize("value", [0, 5, np.int64(2)])
+def test_check_nonnegative_count_accepts(value):
+    from sparsedepth._validation import check_nonnegative_count
+
+    got = check_nonnegative_count(value, name="sweeps")
+    assert got == int(value) and type(got) is int
+
+
+@pytest.mark.parametrize("value", [-1, 1.0, True, np.bool_(False), "2", None])
+def test_check_nonnegative_count_rejects(value):
+    from sparsedepth._validation import check_nonnegative_count
+
+    with pytest.raises(ValueError, match="sweeps must be an integer >= 0"):
+        check_nonnegative_count(value, name="sweeps")

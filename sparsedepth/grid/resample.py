@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import check_count, check_nonnegative_real
+from .._validation import check_count, check_nonnegative_count, check_nonnegative_real
 from .edges import pair_distances
 from .rowbands import row_bands, rows_per_band
 
@@ -253,8 +253,7 @@ def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa
     """
     smoothness = check_nonnegative_real(smoothness, name="smoothness")
     kappa = check_nonnegative_real(kappa, name="kappa")
-    if not (isinstance(sweeps, (int, np.integer)) and not isinstance(sweeps, bool) and sweeps >= 0):
-        raise ValueError(f"sweeps must be an integer >= 0, got {sweeps!r}")
+    sweeps = check_nonnegative_count(sweeps, name="sweeps")
     observed = np.asarray(observed, dtype=bool)
     prior = np.asarray(start, dtype=np.float32)
     z = prior.copy()
