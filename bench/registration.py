@@ -155,6 +155,10 @@ def report_text(args, argv, tune, report, inputs, pooled, ways, gain, gain_score
     for name in names:
         per_dataset.setdefault(dataset_of(name), []).extend(inputs[name])
     rows = [[d] + [f"{np.mean([s(i) for i in ins]):.3f}" for s in ways.values()] for d, ins in per_dataset.items()]
+    lines += ["", "Per tuning frame (mean over densities × seeds), the frame's calibrated shift always applied:", ""]
+    rows = [[f"`{f.name}`", f"{np.mean([i.ratio((0, 0)) for i in inputs[f.name]]):.3f}",
+             f"{np.mean([i.ratio(pooled[f.name]) for i in inputs[f.name]]):.3f}", str(pooled[f.name])] for f in tune]
+    lines.append(H.markdown_table(["frame", "unshifted", "calibrated, always applied", "calibrated shift"], rows))
     lines += ["", "Per dataset of the report frames:", ""]
     lines.append(H.markdown_table(["dataset"] + list(ways), rows))
     every = [i for n in names for i in inputs[n]]
