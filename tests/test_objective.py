@@ -206,3 +206,30 @@ def test_objective_with_the_local_linear_term_keeps_one_image_for_it_and_the_pai
     without = build_objective(image, sparse, weights=w.replace(beta_local_linear=0.0))[0]
     for name in ("smooth_image", "second_order_image"):
         assert obj.term(name).value(z) == without.term(name).value(z)
+
+
+def test_term_values_at_a_changed_point_are_recomputed():
+    """The kept values of the last point never answer for another point, even one changed in place."""
+    image, sparse, mask, _ = make_problem((6, 5))
+    obj, _, _ = build_objective(image, sparse, mask, weights=ALL_TERMS)
+    z = np.random.default_rng(2).random(obj.size)
+    first = obj.term_values(z)
+    first["data"] = -1.0  # the caller's dict is its own
+    again = obj.term_values(z.copy())
+    assert again["data"] >= 0
+    z[3] += 0.5  # in place: same array object, new values
+    fresh = build_objective(image, sparse, mask, weights=ALL_TERMS)[0].term_values(z)
+    assert obj.term_values(z) == fresh
+    assert obj.value(z.reshape(obj.shape)) == pytest.approx(sum(fresh.values()), rel=1e-15)
+
+
+def test_the_first_history_entry_is_the_objective_at_the_start():
+    import sparsedepth as sd
+
+    image, sparse, mask, _ = make_problem((20, 16))
+    x0 = np.where(mask, sparse, np.nanmean(np.where(mask, sparse, np.nan)))
+    result = sd.complete_depth(image, sparse, mask, solver="amg", x0=x0, clip_to_observed=False)
+    obj, _, _ = build_objective(image, sparse, mask, weights=result.weights)
+    assert result.history[0].iteration == 0
+    assert result.history[0].objective == pytest.approx(obj.value(x0), rel=1e-9)
+    assert result.objective == pytest.approx(obj.value(result.depth), rel=1e-12)

@@ -154,20 +154,19 @@ def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner, depth_
     With ``depth_tol`` (solver units) it also stops when the estimated RMS
     remaining change (:class:`RemainingChange`) is at most ``depth_tol``.
 
-    The objective recorded after each CG step is ``F(z) = c − bᵀz − rᵀz``
-    (``= zᵀAz − 2bᵀz + c`` with the CG residual ``r = b − A z``), two dot
-    products instead of a full evaluation of every term; the last entry is
-    re-evaluated exactly term by term.
+    The objective recorded at the start is ``zᵀAz − 2bᵀz + c`` and after each
+    CG step ``F(z) = c − bᵀz − rᵀz`` (the same with the CG residual
+    ``r = b − A z``): a product and dot products instead of a full evaluation
+    of every term; the last entry is re-evaluated exactly term by term.
     """
     A, b, c = objective.normal_equations(form=system_form(objective))
-    recorder(0, x0)
+    values = recorder.values
+    recorder(0, x0, value=c - 2.0 * dot(b, x0) + dot(x0, A @ x0) if values else math.nan)
     if preconditioner == "grid":
         M = default_hierarchy(A, objective.shape).aspreconditioner()
     else:
         M = make_preconditioner(A, preconditioner, shape=objective.shape)
     it = [0]
-
-    values = recorder.values
 
     def cb(xk, rk):
         it[0] += 1
