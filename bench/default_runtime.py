@@ -1,0 +1,103 @@
+"""Runtime of the default completion against the baseline objective of ``docs/accuracy.md``, same process.
+
+Run (a few minutes on 2 cores)::
+
+    python -m bench.default_runtime --out docs/default_runtime.md
+
+Every report frame (subsampled by ``--step``, default 2) at 1 / 5 / 10 % of its valid pixels and every seed is
+completed with the library's defaults (``sd.complete_depth`` without ``weights=``) and with
+:data:`BASELINE` (the baseline row of ``docs/accuracy.md``: the density-independent weights without the
+modelling fields edge_sigma, fill_contrast and the local-linear term), alternating which goes first from one
+input to the next.  The ratio is Σ wall time of the defaults over Σ wall time of the baseline (and the same in
+process CPU time).
+
+May import :mod:`sparsedepth`, :mod:`bench.harness` and :mod:`bench.frames`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import sparsedepth as sd
+
+from . import frames as frame_list
+from . import harness as H
+
+FRACTIONS = (0.01, 0.05, 0.10)
+#: The baseline objective of docs/accuracy.md (its "Baseline weights"), modelling fields off.
+BASELINE = sd.Weights(alpha=1, beta=0, gamma=0, delta=0.000131, kappa=25, beta_image=0.00673, beta_second=0.000286,
+                      beta_second_image=0.039, edge_sigma=0, fill_contrast=0, beta_local_linear=0)
+
+
+def parse_args(argv):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--step", type=int, default=2, help="keep every step-th row and column (default 2)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1], help="sampling seeds (default 0 1)")
+    p.add_argument("--quick", action="store_true", help="one frame at step 4, one seed")
+    p.add_argument("--out", type=Path, default=None, help="write the markdown report here")
+    return p.parse_args(argv)
+
+
+def timed_completion(image, sparse, mask, weights):
+    """(wall seconds, process CPU seconds) of one completion."""
+    wall, cpu = time.perf_counter(), time.process_time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sd.ClampWarning)
+        sd.complete_depth(image, sparse, mask, weights=weights)
+    return time.perf_counter() - wall, time.process_time() - cpu
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = parse_args(argv)
+    t0 = time.perf_counter()
+    names = frame_list.REPORT_FRAMES
+    if args.quick:
+        names, args.step, args.seeds = ("middlebury2003/teddy",), 4, args.seeds[:1]
+    frames = [H.load_frame(n, args.step) for n in frame_list.available(names)]
+    times = {}  # frame -> {"defaults"/"baseline": [wall, cpu]}
+    turn = 0
+    for frame in frames:
+        per = times.setdefault(frame.name, {"defaults": np.zeros(2), "baseline": np.zeros(2)})
+        for fraction in FRACTIONS:
+            for seed in args.seeds:
+                sparse, mask = sd.sample_depth(frame.depth, fraction=fraction, seed=seed)
+                order = (("defaults", None), ("baseline", BASELINE))
+                for label, weights in (order if turn % 2 == 0 else order[::-1]):
+                    per[label] += timed_completion(frame.image, sparse, mask, weights)
+                turn += 1
+    total = {k: sum(t[k] for t in times.values()) for k in ("defaults", "baseline")}
+    rows = [[f"`{name}`", f"{t['baseline'][0]:.2f}", f"{t['defaults'][0]:.2f}",
+             f"{t['defaults'][0] / t['baseline'][0]:.2f}"] for name, t in times.items()]
+    rows.append(["all", f"{total['baseline'][0]:.2f}", f"{total['defaults'][0]:.2f}",
+                 f"**{total['defaults'][0] / total['baseline'][0]:.2f}**"])
+    lines = [
+        "# Runtime of the default completion",
+        "",
+        f"Made by `{H.command_line('default_runtime', argv)}` (frames subsampled by {args.step}, sampling seeds "
+        f"{args.seeds}, {time.perf_counter() - t0:.0f} s).",
+        "",
+        H.machine_markdown(),
+        "",
+        __doc__.split("\n\n")[2].replace("\n", " "),
+        "",
+        H.markdown_table(["frame", "baseline (s)", "defaults (s)", "defaults / baseline"], rows),
+        "",
+        f"In process CPU time: defaults / baseline = {total['defaults'][1] / total['baseline'][1]:.2f}.",
+        "",
+    ]
+    text = "\n".join(lines)
+    print(text)
+    if args.out is not None:
+        H.write_text(args.out, text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
