@@ -201,3 +201,18 @@ def test_registration_calibration_sums_the_densest_inputs_errors_by_sample_count
     estimate = registration.calibrated_estimate(inputs)
     assert estimate.best == (-1, -1) and estimate.gain == pytest.approx((1 + 20) / (5 + 5))
     assert registration.shift_of(estimate, 2.0) == (-1, -1) and registration.shift_of(estimate, 2.2) == (0, 0)
+
+
+def test_default_runtime_quick_writes_the_ratio_of_the_summed_times(tmp_path):
+    bench = load("default_runtime")
+    frames = importlib.import_module("bench.frames")
+    if not frames.available(["middlebury2003/teddy"]):
+        pytest.skip("../shared/data is not beside the repository")
+    out = tmp_path / "runtime.md"
+    assert bench.main(["--quick", "--out", str(out)]) == 0
+    rows = [[c.strip().strip("*`") for c in line.split("|")[1:-1]] for line in out.read_text().splitlines()
+            if line.startswith("| `") or line.startswith("| all")]
+    assert [r[0] for r in rows] == ["middlebury2003/teddy", "all"]
+    assert rows[0][1:] == rows[1][1:]  # one frame: the total is that frame
+    baseline, defaults, ratio = (float(c) for c in rows[0][1:])
+    assert baseline > 0 and defaults > 0 and ratio > 0
