@@ -70,19 +70,11 @@ class Input:
             self.scores[shift] = sd.depth_metrics(depth, self.frame.depth, mask=~self.mask).rmse / self.nn_rmse
         return self.scores[shift]
 
-    def shift_at(self, gain) -> tuple[int, int]:
-        return shift_of(self.estimate, gain)
-
 
 def calibrated_estimate(inputs) -> sd.ImageShift:
     """The densest of ``inputs`` pooled by :func:`sparsedepth.pool_image_shifts` (each sample counts once)."""
     densest = max(i.fraction for i in inputs)
     return sd.pool_image_shifts([i.estimate for i in inputs if i.fraction == densest])
-
-
-def shift_of(estimate: sd.ImageShift, gain: float) -> tuple[int, int]:
-    """``estimate.best`` if it beats the unshifted image by ``gain`` (and by something), else ``(0, 0)``."""
-    return estimate.best if estimate.gain >= gain and estimate.gain > 1 else (0, 0)
 
 
 def main(argv=None) -> int:
@@ -106,16 +98,16 @@ def main(argv=None) -> int:
         return float(np.mean([score(i) for n in names for i in inputs[n]]))
 
     tune_names_ = [f.name for f in tune]
-    gain_scores = {g: mean_over(tune_names_, lambda i, g=g: i.ratio(i.shift_at(g))) for g in GAINS}
+    gain_scores = {g: mean_over(tune_names_, lambda i, g=g: i.ratio(i.estimate.shift_at(g))) for g in GAINS}
     gain = min(GAINS, key=lambda g: (round(gain_scores[g], 4), -g))
-    calibration_scores = {g: mean_over(tune_names_, lambda i, g=g: i.ratio(shift_of(calibration[i.frame.name], g)))
+    calibration_scores = {g: mean_over(tune_names_, lambda i, g=g: i.ratio(calibration[i.frame.name].shift_at(g)))
                           for g in GAINS}
     calibration_gain = min(GAINS, key=lambda g: (round(calibration_scores[g], 4), -g))
-    pooled = {name: shift_of(c, calibration_gain) for name, c in calibration.items()}
-    measured = {name: shift_of(c, 1.0) for name, c in calibration.items()}
+    pooled = {name: c.shift_at(calibration_gain) for name, c in calibration.items()}
+    measured = {name: c.shift_at(1.0) for name, c in calibration.items()}
     ways = {
         "unshifted": lambda i: i.ratio((0, 0)),
-        f"per-input estimate (min_gain {gain:g})": lambda i: i.ratio(i.shift_at(gain)),
+        f"per-input estimate (min_gain {gain:g})": lambda i: i.ratio(i.estimate.shift_at(gain)),
         f"calibrated on the 10 % inputs (min_gain {calibration_gain:g})": lambda i: i.ratio(pooled[i.frame.name]),
         "calibrated on the 10 % inputs, always applied (min_gain 1)": lambda i: i.ratio(measured[i.frame.name]),
     }
@@ -147,20 +139,22 @@ def report_text(args, argv, tune, report, inputs, pooled, ways, gain, gain_score
     rows = []
     for name in names:
         ins = inputs[name]
-        chosen = sorted({str(i.shift_at(gain)) for i in ins})
+        chosen = sorted({str(i.estimate.shift_at(gain)) for i in ins})
         rows.append([f"`{name}`", dataset_of(name)] + [f"{np.mean([s(i) for i in ins]):.3f}" for s in ways.values()]
                     + [", ".join(chosen), str(pooled[name])])
-    lines.append(H.markdown_table(["frame", "dataset"] + list(ways) + ["per-input shifts", "calibrated shift (min_gain 1)"], rows))
+    lines.append(H.markdown_table(["frame", "dataset"] + list(ways) + ["per-input shifts",
+                                                                        "calibrated shift (min_gain 1)"], rows))
     per_dataset = {}
     for name in names:
         per_dataset.setdefault(dataset_of(name), []).extend(inputs[name])
-    rows = [[d] + [f"{np.mean([s(i) for i in ins]):.3f}" for s in ways.values()] for d, ins in per_dataset.items()]
+    lines += ["", "Per dataset of the report frames:", ""]
+    lines.append(H.markdown_table(["dataset"] + list(ways), [[d] + [f"{np.mean([s(i) for i in ins]):.3f}"
+                                                                   for s in ways.values()]
+                                                             for d, ins in per_dataset.items()]))
     lines += ["", "Per tuning frame (mean over densities × seeds), the frame's calibrated shift always applied:", ""]
     rows = [[f"`{f.name}`", f"{np.mean([i.ratio((0, 0)) for i in inputs[f.name]]):.3f}",
              f"{np.mean([i.ratio(pooled[f.name]) for i in inputs[f.name]]):.3f}", str(pooled[f.name])] for f in tune]
     lines.append(H.markdown_table(["frame", "unshifted", "calibrated, always applied", "calibrated shift"], rows))
-    lines += ["", "Per dataset of the report frames:", ""]
-    lines.append(H.markdown_table(["dataset"] + list(ways), rows))
     every = [i for n in names for i in inputs[n]]
     estimate_time = sum(i.estimate_seconds for i in every)
     solve_time = sum(i.solve_seconds[(0, 0)] for i in every)

@@ -200,7 +200,7 @@ def test_registration_calibration_sums_the_densest_inputs_errors_by_sample_count
     inputs[1] = Fake(0.1, centre_wins, 1)
     estimate = registration.calibrated_estimate(inputs)
     assert estimate.best == (-1, -1) and estimate.gain == pytest.approx((1 + 20) / (5 + 5))
-    assert registration.shift_of(estimate, 2.0) == (-1, -1) and registration.shift_of(estimate, 2.2) == (0, 0)
+    assert estimate.shift_at(2.0) == (-1, -1) and estimate.shift_at(2.2) == (0, 0)
 
 
 def test_default_runtime_quick_writes_the_ratio_of_the_summed_times(tmp_path):
@@ -216,3 +216,24 @@ def test_default_runtime_quick_writes_the_ratio_of_the_summed_times(tmp_path):
     assert rows[0][1:] == rows[1][1:]  # one frame: the total is that frame
     baseline, defaults, ratio = (float(c) for c in rows[0][1:])
     assert baseline > 0 and defaults > 0 and ratio > 0
+
+
+def test_registration_quick_tables_hold_what_their_headers_say(tmp_path):
+    registration = load("registration")
+    frames = importlib.import_module("bench.frames")
+    if len(frames.available(["middlebury2001/tsukuba", "tum/0"])) < 2:
+        pytest.skip("../shared/data is not beside the repository")
+    out = tmp_path / "registration.md"
+    assert registration.main(["--quick", "--out", str(out)]) == 0
+    text = out.read_text()
+
+    def table_after(title):
+        lines = text.split(title, 1)[1].splitlines()
+        lines = lines[next(k for k, line in enumerate(lines) if line.startswith("|")):]  # the first table after it
+        table = lines[:next((k for k, line in enumerate(lines) if not line.startswith("|")), len(lines))]
+        return [[c.strip() for c in line.strip("|").split("|")] for line in table][2:]
+
+    per_dataset = table_after("Per dataset of the report frames:")
+    assert [row[0] for row in per_dataset] == ["TUM"] and len(per_dataset[0]) == 5
+    per_tuning_frame = table_after("Per tuning frame")
+    assert [row[0] for row in per_tuning_frame] == ["`middlebury2001/tsukuba`"] and len(per_tuning_frame[0]) == 4
