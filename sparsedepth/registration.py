@@ -11,7 +11,7 @@ May import NumPy, :mod:`sparsedepth._validation` and :mod:`sparsedepth.grid`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -124,6 +124,10 @@ class ImageShift:
         """The candidate of the smallest error (before the ``min_gain`` test)."""
         return _smallest_best(self.errors)
 
+    def shift_at(self, min_gain: float) -> tuple[int, int]:
+        """The shift under another ``min_gain``: :attr:`best` if ``gain > 1`` and ``gain >= min_gain``, else (0, 0)."""
+        return self.best if self.gain > 1 and self.gain >= min_gain else (0, 0)
+
 
 def estimate_image_shift(image, sparse_depth, mask=None, *, max_shift: int = 2, folds: int = 4,
                          fill_contrast: float = 20.0, min_gain: float = 1.0, seed: int = 0) -> ImageShift:
@@ -196,9 +200,7 @@ def estimate_image_shift(image, sparse_depth, mask=None, *, max_shift: int = 2, 
     if folds < 2:
         raise ValueError(f"folds must be an integer >= 2, got {folds}")
     fill_contrast = check_nonnegative_real(fill_contrast, name="fill_contrast")
-    min_gain = check_nonnegative_real(min_gain, name="min_gain")
-    if min_gain < 1:
-        raise ValueError(f"min_gain must be >= 1, got {min_gain!r}")
+    min_gain = _check_min_gain(min_gain)
     seed = check_nonnegative_count(seed, name="seed")
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     img = as_float_image(image)
@@ -211,16 +213,19 @@ def estimate_image_shift(image, sparse_depth, mask=None, *, max_shift: int = 2, 
     group = np.empty(samples.size, dtype=np.intp)
     group[np.random.default_rng(seed).permutation(samples.size)] = np.arange(samples.size) % folds
     values = depth.ravel()[samples]
+    held_out = [np.flatnonzero(group == g) for g in range(folds)]  # positions in `samples` of each group
+    kept_masks = []
+    for held in held_out:
+        kept = observed.copy()
+        kept.ravel()[samples[held]] = False
+        kept_masks.append(kept)
     size = 2 * max_shift + 1
     errors = np.empty((size, size))
     for i in range(size):
         for j in range(size):
             moved = shift_image(img, (i - max_shift, j - max_shift))
             total = 0.0
-            for g in range(folds):
-                held = group == g
-                kept = observed.copy()
-                kept.ravel()[samples[held]] = False
+            for held, kept in zip(held_out, kept_masks):
                 fill = geodesic_fill(moved, depth, kept, contrast=fill_contrast)
                 total += float(np.abs(fill.ravel()[samples[held]] - values[held]).sum())
             errors[i, j] = total / samples.size
@@ -285,9 +290,7 @@ def pool_image_shifts(estimates, *, min_gain: float = 1.0) -> ImageShift:
     >>> pooled.shift, pooled.samples, round(pooled.gain, 3)
     ((0, 1), 40, 1.167)
     """
-    min_gain = check_nonnegative_real(min_gain, name="min_gain")
-    if min_gain < 1:
-        raise ValueError(f"min_gain must be >= 1, got {min_gain!r}")
+    min_gain = _check_min_gain(min_gain)
     estimates = list(estimates)
     if not estimates:
         raise ValueError("pool_image_shifts needs at least one estimate")
@@ -312,8 +315,16 @@ def _chosen(errors, samples: int, min_gain: float) -> ImageShift:
     smallest = float(errors.min())
     unshifted = float(errors[R, R])
     gain = unshifted / smallest if smallest > 0 else (1.0 if unshifted == 0 else np.inf)
-    shift = _smallest_best(errors) if gain > 1 and gain >= min_gain else (0, 0)
-    return ImageShift(shift=shift, errors=errors, gain=gain, samples=int(samples))
+    unchosen = ImageShift(shift=(0, 0), errors=errors, gain=gain, samples=int(samples))
+    return replace(unchosen, shift=unchosen.shift_at(min_gain))
+
+
+def _check_min_gain(min_gain) -> float:
+    """``min_gain`` as a float: ``TypeError`` unless a number, ``ValueError`` unless finite and ``>= 1``."""
+    min_gain = check_nonnegative_real(min_gain, name="min_gain")
+    if min_gain < 1:
+        raise ValueError(f"min_gain must be >= 1, got {min_gain!r}")
+    return min_gain
 
 
 def _smallest_best(errors) -> tuple[int, int]:
