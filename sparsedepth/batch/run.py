@@ -201,14 +201,8 @@ def _measured_shift(frames, options, executor, max_workers):
                 futures.append(pool.submit(estimate_frame_shift, position, frames[position], options))
             except Exception:  # noqa: BLE001 - an executor that takes no work: estimated here
                 futures.append(None)
-        estimates = []
-        for position, future in zip(positions, futures):
-            try:
-                if future is None:
-                    raise CancelledError
-                estimates.append(future.result())
-            except (Exception, CancelledError):  # noqa: BLE001 - the executor failed, not the frame
-                estimates.append(estimate_frame_shift(position, frames[position], options))
+        estimates = [_returned_or_here(future, position, frames, options)
+                     for position, future in zip(positions, futures)]
     except BaseException:
         stopped = True
         raise
@@ -221,6 +215,16 @@ def _measured_shift(frames, options, executor, max_workers):
                     future.cancel()
     estimates = [e for e in estimates if e is not None]
     return (pool_image_shifts(estimates) if estimates else None), len(estimates)
+
+
+def _returned_or_here(future, position, frames, options):
+    """The estimate ``future`` returns, or one computed in this process if the executor took or returned none."""
+    if future is not None:
+        try:
+            return future.result()
+        except (Exception, CancelledError):  # noqa: BLE001 - the executor failed, not the frame
+            pass
+    return estimate_frame_shift(position, frames[position], options)
 
 
 def _batch_shift(frames, options, executor, max_workers):
