@@ -98,9 +98,11 @@ def _window_sum(array, rows):
     """
     k0, k1 = rows
     W = array.shape[-1]
-    out = np.zeros(array.shape[:-2] + (k1 - k0, W - 2))
-    for dy, dx in WINDOW_OFFSETS:
-        out += array[..., k0 + 1 + dy:k1 + 1 + dy, 1 + dx:W - 1 + dx]
+    band = array[..., k0:k1 + 2, :]
+    across = band[..., :, 0:W - 2] + band[..., :, 1:W - 1]  # the three columns of each window, then its rows
+    across += band[..., :, 2:W]
+    out = across[..., 0:k1 - k0, :] + across[..., 1:k1 - k0 + 1, :]
+    out += across[..., 2:k1 - k0 + 2, :]
     return out
 
 
@@ -119,8 +121,12 @@ def _symmetric_inverse(S):
         c11 = S[0, 0] * S[2, 2] - S[0, 2] * S[0, 2]
         c12 = S[0, 1] * S[0, 2] - S[0, 0] * S[1, 2]
         c22 = S[0, 0] * S[1, 1] - S[0, 1] * S[0, 1]
-        det = S[0, 0] * c00 + S[0, 1] * c01 + S[0, 2] * c02
-        return np.stack([np.stack([c00, c01, c02]), np.stack([c01, c11, c12]), np.stack([c02, c12, c22])]) / det
+        scale = 1.0 / (S[0, 0] * c00 + S[0, 1] * c01 + S[0, 2] * c02)  # 1 / det
+        out = np.empty(S.shape)
+        for (c, d), cofactor in zip(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)), (c00, c01, c02, c11, c12, c22)):
+            np.multiply(cofactor, scale, out=out[c, d])
+            out[d, c] = out[c, d]
+        return out
     return np.moveaxis(np.linalg.inv(np.moveaxis(S, (0, 1), (-2, -1))), (-2, -1), (0, 1))
 
 
@@ -390,18 +396,19 @@ class LocalLinearOperator(StencilOperator):
                 continue
             rows = (k0, k1)
             mean, inverse = self._window_planes(*rows)
-            centred = np.empty((C,) + mean.shape[1:])
+            # per window pixel i: I_i − μ and −(scale / 9) P (I_i − μ), each (C, rows, W − 2)
+            centred = np.empty((9,) + mean.shape)
+            for i, oi in enumerate(WINDOW_OFFSETS):
+                np.subtract(self._shifted(self._image, oi, rows), mean, out=centred[i])
+            projected = np.stack([_apply(inverse, centred[i]) for i in range(9)])
+            projected *= constant
             coupling = np.empty(mean.shape[1:])
             product = np.empty(mean.shape[1:])
-            for i, oi in enumerate(WINDOW_OFFSETS):
-                np.subtract(self._shifted(self._image, oi, rows), mean, out=centred)
-                projected = _apply(inverse, centred)
-                projected *= constant  # -(scale / 9) P (I_i - mu)
+            for i in range(9):
                 for j in range(i, 9):
-                    np.subtract(self._shifted(self._image, WINDOW_OFFSETS[j], rows), mean, out=centred)
-                    np.multiply(projected[0], centred[0], out=coupling)
+                    np.multiply(projected[i, 0], centred[j, 0], out=coupling)
                     for c in range(1, C):
-                        np.multiply(projected[c], centred[c], out=product)
+                        np.multiply(projected[i, c], centred[j, c], out=product)
                         coupling += product
                     coupling += constant + scale if i == j else constant
                     for o, a in writes[i, j]:
