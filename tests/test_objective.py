@@ -233,3 +233,37 @@ def test_the_first_history_entry_is_the_objective_at_the_start():
     assert result.history[0].iteration == 0
     assert result.history[0].objective == pytest.approx(obj.value(x0), rel=1e-9)
     assert result.objective == pytest.approx(obj.value(result.depth), rel=1e-12)
+
+
+def test_system_value_is_the_terms_sum_once_the_normal_equations_are_kept():
+    """zᵀAz − 2bᵀz + c equals the term-by-term value; it is None before assembly and with an L1 term."""
+    import sparsedepth as sd
+
+    image, sparse, mask, _ = make_problem((12, 9))
+    obj, _, _ = build_objective(image, sparse, mask, weights=sd.DEFAULT_WEIGHTS)  # quadratic, 25-point
+    z = 1.0 + np.random.default_rng(7).random(obj.size)
+    assert obj.system_value(z) is None  # nothing assembled yet
+    obj.normal_equations()
+    assert obj.system_value(z) == pytest.approx(obj.value(z), rel=1e-10)
+    assert obj.system_value(z.reshape(obj.shape)) == obj.system_value(z)
+    with_l1, _, _ = build_objective(image, sparse, mask, weights=ALL_TERMS)
+    with_l1.normal_equations()
+    assert with_l1.system_value(z) is None  # F has |Kz| terms the system does not hold
+
+
+def test_the_last_history_entry_of_a_clamped_completion_is_the_solver_output_value():
+    """The PCG records F at its final iterate (before the clamp); the result's terms are those at the clamped depth."""
+    import sparsedepth as sd
+
+    image, sparse, mask, _ = make_problem((24, 20))
+    unclamped = sd.complete_depth(image, sparse, mask, solver="amg", clip_to_observed=False)
+    obj, _, _ = build_objective(image, sparse, mask, weights=unclamped.weights)
+    assert unclamped.history[-1].objective == pytest.approx(obj.value(unclamped.depth), rel=1e-9)
+    assert unclamped.history[-1].objective == pytest.approx(unclamped.objective, rel=1e-9)
+    low, high = sparse[mask].min(), sparse[mask].max()
+    assert np.any((unclamped.depth < low) | (unclamped.depth > high))  # this problem overshoots its samples
+    with pytest.warns(sd.ClampWarning):
+        clamped = sd.complete_depth(image, sparse, mask, solver="amg")
+    assert clamped.objective == pytest.approx(obj.value(np.clip(unclamped.depth, low, high)), rel=1e-9)
+    assert clamped.objective > unclamped.objective  # the clamp moves off the minimiser
+    assert clamped.history[-1].objective == pytest.approx(unclamped.history[-1].objective, rel=1e-12)

@@ -121,8 +121,8 @@ class Objective:
         """Exact value of every named term at ``z`` (flat or ``(H, W)``).
 
         The values at the last ``z`` asked for are kept (keyed by a digest of
-        its bytes, not a copy): a solver, its certificate and
-        :func:`~sparsedepth.complete_depth` all evaluate the same final point.
+        its bytes, not a copy): a solver's last record, its certificate and
+        :func:`~sparsedepth.complete_depth` may all ask for the same final point.
         """
         z = np.ascontiguousarray(self._flat(z))
         digest = hashlib.blake2b(memoryview(z).cast("B"), digest_size=16).digest()
@@ -133,6 +133,19 @@ class Objective:
     def value(self, z) -> float:
         """Exact objective ``F(z)`` (with ``|t|``, no smoothing)."""
         return float(sum(self.term_values(z).values()))
+
+    def system_value(self, z):
+        """``F(z) = zᵀAz − 2bᵀz + c`` from the cached :meth:`normal_equations` (one product), else None.
+
+        None also when ``F`` has terms other than quadratic ones.  The same number as :meth:`value` up to
+        rounding, for the quadratic solvers' records and the scale of a tolerance; :meth:`value` and
+        :meth:`term_values` sum the terms one by one.
+        """
+        if self._normal is None or self.has_l1 or self.robust_terms:
+            return None
+        A, b, c = self._normal
+        z = self._flat(z)
+        return float(c - 2.0 * np.dot(b, z) + np.dot(z, A @ z))
 
     def smoothed_value_and_gradient(self, z, eps: float | None = None):
         """Smoothed objective (``|t| → sqrt(t² + ε²)``) and its gradient.

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..result import IterationRecord, SolverState
 
-__all__ = ["SolverOutput", "CallbackStop", "Recorder", "relative", "objective_floor", "gap_threshold",
+__all__ = ["SolverOutput", "CallbackStop", "Recorder", "relative", "objective_floor", "gap_threshold", "quick_value",
            "require_quadratic", "refuse_robust", "output"]
 
 
@@ -142,6 +142,15 @@ def objective_floor(objective):
     """
     c = objective.constant()
     return 1e-13 * (abs(c) if c > 0 else float(objective.size))
+
+
+def quick_value(objective, z):
+    """``F(z)``: :meth:`~Objective.system_value` (one product) when it is available, else the terms' sum.
+
+    For the quadratic solvers' records and the scale of a tolerance, not for the reported terms.
+    """
+    F = objective.system_value(z)
+    return objective.value(z) if F is None else F
 
 
 def gap_threshold(objective, F, gap_tol):

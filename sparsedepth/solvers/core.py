@@ -20,7 +20,7 @@ import numpy as np
 from .._validation import is_int, is_real
 from ..objective.objective import AbsTerm, Objective, QuadraticTerm, RobustTerm
 from .certificate import Certificate, curvature_lower_bound
-from .common import CallbackStop, Recorder, SolverOutput, gap_threshold, refuse_robust, relative
+from .common import CallbackStop, Recorder, SolverOutput, gap_threshold, refuse_robust, relative, quick_value
 from .registry import DEFAULT_MAX_ITER, DEFAULT_TOL, REGISTRY, SOLVER_OPTIONS, SOLVERS
 
 __all__ = ["solve", "solve_scaled", "check_solver_arguments", "depth_scale", "scaled_objective", "certify",
@@ -213,9 +213,9 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
         message += "; duality gap not computed"
     elif np.isnan(gap):
         message += "; duality gap not available (the solve with the quadratic part's matrix failed)"
-    elif converged and not gap <= gap_threshold(objective, objective.value(out.z), options.gap_tol):
+    elif converged and not gap <= gap_threshold(objective, quick_value(objective, out.z), options.gap_tol):
         converged = False
-        message += (f"; NOT converged: duality gap {relative(gap, objective.value(out.z)):.1e} (relative) > "
+        message += (f"; NOT converged: duality gap {relative(gap, quick_value(objective, out.z)):.1e} (relative) > "
                     f"gap_tol {options.gap_tol:.1e}")
     if own and solver != "direct" and (out.iterations <= 1 or np.array_equal(out.z, np.maximum(x0, 0.0))):
         kkt = start_kkt_residual(objective, np.maximum(out.z, 0.0), entry.smoothed)
@@ -250,7 +250,7 @@ def certify(objective, z, solver, options):
             A, b, _ = objective.normal_equations(form="stencil")  # the cached form
             r = 2.0 * (A @ z - b)
             cheap = 0.25 * float(r @ r) / curvature
-            if cheap <= gap_threshold(objective, objective.value(z), options.gap_tol):
+            if cheap <= gap_threshold(objective, quick_value(objective, z), options.gap_tol):
                 return cheap
     eps = float(objective.l1_smoothing) if entry.smoothing_ties else 0.0
     # ADMM without L1 terms returns one unconstrained PCG solve

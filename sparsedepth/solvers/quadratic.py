@@ -16,7 +16,7 @@ from scipy.sparse.linalg import spsolve
 from ..linalg.krylov import dot, pcg
 from ..linalg.multigrid import GridMultigrid
 from ..linalg.preconditioners import make_preconditioner
-from .common import output, require_quadratic
+from .common import output, quick_value, require_quadratic
 
 __all__ = ["solve_direct", "solve_cg", "solve_amg", "RemainingChange", "DEFAULT_DEPTH_RTOL", "default_hierarchy"]
 
@@ -157,7 +157,8 @@ def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner, depth_
     The objective recorded at the start is ``zᵀAz − 2bᵀz + c`` and after each
     CG step ``F(z) = c − bᵀz − rᵀz`` (the same with the CG residual
     ``r = b − A z``): a product and dot products instead of a full evaluation
-    of every term; the last entry is re-evaluated exactly term by term.
+    of every term; the last entry is re-evaluated with the true residual
+    (:meth:`~sparsedepth.objective.objective.Objective.system_value`).
     """
     A, b, c = objective.normal_equations(form=system_form(objective))
     values = recorder.values
@@ -177,7 +178,7 @@ def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner, depth_
                                stop=rule)
     del M  # the hierarchy goes before the objective is evaluated: peak memory of 8-MP frames
     if values and recorder.history and recorder.history[-1].iteration == n and n > 0:
-        recorder.set_last_value(objective.value(z))
+        recorder.set_last_value(quick_value(objective, z))  # with the true residual, not the recurrence's
     residual = f"relative residual {rel:.2e} {'<=' if converged else '>'} tol {tol:.1e}"
     if rule is not None and rule.estimate <= depth_tol:
         s = recorder.scale
