@@ -49,7 +49,7 @@ WINDOW_OFFSETS = tuple((dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1))
 PINV_CUTOFF = 1e-10
 #: pixels per band of the band-wise computations (the normal stencil, the term's value): their work arrays
 #: stay a few megabytes whatever the frame size
-_BAND_PIXELS = 1 << 16
+_BAND_PIXELS = 1 << 15
 
 
 def local_linear_operator(image, eps: float, *, copy: bool = True) -> "LocalLinearOperator":
