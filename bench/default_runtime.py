@@ -8,8 +8,9 @@ Every report frame (subsampled by ``--step``, default 2) at 1 / 5 / 10 % of its 
 completed with the library's defaults (``sd.complete_depth`` without ``weights=``) and with
 :data:`BASELINE` (the baseline row of ``docs/accuracy.md``: the density-independent weights without the
 modelling fields edge_sigma, fill_contrast and the local-linear term), alternating which goes first from one
-input to the next.  The ratio is Σ wall time of the defaults over Σ wall time of the baseline (and the same in
-process CPU time).
+input to the next, the whole pass ``--repeats`` times.  The ratio is Σ wall time of the defaults over Σ wall time of
+the baseline over every pass (and the same in process CPU time); each pass's own ratio shows the spread of the
+measurement on a shared machine.
 
 May import :mod:`sparsedepth`, :mod:`bench.harness` and :mod:`bench.frames`.
 """
@@ -39,6 +40,7 @@ def parse_args(argv):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--step", type=int, default=2, help="keep every step-th row and column (default 2)")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1], help="sampling seeds (default 0 1)")
+    p.add_argument("--repeats", type=int, default=None, help="passes over every input (default 3; 1 with --quick)")
     p.add_argument("--quick", action="store_true", help="one frame at step 4, one seed")
     p.add_argument("--out", type=Path, default=None, help="write the markdown report here")
     return p.parse_args(argv)
@@ -60,18 +62,28 @@ def main(argv=None) -> int:
     names = frame_list.REPORT_FRAMES
     if args.quick:
         names, args.step, args.seeds = ("middlebury2003/teddy",), 4, args.seeds[:1]
+    if args.repeats is None:
+        args.repeats = 1 if args.quick else 3
+    if args.repeats < 1:
+        raise SystemExit("--repeats must be at least 1")
     frames = [H.load_frame(n, args.step) for n in frame_list.available(names)]
     times = {}  # frame -> {"defaults"/"baseline": [wall, cpu]}
+    passes = []  # per pass: {"defaults"/"baseline": [wall, cpu]}
     turn = 0
-    for frame in frames:
-        per = times.setdefault(frame.name, {"defaults": np.zeros(2), "baseline": np.zeros(2)})
-        for fraction in FRACTIONS:
-            for seed in args.seeds:
-                sparse, mask = sd.sample_depth(frame.depth, fraction=fraction, seed=seed)
-                order = (("defaults", None), ("baseline", BASELINE))
-                for label, weights in (order if turn % 2 == 0 else order[::-1]):
-                    per[label] += timed_completion(frame.image, sparse, mask, weights)
-                turn += 1
+    for _ in range(args.repeats):
+        this_pass = {"defaults": np.zeros(2), "baseline": np.zeros(2)}
+        for frame in frames:
+            per = times.setdefault(frame.name, {"defaults": np.zeros(2), "baseline": np.zeros(2)})
+            for fraction in FRACTIONS:
+                for seed in args.seeds:
+                    sparse, mask = sd.sample_depth(frame.depth, fraction=fraction, seed=seed)
+                    order = (("defaults", None), ("baseline", BASELINE))
+                    for label, weights in (order if turn % 2 == 0 else order[::-1]):
+                        seconds = timed_completion(frame.image, sparse, mask, weights)
+                        per[label] += seconds
+                        this_pass[label] += seconds
+                    turn += 1
+        passes.append(this_pass)
     total = {k: sum(t[k] for t in times.values()) for k in ("defaults", "baseline")}
     rows = [[f"`{name}`", f"{t['baseline'][0]:.2f}", f"{t['defaults'][0]:.2f}",
              f"{t['defaults'][0] / t['baseline'][0]:.2f}"] for name, t in times.items()]
@@ -90,6 +102,10 @@ def main(argv=None) -> int:
         H.markdown_table(["frame", "baseline (s)", "defaults (s)", "defaults / baseline"], rows),
         "",
         f"In process CPU time: defaults / baseline = {total['defaults'][1] / total['baseline'][1]:.2f}.",
+        "",
+        f"Per pass ({args.repeats}), wall / CPU time: "
+        + ", ".join(f"{p['defaults'][0] / p['baseline'][0]:.2f} / {p['defaults'][1] / p['baseline'][1]:.2f}"
+                    for p in passes) + ".",
         "",
     ]
     text = "\n".join(lines)

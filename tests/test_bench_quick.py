@@ -218,6 +218,24 @@ def test_default_runtime_quick_writes_the_ratio_of_the_summed_times(tmp_path):
     assert baseline > 0 and defaults > 0 and ratio > 0
 
 
+def test_default_runtime_total_ratio_lies_between_the_passes_ratios(tmp_path):
+    """Σ defaults / Σ baseline over the passes is a weighted mean of each pass's ratio."""
+    bench = load("default_runtime")
+    frames = importlib.import_module("bench.frames")
+    if not frames.available(["middlebury2003/teddy"]):
+        pytest.skip("../shared/data is not beside the repository")
+    out = tmp_path / "runtime.md"
+    assert bench.main(["--quick", "--repeats", "2", "--out", str(out)]) == 0
+    text = out.read_text()
+    total = float(next(line for line in text.splitlines() if line.startswith("| all")).split("|")[-2].strip(" *"))
+    per_pass = next(line for line in text.splitlines() if line.startswith("Per pass (2)"))
+    walls = [float(pair.split("/")[0]) for pair in per_pass.split(": ", 1)[1].rstrip(".").split(", ")]
+    assert len(walls) == 2
+    assert min(walls) - 0.01 <= total <= max(walls) + 0.01
+    with pytest.raises(SystemExit):
+        bench.main(["--quick", "--repeats", "0"])
+
+
 def test_registration_quick_tables_hold_what_their_headers_say(tmp_path):
     registration = load("registration")
     frames = importlib.import_module("bench.frames")
