@@ -226,6 +226,25 @@ def test_default_runtime_quick_writes_the_ratio_of_the_summed_times(tmp_path):
         bench.main(["--quick", "--repeats", "0"])
 
 
+def test_interpolation_quick_compares_both_on_both_objectives(tmp_path):
+    """Each objective's total row sums its frame rows; the two depth-rule solutions agree within the rule's scale."""
+    bench = load("interpolation")
+    frames = importlib.import_module("bench.frames")
+    if not frames.available(["middlebury2003/teddy"]):
+        pytest.skip("../shared/data is not beside the repository")
+    out = tmp_path / "interpolation.md"
+    assert bench.main(["--quick", "--out", str(out)]) == 0
+    rows = [[c.strip().strip("*`") for c in line.split("|")[1:-1]] for line in out.read_text().splitlines()
+            if line.startswith("| `") or line.startswith("| all")]
+    assert [r[1] for r in rows] == ["defaults (25-point)", "baseline (13-point)"] * 2
+    for frame_row, total_row in zip(rows[:2], rows[2:]):
+        assert frame_row[2:7] == total_row[2:7]  # one frame: the totals are that frame
+        for cell in frame_row[2:4]:
+            depth_rule, residual = (int(c) for c in cell.split(" / "))
+            assert 0 < depth_rule <= residual  # the depth rule stops no later than the residual rule
+        assert float(frame_row[7]) < 10 * 3e-4  # DEFAULT_DEPTH_RTOL: both solutions are the same answer
+
+
 def test_registration_quick_tables_hold_what_their_headers_say(tmp_path):
     registration = load("registration")
     frames = importlib.import_module("bench.frames")

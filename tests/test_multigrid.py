@@ -125,10 +125,11 @@ def test_galerkin_equals_scipy_triple_product(shape, interpolation, stencil_path
                                    atol=1e-13 * scale.max())
 
 
+@pytest.mark.parametrize("interpolation", ["bilinear", "operator"])
 @pytest.mark.parametrize("shape", [(9, 11), (10, 12)])
-def test_galerkin_of_13_point_operator(shape, stencil_path):
+def test_galerkin_of_13_point_operator(shape, interpolation, stencil_path):
     A = biharmonic_system(shape, np.random.default_rng(2))
-    mg = GridMultigrid(A, shape, max_coarse=1, **DOUBLE)
+    mg = GridMultigrid(A, shape, max_coarse=1, interpolation=interpolation, **DOUBLE)
     for fine, coarse in zip(mg.levels[:-1], mg.levels[1:]):
         P = sp.csr_array(fine.P if sp.issparse(fine.P) else fine.P.tocsr())
         expected = (P.T @ fine.A @ P).toarray()
@@ -185,11 +186,12 @@ def test_vcycle_is_symmetric_positive_definite(interpolation, smoother, sweeps):
         assert u @ Mu > 0
 
 
-def test_vcycle_symmetric_for_13_point_operator():
+@pytest.mark.parametrize("interpolation", ["bilinear", "operator"])
+def test_vcycle_symmetric_for_13_point_operator(interpolation):
     shape = (21, 26)
     rng = np.random.default_rng(6)
     A = biharmonic_system(shape, rng)
-    mg = GridMultigrid(A, shape, max_coarse=16, **DOUBLE)
+    mg = GridMultigrid(A, shape, max_coarse=16, interpolation=interpolation, **DOUBLE)
     u, v = rng.standard_normal((2, A.shape[0]))
     Mu, Mv = mg.vcycle(u), mg.vcycle(v)
     assert abs(u @ Mv - Mu @ v) <= 1e-11 * np.linalg.norm(u) * np.linalg.norm(Mv)
@@ -497,10 +499,28 @@ def test_unknown_options_rejected():
         solve_spd(A, np.ones(16), (4, 4), preconditioner="jacobi", sweeps=2)
 
 
-def test_operator_interpolation_needs_radius_one():
-    A = biharmonic_system((10, 10), np.random.default_rng(27))
-    with pytest.raises(ValueError, match="radius 1"):
-        GridMultigrid(A, (10, 10), interpolation="operator")
+def test_operator_interpolation_of_a_wide_stencil_reads_it_collapsed_to_radius_one():
+    """Each coupling of a 13-point stencil is moved to the neighbour in its direction; row sums are kept."""
+    from sparsedepth.linalg.multigrid.stencils import CollapsedSource, StencilSource
+
+    shape = (7, 8)
+    A = biharmonic_system(shape, np.random.default_rng(27))
+    offsets, S = grid_stencil(A, shape)
+    assert max(max(abs(dy), abs(dx)) for dy, dx in offsets) == 2
+    collapsed = CollapsedSource(StencilSource(offsets, shape, array=S))
+    assert collapsed.offsets == [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+    whole = np.zeros((9,) + shape)
+    for (dy, dx), image in zip(offsets, S):  # the rule written out: (±2, 0) -> (±1, 0), (1, -1) stays, ...
+        whole[collapsed.offsets.index((int(np.sign(dy)), int(np.sign(dx))))] += image
+    for py, px in ((0, 0), (0, 1), (1, 0), (1, 1)):
+        np.testing.assert_array_equal(collapsed.parity_class(py, px), whole[:, py::2, px::2])
+    np.testing.assert_allclose(whole.sum(axis=0), S.sum(axis=0), rtol=0, atol=1e-12)
+    assert GridMultigrid(A, shape, interpolation="auto", max_coarse=1, **DOUBLE).interpolation == "bilinear"
+    mg = GridMultigrid(A, shape, interpolation="operator", max_coarse=1, **DOUBLE)
+    x = np.random.default_rng(28).standard_normal(A.shape[0])
+    solution, info = mg.solve(A @ x, rtol=1e-12)
+    assert info.converged
+    np.testing.assert_allclose(solution, x, rtol=0, atol=1e-8 * np.abs(x).max())
 
 
 def test_rhs_size_checked():

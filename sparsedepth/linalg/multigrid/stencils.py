@@ -14,7 +14,7 @@ import numpy as np
 from ..._validation import as_grid_operator
 from ...grid.stencil import SymmetricStencil, csr_to_stencil, full_pattern_offsets
 
-__all__ = ["grid_stencil", "extract_stencil", "StencilSource", "fine_stencil_source"]
+__all__ = ["grid_stencil", "extract_stencil", "StencilSource", "CollapsedSource", "fine_stencil_source"]
 
 
 def _square_offsets(radius):
@@ -242,6 +242,35 @@ class StencilSource:
             self.array = self.parity_class(None, None)
             self.csr = self.symmetric = None
         return self
+
+
+def _towards(offset):
+    """The radius-1 offset in the direction of ``offset``: ``(sign dy, sign dx)``."""
+    return tuple(int(np.sign(d)) for d in offset)
+
+
+class CollapsedSource:
+    """A stencil of radius 2 seen as one of radius 1: every coupling moved to the neighbour in its direction.
+
+    ``(±2, 0)`` goes to ``(±1, 0)``, ``(±1, ±2)`` and ``(±2, ±2)`` to ``(±1, ±1)``, and so on, so each pixel's
+    row keeps its sum.  Only :meth:`parity_class` is offered (what
+    :func:`~sparsedepth.linalg.multigrid.interpolation.operator_weights` reads), collapsed one class at a time
+    from the wrapped :class:`StencilSource`.
+    """
+
+    def __init__(self, source):
+        self.source = source
+        self.shape = source.shape
+        self.offsets = sorted({_towards(o) for o in source.offsets})
+
+    def parity_class(self, py, px):
+        """The collapsed images on the pixels ``(py::2, px::2)``, shape ``(len(offsets), ny, nx)``."""
+        part = self.source.parity_class(py, px)
+        slot = {o: k for k, o in enumerate(self.offsets)}
+        out = np.zeros((len(self.offsets),) + part.shape[1:])
+        for k, o in enumerate(self.source.offsets):
+            out[slot[_towards(o)]] += part[k]
+        return out
 
 
 class _ClassImages:
