@@ -20,7 +20,12 @@ and most have ``--quick`` for a seconds-long smoke test on tiny frames):
 * :mod:`bench.fast_mode` - ``quality="fast"`` against the default solve and OpenCV's fast global smoother (``docs/fast_mode.md``);
 * :mod:`bench.scaling` - time per pixel of the default and fast modes from 0.3 to 4.9 megapixels and their 8-megapixel peak memory (``docs/scaling.md``);
 * :mod:`bench.robust_penalties` - robust edge penalties against the L1 edge term (``docs/robust_penalties.md``);
-* :mod:`bench.tune` - the seeded search that chose ``sparsedepth.DEFAULT_WEIGHTS`` (``docs/tuning.md``).
+* :mod:`bench.tune` - the seeded search that chose ``sparsedepth.DEFAULT_WEIGHTS`` (``docs/tuning.md``);
+* :mod:`bench.density` - the density schedule of the default weights, tuned per density, with a leave-one-dataset-out table (``docs/density.md``);
+* :mod:`bench.registration` - shifting the image onto the samples' depth edges, per input and calibrated per frame (``docs/registration.md``);
+* :mod:`bench.default_runtime` - the default completion's time against the baseline objective's, same process (``docs/default_runtime.md``);
+* :mod:`bench.interpolation` - bilinear against operator-dependent multigrid interpolation on the radius-2 completion systems (``docs/interpolation.md``);
+* :mod:`bench.uncertainty` and :mod:`bench.figures` - how ``result.uncertainty`` ranks and covers the errors, and its figures (``docs/uncertainty.md``).
 
 Shared pieces: :mod:`bench.frames` (the reported and the tuning frames, disjoint), :mod:`bench.harness`
 (inputs, methods, one evaluation, aggregation, timing, markdown tables, machine description, report header,
