@@ -98,11 +98,10 @@ def _window_sum(array, rows):
     """
     k0, k1 = rows
     W = array.shape[-1]
-    band = array[..., k0:k1 + 2, :]
-    across = band[..., :, 0:W - 2] + band[..., :, 1:W - 1]  # the three columns of each window, then its rows
-    across += band[..., :, 2:W]
-    out = across[..., 0:k1 - k0, :] + across[..., 1:k1 - k0 + 1, :]
-    out += across[..., 2:k1 - k0 + 2, :]
+    (dy, dx), *others = WINDOW_OFFSETS
+    out = array[..., k0 + 1 + dy:k1 + 1 + dy, 1 + dx:W - 1 + dx].copy()
+    for dy, dx in others:
+        out += array[..., k0 + 1 + dy:k1 + 1 + dy, 1 + dx:W - 1 + dx]
     return out
 
 
@@ -396,19 +395,18 @@ class LocalLinearOperator(StencilOperator):
                 continue
             rows = (k0, k1)
             mean, inverse = self._window_planes(*rows)
-            # per window pixel i: I_i − μ and −(scale / 9) P (I_i − μ), each (C, rows, W − 2)
-            centred = np.empty((9,) + mean.shape)
-            for i, oi in enumerate(WINDOW_OFFSETS):
-                np.subtract(self._shifted(self._image, oi, rows), mean, out=centred[i])
-            projected = np.stack([_apply(inverse, centred[i]) for i in range(9)])
-            projected *= constant
+            centred = np.empty((C,) + mean.shape[1:])
             coupling = np.empty(mean.shape[1:])
             product = np.empty(mean.shape[1:])
-            for i in range(9):
+            for i, oi in enumerate(WINDOW_OFFSETS):
+                np.subtract(self._shifted(self._image, oi, rows), mean, out=centred)
+                projected = _apply(inverse, centred)
+                projected *= constant  # -(scale / 9) P (I_i - mu)
                 for j in range(i, 9):
-                    np.multiply(projected[i, 0], centred[j, 0], out=coupling)
+                    np.subtract(self._shifted(self._image, WINDOW_OFFSETS[j], rows), mean, out=centred)
+                    np.multiply(projected[0], centred[0], out=coupling)
                     for c in range(1, C):
-                        np.multiply(projected[i, c], centred[j, c], out=product)
+                        np.multiply(projected[c], centred[c], out=product)
                         coupling += product
                     coupling += constant + scale if i == j else constant
                     for o, a in writes[i, j]:
