@@ -13,7 +13,9 @@ picks for these stencils) and once with ``interpolation="operator"``, which read
 to radius 1 (:class:`sparsedepth.linalg.multigrid.stencils.CollapsedSource`); the order alternates from one
 frame to the next.  Columns: CG iterations at the depth rule and to the relative residual 1e-8, the wall time
 of set-up + depth-rule solve, and the RMS difference of the two depth-rule solutions in units of the depth
-scale (the rule's tolerance is :data:`sparsedepth.solvers.quadratic.DEFAULT_DEPTH_RTOL`).
+scale (the rule's tolerance is :data:`sparsedepth.solvers.quadratic.DEFAULT_DEPTH_RTOL`).  Last, the peak memory
+of one default ``complete_depth`` on the 8-megapixel frame of ``bench.scaling`` with each interpolation (a fresh
+process each, the solve's hierarchy built by :func:`operator_hierarchy` for "operator"); not with ``--quick``.
 
 May import :mod:`sparsedepth`, numpy, :mod:`bench.blas`, :mod:`bench.frames` and :mod:`bench.harness`.
 """
@@ -25,6 +27,8 @@ from .blas import one_blas_thread
 one_blas_thread()
 
 import argparse  # noqa: E402
+import json  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -48,7 +52,8 @@ INTERPOLATIONS = ("bilinear", "operator")
 def parse_args(argv):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--step", type=int, default=1, help="keep every step-th row and column (default 1)")
-    p.add_argument("--quick", action="store_true", help="one frame at step 4")
+    p.add_argument("--quick", action="store_true", help="one frame at step 4, no 8-MP memory runs")
+    p.add_argument("--child-memory", choices=INTERPOLATIONS, help=argparse.SUPPRESS)
     p.add_argument("--out", type=Path, default=None, help="write the markdown report here")
     return p.parse_args(argv)
 
@@ -62,6 +67,30 @@ def solve(A, b, x0, shape, interpolation):
     seconds = time.perf_counter() - start
     residual = pcg_info(A, b, x0=x0, M=mg.aspreconditioner(), rtol=1e-8, maxiter=500)
     return seconds, depth.iterations, residual.iterations, depth.x
+
+
+def operator_hierarchy(A, shape):
+    """:func:`sparsedepth.solvers.quadratic.default_hierarchy` with ``interpolation="operator"``."""
+    return GridMultigrid(A, shape, interpolation="operator", smoother="line_gauss_seidel")
+
+
+def child_memory(interpolation):
+    """One default completion of the 8-MP frame in this (fresh) process; prints JSON with its peak memory."""
+    import sparsedepth.solvers.quadratic as quadratic
+
+    from . import perf, scaling
+
+    if interpolation == "operator":
+        quadratic.default_hierarchy = operator_hierarchy
+    result, seconds = scaling._complete(perf.load_problem(shape=perf.MP8), "default")
+    print(json.dumps(dict(peak_mb=perf._peak_rss_mb(), seconds=seconds, iterations=result.iterations)))
+
+
+def memory_8mp(interpolation):
+    """``{peak_mb, seconds, iterations}`` of :func:`child_memory` run in a fresh process."""
+    proc = subprocess.run([sys.executable, "-m", "bench.interpolation", "--child-memory", interpolation],
+                          capture_output=True, text=True, cwd=H.REPO, check=True)
+    return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
 def measure(frame, weights, turn):
@@ -82,6 +111,9 @@ def measure(frame, weights, turn):
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parse_args(argv)
+    if args.child_memory:
+        child_memory(args.child_memory)
+        return 0
     t0 = time.perf_counter()
     names = frame_list.REPORT_FRAMES
     if args.quick:
@@ -123,6 +155,12 @@ def main(argv=None) -> int:
         H.markdown_table(header, rows),
         "",
     ]
+    if not args.quick:
+        memory = {name: memory_8mp(name) for name in INTERPOLATIONS}
+        lines += ["Peak memory of the default completion of the 8-megapixel frame (`VmHWM`, a fresh process each):",
+                  "", H.markdown_table(["interpolation", "peak (MB)", "time (s)", "CG iterations"], [
+                      [name, f"{m['peak_mb']:.0f}", f"{m['seconds']:.1f}", str(m["iterations"])]
+                      for name, m in memory.items()]), ""]
     text = "\n".join(lines)
     print(text)
     if args.out is not None:
