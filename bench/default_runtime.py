@@ -108,11 +108,7 @@ def main(argv=None) -> int:
                     for p in passes) + ".",
         "",
     ]
-    text = "\n".join(lines)
-    print(text)
-    if args.out is not None:
-        H.write_text(args.out, text)
-    return 0
+    return H.publish(lines, args.out)
 
 
 if __name__ == "__main__":

@@ -161,11 +161,7 @@ def main(argv=None) -> int:
                   "", H.markdown_table(["interpolation", "peak (MB)", "time (s)", "CG iterations"], [
                       [name, f"{m['peak_mb']:.0f}", f"{m['seconds']:.1f}", str(m["iterations"])]
                       for name, m in memory.items()]), ""]
-    text = "\n".join(lines)
-    print(text)
-    if args.out is not None:
-        H.write_text(args.out, text)
-    return 0
+    return H.publish(lines, args.out)
 
 
 if __name__ == "__main__":

@@ -113,10 +113,7 @@ def main(argv=None) -> int:
     }
     text = report_text(args, argv, tune, report, inputs, measured, ways, gain, (gain_scores, calibration_scores),
                        time.perf_counter() - t0)
-    print(text)
-    if args.out is not None:
-        H.write_text(args.out, text)
-    return 0
+    return H.publish([text], args.out)
 
 
 def report_text(args, argv, tune, report, inputs, pooled, ways, gain, gain_scores, seconds) -> str:

@@ -203,15 +203,19 @@ def test_registration_calibration_sums_the_densest_inputs_errors_by_sample_count
     assert estimate.shift_at(2.0) == (-1, -1) and estimate.shift_at(2.2) == (0, 0)
 
 
+def quick_report(bench, tmp_path, *extra):
+    """The report a bench module's ``--quick`` run on the Teddy frame writes (skips without ``../shared``)."""
+    if not importlib.import_module("bench.frames").available(["middlebury2003/teddy"]):
+        pytest.skip("../shared/data is not beside the repository")
+    out = tmp_path / "report.md"
+    assert bench.main(["--quick", *extra, "--out", str(out)]) == 0
+    return out.read_text()
+
+
 def test_default_runtime_quick_writes_the_ratio_of_the_summed_times(tmp_path):
     """Σ defaults / Σ baseline, per frame and over two passes: a weighted mean of each pass's own ratio."""
     bench = load("default_runtime")
-    frames = importlib.import_module("bench.frames")
-    if not frames.available(["middlebury2003/teddy"]):
-        pytest.skip("../shared/data is not beside the repository")
-    out = tmp_path / "runtime.md"
-    assert bench.main(["--quick", "--repeats", "2", "--out", str(out)]) == 0
-    text = out.read_text()
+    text = quick_report(bench, tmp_path, "--repeats", "2")
     rows = [[c.strip().strip("*`") for c in line.split("|")[1:-1]] for line in text.splitlines()
             if line.startswith("| `") or line.startswith("| all")]
     assert [r[0] for r in rows] == ["middlebury2003/teddy", "all"]
@@ -228,13 +232,8 @@ def test_default_runtime_quick_writes_the_ratio_of_the_summed_times(tmp_path):
 
 def test_interpolation_quick_compares_both_on_both_objectives(tmp_path):
     """Each objective's total row sums its frame rows; the two depth-rule solutions agree within the rule's scale."""
-    bench = load("interpolation")
-    frames = importlib.import_module("bench.frames")
-    if not frames.available(["middlebury2003/teddy"]):
-        pytest.skip("../shared/data is not beside the repository")
-    out = tmp_path / "interpolation.md"
-    assert bench.main(["--quick", "--out", str(out)]) == 0
-    rows = [[c.strip().strip("*`") for c in line.split("|")[1:-1]] for line in out.read_text().splitlines()
+    rows = [[c.strip().strip("*`") for c in line.split("|")[1:-1]]
+            for line in quick_report(load("interpolation"), tmp_path).splitlines()
             if line.startswith("| `") or line.startswith("| all")]
     assert [r[1] for r in rows] == ["defaults (25-point)", "baseline (13-point)"] * 2
     for frame_row, total_row in zip(rows[:2], rows[2:]):

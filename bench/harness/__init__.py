@@ -20,7 +20,7 @@ from .inputs import (DEFAULT_SEEDS, FRACTIONS, FrameData, get_frames, load_frame
                      sample, synthetic_frame)
 from .machine import blas_threads, cpu_model, machine_info, machine_markdown, version
 from .methods import BIHARMONIC, COLORIZATION, LINEAR, NEAREST, Method, ours
-from .report import (DOCS, REPO, command_line, frames_markdown, section, step_note, tuned_report_header, weights_markdown,
+from .report import (DOCS, REPO, command_line, publish, frames_markdown, section, step_note, tuned_report_header, weights_markdown,
                      write_text)
 from .tables import fmt, markdown_table, per_frame_table
 from .timing import best_of, timed
@@ -32,7 +32,7 @@ __all__ = [
     "sample", "synthetic_frame",
     "blas_threads", "cpu_model", "machine_info", "machine_markdown", "version",
     "BIHARMONIC", "COLORIZATION", "LINEAR", "NEAREST", "Method", "ours",
-    "DOCS", "REPO", "command_line", "frames_markdown", "section", "step_note", "tuned_report_header", "weights_markdown",
+    "DOCS", "REPO", "command_line", "publish", "frames_markdown", "section", "step_note", "tuned_report_header", "weights_markdown",
     "write_text",
     "fmt", "markdown_table", "per_frame_table",
     "best_of", "timed",

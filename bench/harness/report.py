@@ -96,3 +96,12 @@ def write_text(path, text: str) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
+
+
+def publish(lines, out) -> int:
+    """Print the report made of ``lines`` and write it to ``out`` when given (a script's last step); returns 0."""
+    text = "\n".join(lines)
+    print(text)
+    if out is not None:
+        write_text(out, text)
+    return 0
