@@ -137,9 +137,15 @@ class Objective:
     def system_value(self, z):
         """``F(z) = zᵀAz − 2bᵀz + c`` from the cached :meth:`normal_equations` (one product), else None.
 
-        None also when ``F`` has terms other than quadratic ones.  The same number as :meth:`value` up to
-        rounding, for the quadratic solvers' records and the scale of a tolerance; :meth:`value` and
-        :meth:`term_values` sum the terms one by one.
+        None also when ``F`` has terms other than quadratic ones.  For the quadratic solvers' records and the
+        scale of a tolerance; :meth:`value` and :meth:`term_values` sum the terms one by one, which is exact to
+        a few units of rounding.
+
+        Notes
+        -----
+        Near a minimiser ``F`` is a small difference of large numbers (``c`` and ``2bᵀz − zᵀAz``, each about
+        ``F(0)``), so the rounding of ``A``'s entries and of the product is magnified by about ``F(0) / F``,
+        and by the size of ``A``'s entries against ``F(0)``.
         """
         if self._normal is None or self.has_l1 or self.robust_terms:
             return None
