@@ -246,6 +246,12 @@ def test_system_value_is_the_terms_sum_once_the_normal_equations_are_kept():
     obj.normal_equations()
     assert obj.system_value(z) == pytest.approx(obj.value(z), rel=1e-10)
     assert obj.system_value(z.reshape(obj.shape)) == obj.system_value(z)
+    kept = obj.system_value(z)
+    z[5] += 0.25  # in place: the kept value must not answer for the new point
+    assert obj.system_value(z) != kept
+    assert obj.system_value(z) == pytest.approx(obj.value(z), rel=1e-10)
+    obj.clear_cache()
+    assert obj.system_value(z) is None  # no assembled system, no kept value either
     with_l1, _, _ = build_objective(image, sparse, mask, weights=ALL_TERMS)
     with_l1.normal_equations()
     assert with_l1.system_value(z) is None  # F has |Kz| terms the system does not hold

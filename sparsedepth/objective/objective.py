@@ -60,6 +60,11 @@ __all__ = [
 DEFAULT_L1_SMOOTHING = 1e-4
 
 
+def _digest(z) -> bytes:
+    """A digest of a contiguous float64 vector's bytes: the key of the values kept for the last point."""
+    return hashlib.blake2b(memoryview(z).cast("B"), digest_size=16).digest()
+
+
 class Objective:
     """A sum of named quadratic, L1 and robust terms over a flattened ``(H, W)`` grid.
 
@@ -91,6 +96,7 @@ class Objective:
         self.l1_smoothing = check_positive_real(l1_smoothing, name="l1_smoothing")
         self._normal = None
         self._last_values = None  # (digest of z, term values) of the last term_values call
+        self._last_system = None  # (digest of z, F) of the last system_value call with A assembled
 
     # -- structure ---------------------------------------------------------
     @property
@@ -125,7 +131,7 @@ class Objective:
         :func:`~sparsedepth.complete_depth` may all ask for the same final point.
         """
         z = np.ascontiguousarray(self._flat(z))
-        digest = hashlib.blake2b(memoryview(z).cast("B"), digest_size=16).digest()
+        digest = _digest(z)
         if self._last_values is None or self._last_values[0] != digest:
             self._last_values = (digest, {t.name: t.value(z) for t in self.terms})
         return dict(self._last_values[1])
@@ -139,7 +145,8 @@ class Objective:
 
         None also when ``F`` has terms other than quadratic ones.  For the quadratic solvers' records and the
         scale of a tolerance; :meth:`value` and :meth:`term_values` sum the terms one by one, which is exact to
-        a few units of rounding.
+        a few units of rounding.  The value at the last ``z`` is kept like :meth:`term_values`' (a PCG's last
+        record, its certificate and the gap check ask for the same point).
 
         Notes
         -----
@@ -149,9 +156,12 @@ class Objective:
         """
         if self._normal is None or self.has_l1 or self.robust_terms:
             return None
-        A, b, c = self._normal
-        z = self._flat(z)
-        return float(c - 2.0 * np.dot(b, z) + np.dot(z, A @ z))
+        z = np.ascontiguousarray(self._flat(z))
+        digest = _digest(z)
+        if self._last_system is None or self._last_system[0] != digest:
+            A, b, c = self._normal
+            self._last_system = (digest, float(c - 2.0 * np.dot(b, z) + np.dot(z, A @ z)))
+        return self._last_system[1]
 
     def smoothed_value_and_gradient(self, z, eps: float | None = None):
         """Smoothed objective (``|t| → sqrt(t² + ε²)``) and its gradient.
@@ -262,6 +272,7 @@ class Objective:
         normal = (A, b, self.constant())
         if cache:
             self._normal = normal
+            self._last_system = None
         return normal
 
     def constant(self) -> float:
@@ -282,6 +293,7 @@ class Objective:
         5 or 13 entries per pixel for the 5- or 13-point system).
         """
         self._normal = None
+        self._last_system = None
 
     def normal_stencil(self):
         """Stencil of the quadratic part's matrix ``A`` (see :mod:`sparsedepth.grid.stencil`).

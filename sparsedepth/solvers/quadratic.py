@@ -162,7 +162,7 @@ def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner, depth_
     """
     A, b, c = objective.normal_equations(form=system_form(objective))
     values = recorder.values
-    recorder(0, x0, value=c - 2.0 * dot(b, x0) + dot(x0, A @ x0) if values else math.nan)
+    recorder(0, x0, value=quick_value(objective, x0) if values else math.nan)
     if preconditioner == "grid":
         M = default_hierarchy(A, objective.shape).aspreconditioner()
     else:

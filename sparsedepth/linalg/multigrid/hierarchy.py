@@ -63,6 +63,11 @@ class _Level:
         self.omega = None
 
 
+def _wide(offsets) -> bool:
+    """True when the stencil of ``offsets`` reaches beyond radius 1 (13- and 25-point stencils)."""
+    return any(max(abs(dy), abs(dx)) > 1 for dy, dx in offsets)
+
+
 class GridMultigrid:
     r"""Geometric multigrid hierarchy for an SPD operator on a pixel grid.
 
@@ -278,8 +283,7 @@ class GridMultigrid:
     def _build(self, A):
         offsets, source = fine_stencil_source(A, self.shape)
         if self.requested_interpolation == "auto":
-            wide = any(max(abs(dy), abs(dx)) > 1 for dy, dx in offsets)
-            self.interpolation = "bilinear" if wide else "operator"
+            self.interpolation = "bilinear" if _wide(offsets) else "operator"
         shapes = self._shapes()
         levels = []
         for li, shp in enumerate(shapes):
@@ -315,8 +319,7 @@ class GridMultigrid:
         for li in range(len(levels) - 1):
             fine, coarse = levels[li], levels[li + 1]
             if self.interpolation == "operator":
-                wide = any(max(abs(dy), abs(dx)) > 1 for dy, dx in fine.offsets)
-                seen = CollapsedSource(source) if wide else source  # the weights read a radius-1 stencil
+                seen = CollapsedSource(source) if _wide(fine.offsets) else source  # weights read radius 1
                 interp = operator_weights(seen.offsets, seen, fine.shape)
                 del seen
                 fine.P = ClassProlongation(interp, fine.shape, self.coarse_dtype)
