@@ -9,7 +9,12 @@ frame (observed pixels / all pixels, clamped to the anchors).
 The anchors are tuned by coordinate descent on :data:`bench.frames.TUNE_FRAMES` only: starting from
 ``sd.DEFAULT_WEIGHTS`` at every anchor, each field of each anchor in turn is multiplied by 1/2 and by 2 (and again
 in the same direction while that helps), a change kept when it lowers the score, until a round changes nothing or
-``--rounds`` is reached.  Score: the mean over the datasets of each dataset's mean over its frames × 1/5/10 % of the
+``--rounds`` is reached.  That descent scores the inputs at 1 / 5 / 10 % of the valid pixels; below the lowest
+anchor a schedule keeps that anchor's values, and most of the 1 % inputs already lie there (a frame's valid pixels
+are fewer than its pixels).  So an anchor at :data:`LOW_ANCHOR` of all pixels is added afterwards
+(:func:`extend`): it starts from the 1 % anchor's values and descends alone, the others fixed, on every tuning input
+including those that keep :data:`LOW_ANCHOR` of the valid pixels (LiDAR-like sparsity, and the 200 samples of the
+literature's NYU protocol).  Score: the mean over the datasets of each dataset's mean over its frames × 1/5/10 % of the
 valid pixels × seeds (every dataset counts alike; ``--unbalanced``: the plain mean) of the mean of the RMSE and MAE
 on the hidden valid pixels divided by those of the nearest-neighbour fill on the same input
 (:func:`bench.tune.score`'s score).  Each field stays within a factor ``--span`` (default :data:`SPAN`) of its
@@ -54,6 +59,9 @@ from .accuracy import dataset_of, load  # noqa: E402
 
 #: The anchor densities of the tuned schedule (observed fraction of all pixels).
 ANCHORS = (0.01, 0.05, 0.10)
+#: The anchor added below :data:`ANCHORS` after their descent (observed fraction of all pixels), and the fraction of
+#: a frame's valid pixels its own tuning and report inputs keep.
+LOW_ANCHOR = 0.003
 #: The factors of one coordinate step.
 FACTORS = (0.5, 2.0)
 #: A field's value stays within this factor of its value in ``sd.DEFAULT_WEIGHTS`` (both ways).
@@ -112,19 +120,23 @@ def with_value(schedule: sd.DensitySchedule, anchor: int, name: str, value: floa
     return sd.DensitySchedule(tuple(anchors), schedule.base)
 
 
-def descend(samples, *, rounds: int, span: float = SPAN, balanced: bool = True,
-            label: str = "") -> tuple[sd.DensitySchedule, list[float]]:
-    """Coordinate descent of the anchors from ``sd.DEFAULT_WEIGHTS``; the schedule and the score after each round.
+def descend(samples, *, rounds: int, span: float = SPAN, balanced: bool = True, label: str = "",
+            start: sd.DensitySchedule | None = None, tuned=None) -> tuple[sd.DensitySchedule, list[float]]:
+    """Coordinate descent of a schedule's anchors; the schedule and the score after each round.
 
-    Every field stays within a factor ``span`` of its default; ``balanced`` scores the dataset-balanced mean.
+    ``start`` (default: ``sd.DEFAULT_WEIGHTS`` at every fraction of :data:`ANCHORS`) is the first schedule and
+    ``tuned`` the indices of the anchors the descent changes (default: all).  Every field stays within a factor
+    ``span`` of its default; ``balanced`` scores the dataset-balanced mean.
     """
     scorer = Scorer()
-    schedule = sd.DensitySchedule.from_weights(tuple((f, sd.DEFAULT_WEIGHTS) for f in ANCHORS))
+    schedule = start if start is not None else sd.DensitySchedule.from_weights(
+        tuple((f, sd.DEFAULT_WEIGHTS) for f in ANCHORS))
+    tuned = range(len(schedule.anchors)) if tuned is None else tuple(tuned)
     best = scorer.mean(schedule, samples, balanced=balanced)
     trace = [best]
     for r in range(rounds):
         changed = False
-        for anchor in range(len(ANCHORS)):
+        for anchor in tuned:
             for name in DENSITY_FIELDS:
                 for factor in FACTORS:
                     while True:
@@ -137,17 +149,37 @@ def descend(samples, *, rounds: int, span: float = SPAN, balanced: bool = True,
                         if score >= best:
                             break
                         schedule, best, changed = candidate, score, True
-                        print(f"{label} round {r + 1}: {ANCHORS[anchor]:g} {name} = {value:.4g}: {best:.4f}",
-                              file=sys.stderr, flush=True)
+                        print(f"{label} round {r + 1}: {schedule.anchors[anchor][0]:g} {name} = {value:.4g}: "
+                              f"{best:.4f}", file=sys.stderr, flush=True)
         trace.append(best)
         if not changed:
             break
     return schedule, trace
 
 
+def extend(schedule: sd.DensitySchedule, fraction: float, samples, *, rounds: int, span: float = SPAN,
+           balanced: bool = True, label: str = "") -> tuple[sd.DensitySchedule, list[float]]:
+    """``schedule`` with one anchor added below its lowest, at ``fraction``, tuned with the other anchors fixed.
+
+    The new anchor starts from the values of the lowest anchor (so the first score is the schedule's own: below
+    the lowest anchor a schedule takes that anchor's values) and only its fields descend (:func:`descend`).
+    """
+    lowest = schedule.anchors[0][0]
+    if not 0 < fraction < lowest:
+        raise ValueError(f"an added anchor lies below the lowest ({lowest:g}); got {fraction:g}")
+    start = sd.DensitySchedule(((fraction, dict(schedule.anchors[0][1])),) + tuple(schedule.anchors), schedule.base)
+    return descend(samples, rounds=rounds, span=span, balanced=balanced, label=label, start=start, tuned=(0,))
+
+
 def _descend_job(job):
+    """``(label, schedule, trace, extension trace)``: the descent of :data:`ANCHORS` on the inputs at the standard
+    fractions, then :data:`LOW_ANCHOR` added by :func:`extend` on every input."""
     label, samples, rounds, span, balanced = job
-    return label, *descend(samples, rounds=rounds, span=span, balanced=balanced, label=label)
+    standard = [s for s in samples if s.fraction in harness.FRACTIONS]
+    schedule, trace = descend(standard, rounds=rounds, span=span, balanced=balanced, label=label)
+    schedule, low_trace = extend(schedule, LOW_ANCHOR, samples, rounds=rounds, span=span, balanced=balanced,
+                                 label=f"{label} (low)")
+    return label, schedule, trace, low_trace
 
 
 def parse_args(argv):
@@ -177,7 +209,7 @@ def main(argv=None) -> int:
     if not tune_frames or not report_frames:
         print("the shared data folder is absent: nothing to measure", file=sys.stderr)
         return 2
-    fractions = harness.FRACTIONS
+    fractions = (LOW_ANCHOR, *harness.FRACTIONS)
     tune = [Sample(f, p, s) for f in tune_frames for p in fractions for s in args.seeds]
     report = [Sample(f, p, s) for f in report_frames for p in fractions for s in args.seeds]
     held_out = sorted({dataset_of(f.name) for f in tune_frames} & {dataset_of(f.name) for f in report_frames})
@@ -188,9 +220,9 @@ def main(argv=None) -> int:
         (d, [s for s in tune if dataset_of(s.frame.name) != d], args.rounds, args.span, balanced) for d in held_out]
     if args.jobs > 1:
         with multiprocessing.get_context("fork").Pool(min(args.jobs, len(jobs))) as pool:
-            tuned = {label: (schedule, trace) for label, schedule, trace in pool.map(_descend_job, jobs)}
+            tuned = {label: rest for label, *rest in pool.map(_descend_job, jobs)}
     else:
-        tuned = {label: (schedule, trace) for label, schedule, trace in map(_descend_job, jobs)}
+        tuned = {label: rest for label, *rest in map(_descend_job, jobs)}
     text = report_text(args, tune_frames, report_frames, report, tuned, start)
     harness.write_text(args.out, text)
     print(text)
@@ -198,22 +230,29 @@ def main(argv=None) -> int:
 
 
 def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
-    schedule, trace = tuned["all"]
+    schedule, trace, low_trace = tuned["all"]
     scorer = Scorer()
     constant = sd.DensitySchedule.from_weights(((ANCHORS[0], sd.DEFAULT_WEIGHTS),))
+    without_low = sd.DensitySchedule(schedule.anchors[1:], schedule.base)
     library = sd.DEFAULT_SCHEDULE
-    methods = [("constant `sd.DEFAULT_WEIGHTS`", constant), ("schedule tuned here", schedule),
-               ("library defaults at run time (`sd.default_weights`)", library)]
+    low = f"{100 * LOW_ANCHOR:g} %"
+    methods = [("constant `sd.DEFAULT_WEIGHTS`", constant), (f"schedule tuned here without its {low} anchor",
+                                                               without_low),
+               ("schedule tuned here", schedule), ("library defaults at run time (`sd.default_weights`)", library)]
     fractions = harness.FRACTIONS
+    standard = [s for s in report if s.fraction in fractions]
 
     def mean_rmse(sched, keep=lambda s: True):
-        chosen = [s for s in report if keep(s)]
+        chosen = [s for s in standard if keep(s)]
         return scorer.mean(sched, chosen, which=1) if chosen else float("nan")
+
+    def low_rmse(sched):
+        return scorer.mean(sched, [s for s in report if s.fraction == LOW_ANCHOR], which=1)
 
     rows = []
     for label, sched in methods:
         per = [mean_rmse(sched, lambda s, p=p: s.fraction == p) for p in fractions]
-        rows.append([label, *(f"{v:.3f}" for v in per), f"{mean_rmse(sched):.3f}"])
+        rows.append([label, f"{low_rmse(sched):.3f}", *(f"{v:.3f}" for v in per), f"{mean_rmse(sched):.3f}"])
     datasets = sorted({dataset_of(f.name) for f in report_frames})
     per_dataset = []
     for d in datasets:
@@ -221,7 +260,7 @@ def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
         per_dataset.append([d, *(f"{mean_rmse(sched, keep):.3f}" for _, sched in methods)])
     lodo, lodo_scores = [], []
     for d in datasets:
-        held = [s for s in report if dataset_of(s.frame.name) == d]
+        held = [s for s in standard if dataset_of(s.frame.name) == d]
         sched, label = ((tuned[d][0], f"tuned without {d}") if d in tuned
                         else (schedule, "tuned on all (no tuning frame)"))
         lodo_scores += [scorer.ratios(s, sched.weights(s.density))[1] for s in held]
@@ -230,48 +269,54 @@ def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
     anchors = [[name, *(f"{values[name]:.6g}" for _, values in schedule.anchors),
                 f"{getattr(sd.DEFAULT_WEIGHTS, name):.6g}"] for name in DENSITY_FIELDS]
     densities = [[f.name, f"{100 * np.isfinite(f.depth).mean():.0f} %",
-                  *(f"{100 * p * np.isfinite(f.depth).mean():.2g} %" for p in fractions)] for f in report_frames]
+                  *(f"{100 * p * np.isfinite(f.depth).mean():.2g} %" for p in (LOW_ANCHOR, *fractions))]
+                 for f in report_frames]
     command = harness.command_line("density", args.argv)
+    score_name = 'the mean over all inputs' if args.unbalanced else 'the mean over datasets of each dataset mean'
     lines = [
         *harness.tuned_report_header("Density-scheduled weights", command, args, time.perf_counter() - start,
                                      tune_frames, report_frames),
         "",
-        "Each input keeps 1, 5 or 10 % of the frame's *valid* pixels; the schedule is evaluated at the observed "
-        "fraction of *all* pixels (KITTI's ground truth covers about a fifth of the frame, so its inputs are "
-        "completed with the weights of a lower density).",
+        f"Each input keeps {low}, 1, 5 or 10 % of the frame's *valid* pixels; the schedule is evaluated at the "
+        "observed fraction of *all* pixels (KITTI's ground truth covers about a fifth of the frame, so its inputs "
+        "are completed with the weights of a lower density).",
         "",
-        f"Coordinate descent on the tuning frames (score (RMSE + MAE) / 2 over nearest's, "
-        f"{'the mean over all inputs' if args.unbalanced else 'the mean over datasets of each dataset mean'}; "
-        f"every field within a factor {args.span:g} of its default): "
+        f"Coordinate descent on the tuning frames' inputs at 1 / 5 / 10 % (score (RMSE + MAE) / 2 over nearest's, "
+        f"{score_name}; every field within a factor {args.span:g} of its default): "
         + " -> ".join(f"{v:.4f}" for v in trace) + f" ({len(trace) - 1} rounds).",
+        "",
+        f"Then an anchor at {low} of all pixels, below which the schedule used to keep the 1 % anchor's values, "
+        f"starting from those values and descending alone (the other anchors fixed) on every tuning input, "
+        f"{low} included: " + " -> ".join(f"{v:.4f}" for v in low_trace) + f" ({len(low_trace) - 1} rounds).",
         "",
         "Tuned anchors (observed fraction of all pixels), beside the constant defaults:",
         "",
         harness.markdown_table(["field", *(f"{100 * f:g} %" for f, _ in schedule.anchors), "`sd.DEFAULT_WEIGHTS`"],
                                anchors, align=["---"] + ["---:"] * (len(schedule.anchors) + 1)),
         "",
-        "RMSE / nearest-neighbour RMSE on the report frames (lower is better), mean over frames × seeds:",
+        f"RMSE / nearest-neighbour RMSE on the report frames (lower is better), mean over frames × seeds; the "
+        f"mean is over 1 / 5 / 10 % (the {low} inputs are the sparsest a user brings, not part of that mean):",
         "",
-        harness.markdown_table(["weights", *(f"{100 * f:g} %" for f in fractions), "mean"], rows,
-                               align=["---"] + ["---:"] * (len(fractions) + 1)),
+        harness.markdown_table(["weights", low, *(f"{100 * f:g} %" for f in fractions), "mean (1 / 5 / 10 %)"],
+                               rows, align=["---"] + ["---:"] * (len(fractions) + 2)),
         "",
-        "Per dataset (mean over its report frames × sparsities × seeds):",
+        "Per dataset (mean over its report frames × 1 / 5 / 10 % × seeds):",
         "",
         harness.markdown_table(["dataset", *(label for label, _ in methods)], per_dataset,
                                align=["---"] + ["---:"] * len(methods)),
         "",
-        "Leave-one-dataset-out: for each dataset with tuning frames the descent repeated without them, scored on "
-        "that dataset's report frames:",
+        "Leave-one-dataset-out: for each dataset with tuning frames the descent and the added anchor repeated "
+        "without them, scored on that dataset's report frames at 1 / 5 / 10 %:",
         "",
         harness.markdown_table(["held-out dataset", "schedule", "score", "constant `sd.DEFAULT_WEIGHTS`"], lodo,
                                align=["---", "---", "---:", "---:"]),
         "",
         f"Leave-one-dataset-out mean over the report frames: {np.mean(lodo_scores):.3f}.",
         "",
-        "Observed fraction of all pixels per report frame (valid ground truth, then 1 / 5 / 10 % of it):",
+        f"Observed fraction of all pixels per report frame (valid ground truth, then {low}, 1, 5 and 10 % of it):",
         "",
-        harness.markdown_table(["frame", "valid", *(f"{100 * f:g} %" for f in fractions)], densities,
-                               align=["---"] + ["---:"] * (len(fractions) + 1)),
+        harness.markdown_table(["frame", "valid", low, *(f"{100 * f:g} %" for f in fractions)], densities,
+                               align=["---"] + ["---:"] * (len(fractions) + 2)),
         "",
     ]
     return "\n".join(lines)

@@ -57,3 +57,28 @@ def test_balanced_score_counts_each_dataset_once(monkeypatch):
     schedule = sd.DensitySchedule.from_weights(((0.05, sd.DEFAULT_WEIGHTS.replace(delta=base * 4)),))
     assert scorer.mean(schedule, samples) == pytest.approx((3 * 1 + 5) / 4)
     assert scorer.mean(schedule, samples, balanced=True) == pytest.approx((1 + 5) / 2)
+
+
+def test_added_anchor_descends_alone_from_the_lowest_anchors_values(monkeypatch):
+    density = _density()
+    base = sd.DEFAULT_WEIGHTS.delta
+    # the sparse input wants 4x the default delta, the 1 % input 1/2x; the 1 % anchor is fixed at 1x
+    targets = {"nyu_a/0": base * 4, "kitti/0": base / 2}
+    monkeypatch.setattr(density.Scorer, "ratios", _score_of(targets))
+    samples = [_sample("nyu_a/0", 0.002, 0), _sample("kitti/0", 0.01, 0)]
+    schedule = sd.DensitySchedule.from_weights(((0.01, sd.DEFAULT_WEIGHTS), (0.1, sd.DEFAULT_WEIGHTS)))
+    extended, trace = density.extend(schedule, 0.003, samples, rounds=3, span=64.0)
+    assert [f for f, _ in extended.anchors] == [0.003, 0.01, 0.1]
+    assert extended.anchors[1:] == schedule.anchors  # the other anchors are not tuned
+    assert extended.weights(0.002).delta == pytest.approx(base * 4, rel=1e-12)
+    assert extended.weights(0.01).delta == pytest.approx(base, rel=1e-12)
+    # the first score is the unextended schedule's: both inputs at 1x (|log2 4| + 1 and |log2 1/2| + 1)
+    assert trace[0] == pytest.approx(((2 + 1) + (1 + 1)) / 2)
+    assert trace[-1] == pytest.approx((1 + 2) / 2)
+
+
+def test_added_anchor_must_lie_below_the_lowest():
+    density = _density()
+    schedule = sd.DensitySchedule.from_weights(((0.01, sd.DEFAULT_WEIGHTS),))
+    with pytest.raises(ValueError, match="below the lowest"):
+        density.extend(schedule, 0.02, [], rounds=1)
