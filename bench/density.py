@@ -229,6 +229,19 @@ def main(argv=None) -> int:
     return 0
 
 
+def _schedule_differences(tuned: sd.DensitySchedule, library: sd.DensitySchedule) -> list[str]:
+    """Where ``library`` differs from ``tuned``: anchors only one has, and each field of a shared anchor."""
+    ours, theirs = dict(tuned.anchors), dict(library.anchors)
+    out = [f"an anchor at {100 * f:g} % only {'here' if f in ours else 'in the library'}"
+           for f in sorted(set(ours) ^ set(theirs))]
+    for f in sorted(set(ours) & set(theirs)):
+        out += [f"{100 * f:g} % {name} = {theirs[f][name]:.6g} (tuned here {ours[f][name]:.6g})"
+                for name in DENSITY_FIELDS if theirs[f][name] != ours[f][name]]
+    if tuned.base != library.base:
+        out.append("the fields outside the schedule")
+    return out
+
+
 def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
     schedule, trace, low_trace = tuned["all"]
     scorer = Scorer()
@@ -271,6 +284,10 @@ def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
     densities = [[f.name, f"{100 * np.isfinite(f.depth).mean():.0f} %",
                   *(f"{100 * p * np.isfinite(f.depth).mean():.2g} %" for p in (LOW_ANCHOR, *fractions))]
                  for f in report_frames]
+    differences = _schedule_differences(schedule, library)
+    library_line = ("The library's `sd.DEFAULT_SCHEDULE` is the schedule tuned here." if not differences else
+                    "The library's `sd.DEFAULT_SCHEDULE` differs from the schedule tuned here: "
+                    + "; ".join(differences) + ".")
     command = harness.command_line("density", args.argv)
     score_name = 'the mean over all inputs' if args.unbalanced else 'the mean over datasets of each dataset mean'
     lines = [
@@ -293,6 +310,8 @@ def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
         "",
         harness.markdown_table(["field", *(f"{100 * f:g} %" for f, _ in schedule.anchors), "`sd.DEFAULT_WEIGHTS`"],
                                anchors, align=["---"] + ["---:"] * (len(schedule.anchors) + 1)),
+        "",
+        library_line,
         "",
         f"RMSE / nearest-neighbour RMSE on the report frames (lower is better), mean over frames × seeds; the "
         f"mean is over 1 / 5 / 10 % (the {low} inputs are the sparsest a user brings, not part of that mean):",

@@ -82,3 +82,13 @@ def test_added_anchor_must_lie_below_the_lowest():
     schedule = sd.DensitySchedule.from_weights(((0.01, sd.DEFAULT_WEIGHTS),))
     with pytest.raises(ValueError, match="below the lowest"):
         density.extend(schedule, 0.02, [], rounds=1)
+
+
+def test_schedule_differences_name_each_changed_field_and_anchor():
+    density = _density()
+    tuned = sd.DensitySchedule.from_weights(((0.01, sd.DEFAULT_WEIGHTS), (0.1, sd.DEFAULT_WEIGHTS)))
+    assert density._schedule_differences(tuned, tuned) == []
+    library = sd.DensitySchedule.from_weights(((0.003, sd.DEFAULT_WEIGHTS), (0.01, sd.DEFAULT_WEIGHTS.replace(kappa=50)),
+                                               (0.1, sd.DEFAULT_WEIGHTS)))
+    assert density._schedule_differences(tuned, library) == [
+        "an anchor at 0.3 % only in the library", f"1 % kappa = 50 (tuned here {sd.DEFAULT_WEIGHTS.kappa:g})"]
