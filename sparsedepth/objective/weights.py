@@ -395,7 +395,7 @@ DEFAULT_SCHEDULE = DensitySchedule((
     (0.05, dict(delta=0.000262, kappa=100.0, beta_image=0.016152, beta_second=3.575e-05, beta_second_image=0.0936,
                 beta_local_linear=0.00125, local_linear_eps=2.5e-06)),
     (0.10, dict(delta=1.6375e-05, kappa=100.0, beta_image=0.016152, beta_second=3.575e-05, beta_second_image=0.0936,
-                beta_local_linear=0.00125, local_linear_eps=1e-05)),
+                beta_local_linear=0.00125, local_linear_eps=2e-05)),
 ))
 
 
