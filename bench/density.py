@@ -30,7 +30,7 @@ frame use the schedule tuned on all of them).
 
 Run from the repository root::
 
-    python -m bench.density --seeds 0 1 --jobs 2   # ~1 h on 2 cores: writes docs/density.md
+    python -m bench.density --seeds 0 1 --jobs 2   # about half an hour on 2 cores: writes docs/density.md
     python -m bench.density --quick                # a smoke run on the tiny quick frames
 
 May import :mod:`sparsedepth`, numpy, :mod:`bench.frames`, :mod:`bench.harness` and :mod:`bench.accuracy`.
@@ -302,7 +302,7 @@ def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
         f"{score_name}; every field within a factor {args.span:g} of its default): "
         + " -> ".join(f"{v:.4f}" for v in trace) + f" ({len(trace) - 1} rounds).",
         "",
-        f"Then an anchor at {low} of all pixels, below which the schedule used to keep the 1 % anchor's values, "
+        f"Then an anchor at {low} of all pixels (without it the schedule keeps the 1 % anchor's values below 1 %), "
         f"starting from those values and descending alone (the other anchors fixed) on every tuning input, "
         f"{low} included: " + " -> ".join(f"{v:.4f}" for v in low_trace) + f" ({len(low_trace) - 1} rounds).",
         "",
