@@ -26,11 +26,16 @@ def _score_of(targets):
     return ratios
 
 
-def test_descent_reaches_each_anchors_minimiser(monkeypatch):
+def _scored_by(monkeypatch, targets):
+    """bench.density with :func:`_score_of` ``targets`` in place of completions."""
     density = _density()
-    base = sd.DEFAULT_WEIGHTS.delta
-    targets = {"nyu_a/0": base * 4, "kitti/0": base / 2}
     monkeypatch.setattr(density.Scorer, "ratios", _score_of(targets))
+    return density
+
+
+def test_descent_reaches_each_anchors_minimiser(monkeypatch):
+    base = sd.DEFAULT_WEIGHTS.delta
+    density = _scored_by(monkeypatch, {"nyu_a/0": base * 4, "kitti/0": base / 2})
     samples = [_sample("nyu_a/0", 0.10, 0), _sample("kitti/0", 0.01, 0)]
     schedule, trace = density.descend(samples, rounds=3, span=64.0)
     assert schedule.weights(0.10).delta == pytest.approx(base * 4, rel=1e-12)
@@ -39,19 +44,17 @@ def test_descent_reaches_each_anchors_minimiser(monkeypatch):
 
 
 def test_descent_stays_within_its_span(monkeypatch):
-    density = _density()
     base = sd.DEFAULT_WEIGHTS.delta
-    monkeypatch.setattr(density.Scorer, "ratios", _score_of({"nyu_a/0": base * 1000}))
+    density = _scored_by(monkeypatch, {"nyu_a/0": base * 1000})
     schedule, _ = density.descend([_sample("nyu_a/0", 0.05, 0)], rounds=3, span=8.0)
     assert schedule.weights(0.05).delta == pytest.approx(base * 8, rel=1e-12)
 
 
 def test_balanced_score_counts_each_dataset_once(monkeypatch):
-    density = _density()
     base = sd.DEFAULT_WEIGHTS.delta
     # three NYU inputs want 4x, one KITTI input wants 1/4x, all at the same density (one anchor decides)
     targets = {"nyu_a/0": base * 4, "nyu_b/1": base * 4, "nyu_c/2": base * 4, "kitti/0": base / 4}
-    monkeypatch.setattr(density.Scorer, "ratios", _score_of(targets))
+    density = _scored_by(monkeypatch, targets)
     samples = [_sample(name, 0.05, 0) for name in targets]
     scorer = density.Scorer()
     schedule = sd.DensitySchedule.from_weights(((0.05, sd.DEFAULT_WEIGHTS.replace(delta=base * 4)),))
@@ -60,11 +63,9 @@ def test_balanced_score_counts_each_dataset_once(monkeypatch):
 
 
 def test_added_anchor_descends_alone_from_the_lowest_anchors_values(monkeypatch):
-    density = _density()
     base = sd.DEFAULT_WEIGHTS.delta
     # the sparse input wants 4x the default delta, the 1 % input 1/2x; the 1 % anchor is fixed at 1x
-    targets = {"nyu_a/0": base * 4, "kitti/0": base / 2}
-    monkeypatch.setattr(density.Scorer, "ratios", _score_of(targets))
+    density = _scored_by(monkeypatch, {"nyu_a/0": base * 4, "kitti/0": base / 2})
     samples = [_sample("nyu_a/0", 0.002, 0), _sample("kitti/0", 0.01, 0)]
     schedule = sd.DensitySchedule.from_weights(((0.01, sd.DEFAULT_WEIGHTS), (0.1, sd.DEFAULT_WEIGHTS)))
     extended, trace = density.extend(schedule, 0.003, samples, rounds=3, span=64.0)
