@@ -121,14 +121,16 @@ def with_value(schedule: sd.DensitySchedule, anchor: int, name: str, value: floa
 
 
 def descend(samples, *, rounds: int, span: float = SPAN, balanced: bool = True, label: str = "",
-            start: sd.DensitySchedule | None = None, tuned=None) -> tuple[sd.DensitySchedule, list[float]]:
+            start: sd.DensitySchedule | None = None, tuned=None,
+            scorer: Scorer | None = None) -> tuple[sd.DensitySchedule, list[float]]:
     """Coordinate descent of a schedule's anchors; the schedule and the score after each round.
 
     ``start`` (default: ``sd.DEFAULT_WEIGHTS`` at every fraction of :data:`ANCHORS`) is the first schedule and
     ``tuned`` the indices of the anchors the descent changes (default: all).  Every field stays within a factor
-    ``span`` of its default; ``balanced`` scores the dataset-balanced mean.
+    ``span`` of its default; ``balanced`` scores the dataset-balanced mean.  ``scorer`` (default: a new one) keeps
+    the completions already scored, e.g. those of an earlier descent on the same inputs.
     """
-    scorer = Scorer()
+    scorer = Scorer() if scorer is None else scorer
     schedule = start if start is not None else sd.DensitySchedule.from_weights(
         tuple((f, sd.DEFAULT_WEIGHTS) for f in ANCHORS))
     tuned = range(len(schedule.anchors)) if tuned is None else tuple(tuned)
@@ -158,7 +160,8 @@ def descend(samples, *, rounds: int, span: float = SPAN, balanced: bool = True, 
 
 
 def extend(schedule: sd.DensitySchedule, fraction: float, samples, *, rounds: int, span: float = SPAN,
-           balanced: bool = True, label: str = "") -> tuple[sd.DensitySchedule, list[float]]:
+           balanced: bool = True, label: str = "", scorer: Scorer | None = None) -> tuple[sd.DensitySchedule,
+                                                                                             list[float]]:
     """``schedule`` with one anchor added below its lowest, at ``fraction``, tuned with the other anchors fixed.
 
     The new anchor starts from the values of the lowest anchor (so the first score is the schedule's own: below
@@ -168,7 +171,8 @@ def extend(schedule: sd.DensitySchedule, fraction: float, samples, *, rounds: in
     if not 0 < fraction < lowest:
         raise ValueError(f"an added anchor lies below the lowest ({lowest:g}); got {fraction:g}")
     start = sd.DensitySchedule(((fraction, dict(schedule.anchors[0][1])),) + tuple(schedule.anchors), schedule.base)
-    return descend(samples, rounds=rounds, span=span, balanced=balanced, label=label, start=start, tuned=(0,))
+    return descend(samples, rounds=rounds, span=span, balanced=balanced, label=label, start=start, tuned=(0,),
+                   scorer=scorer)
 
 
 def _descend_job(job):
@@ -176,9 +180,10 @@ def _descend_job(job):
     fractions, then :data:`LOW_ANCHOR` added by :func:`extend` on every input."""
     label, samples, rounds, span, balanced = job
     standard = [s for s in samples if s.fraction in harness.FRACTIONS]
-    schedule, trace = descend(standard, rounds=rounds, span=span, balanced=balanced, label=label)
+    scorer = Scorer()  # the extension's first score re-reads the descent's last completions of the standard inputs
+    schedule, trace = descend(standard, rounds=rounds, span=span, balanced=balanced, label=label, scorer=scorer)
     schedule, low_trace = extend(schedule, LOW_ANCHOR, samples, rounds=rounds, span=span, balanced=balanced,
-                                 label=f"{label} (low)")
+                                 label=f"{label} (low)", scorer=scorer)
     return label, schedule, trace, low_trace
 
 
