@@ -228,9 +228,7 @@ def main(argv=None) -> int:
                  key=lambda label: mean_over(results[label][3][1]))
     text = report(args, tune_frames, report_frames, fractions, rows, results, chosen, base_report, base_tune,
                   start)
-    harness.write_text(args.out, text)
-    print(text)
-    return 0
+    return harness.publish([text], args.out)
 
 
 def lodo_rows(results, label, report_frames, fractions, seeds, base_report):

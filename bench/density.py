@@ -229,9 +229,7 @@ def main(argv=None) -> int:
     else:
         tuned = {label: rest for label, *rest in map(_descend_job, jobs)}
     text = report_text(args, tune_frames, report_frames, report, tuned, start)
-    harness.write_text(args.out, text)
-    print(text)
-    return 0
+    return harness.publish([text], args.out)
 
 
 def _schedule_differences(tuned: sd.DensitySchedule, library: sd.DensitySchedule) -> list[str]:

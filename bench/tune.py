@@ -260,9 +260,7 @@ def main(argv=None) -> int:
 
     text = report(args, frames=frames, fractions=fractions, cands=cands, n_refine=n_refine, table=table, near=near,
                   chosen=chosen, l1_rows=l1_rows, seconds=time.perf_counter() - start)
-    harness.write_text(args.out, text)
-    print(text)
-    return 0
+    return harness.publish([text], args.out)
 
 
 if __name__ == "__main__":
