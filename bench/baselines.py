@@ -8,7 +8,8 @@ or ``--quick`` for a smoke test.  Methods: nearest-neighbour fill,
 ``scipy.interpolate.griddata`` linear (nearest outside the hull),
 ``skimage.restoration.inpaint_biharmonic``, the Levin/NYU-toolbox
 colorization fill (:func:`sparsedepth.colorization_baseline`) and ours
-(``complete_depth`` with ``sd.DEFAULT_WEIGHTS``, ``solver="auto"``).  Frames
+(``complete_depth`` with the library's defaults, ``sd.DEFAULT_SCHEDULE`` at each input's observed fraction of
+the pixels, ``solver="auto"``).  Frames
 are :data:`frames.REPORT_FRAMES` subsampled by ``--step`` (default 2: the
 biharmonic inpainting takes tens of seconds per full-resolution frame).
 

@@ -6,7 +6,8 @@ Run (full, ~minutes on 2 cores)::
 
 or ``--quick`` for a seconds-long smoke test on tiny frames.  Frames are
 :data:`frames.REPORT_FRAMES` subsampled by ``--step`` (default 2); ours is
-``sparsedepth.complete_depth`` with ``sd.DEFAULT_WEIGHTS`` and ``solver="auto"``.
+``sparsedepth.complete_depth`` with the library's defaults (``sd.DEFAULT_SCHEDULE`` at each input's observed
+fraction of the pixels) and ``solver="auto"``.
 Every number is the mean ± std over frames × seeds, scored on the valid
 ground-truth pixels hidden from the method.
 
