@@ -5,12 +5,14 @@ Run (a few minutes on 2 cores)::
     python -m bench.default_runtime --out docs/default_runtime.md
 
 Every report frame (subsampled by ``--step``, default 2) at 1 / 5 / 10 % of its valid pixels and every seed is
-completed with the library's defaults (``sd.complete_depth`` without ``weights=``) and with
-:data:`BASELINE` (the baseline row of ``docs/accuracy.md``: the density-independent weights without the
-modelling fields edge_sigma, fill_contrast and the local-linear term), alternating which goes first from one
-input to the next, the whole pass ``--repeats`` times.  The ratio is Σ wall time of the defaults over Σ wall time of
-the baseline over every pass (and the same in process CPU time); each pass's own ratio shows the spread of the
-measurement on a shared machine.
+completed with the library's defaults (``sd.complete_depth`` without ``weights=``), with the defaults without
+the local-linear term (:data:`WITHOUT_LOCAL_LINEAR`: ``beta_local_linear = 0`` at every anchor of
+``sd.DEFAULT_SCHEDULE``, whose 25-point normal stencil it turns into a 13-point one) and with :data:`BASELINE` (the
+baseline row of ``docs/accuracy.md``: the density-independent weights without the modelling fields edge_sigma,
+fill_contrast and the local-linear term), the order of the three turning from one input to the next, the whole
+pass ``--repeats`` times.  A ratio is Σ wall time of a setting over Σ wall time of the baseline over every pass (and
+the same in process CPU time); each pass's own ratio of the defaults shows the spread of the measurement on a shared
+machine.
 
 May import :mod:`sparsedepth`, :mod:`bench.harness` and :mod:`bench.frames`.
 """
@@ -34,6 +36,12 @@ FRACTIONS = (0.01, 0.05, 0.10)
 #: The baseline objective of docs/accuracy.md (its "Baseline weights"), modelling fields off.
 BASELINE = sd.Weights(alpha=1, beta=0, gamma=0, delta=0.000131, kappa=25, beta_image=0.00673, beta_second=0.000286,
                       beta_second_image=0.039, edge_sigma=0, fill_contrast=0, beta_local_linear=0)
+#: The library's defaults with the local-linear term switched off at every anchor (the rest as in the defaults).
+WITHOUT_LOCAL_LINEAR = sd.DensitySchedule(
+    tuple((fraction, {**dict(values), "beta_local_linear": 0.0}) for fraction, values in sd.DEFAULT_SCHEDULE.anchors),
+    sd.DEFAULT_SCHEDULE.base.replace(beta_local_linear=0.0))
+#: (label, weights) of the settings timed, ``None`` for the library's defaults; the baseline last.
+SETTINGS = (("defaults", None), ("without local-linear", WITHOUT_LOCAL_LINEAR), ("baseline", BASELINE))
 
 
 def parse_args(argv):
@@ -67,28 +75,36 @@ def main(argv=None) -> int:
     if args.repeats < 1:
         raise SystemExit("--repeats must be at least 1")
     frames = [H.load_frame(n, args.step) for n in frame_list.available(names)]
-    times = {}  # frame -> {"defaults"/"baseline": [wall, cpu]}
-    passes = []  # per pass: {"defaults"/"baseline": [wall, cpu]}
+    labels = [label for label, _ in SETTINGS]
+    times = {}  # frame -> {label: [wall, cpu]}
+    passes = []  # per pass: {label: [wall, cpu]}
     turn = 0
     for _ in range(args.repeats):
-        this_pass = {"defaults": np.zeros(2), "baseline": np.zeros(2)}
+        this_pass = {label: np.zeros(2) for label in labels}
         for frame in frames:
-            per = times.setdefault(frame.name, {"defaults": np.zeros(2), "baseline": np.zeros(2)})
+            per = times.setdefault(frame.name, {label: np.zeros(2) for label in labels})
             for fraction in FRACTIONS:
                 for seed in args.seeds:
                     sparse, mask = sd.sample_depth(frame.depth, fraction=fraction, seed=seed)
-                    order = (("defaults", None), ("baseline", BASELINE))
-                    for label, weights in (order if turn % 2 == 0 else order[::-1]):
+                    k = turn % len(SETTINGS)
+                    for label, weights in SETTINGS[k:] + SETTINGS[:k]:
                         seconds = timed_completion(frame.image, sparse, mask, weights)
                         per[label] += seconds
                         this_pass[label] += seconds
                     turn += 1
         passes.append(this_pass)
-    total = {k: sum(t[k] for t in times.values()) for k in ("defaults", "baseline")}
-    rows = [[f"`{name}`", f"{t['baseline'][0]:.2f}", f"{t['defaults'][0]:.2f}",
-             f"{t['defaults'][0] / t['baseline'][0]:.2f}"] for name, t in times.items()]
-    rows.append(["all", f"{total['baseline'][0]:.2f}", f"{total['defaults'][0]:.2f}",
-                 f"**{total['defaults'][0] / total['baseline'][0]:.2f}**"])
+    total = {label: sum(t[label] for t in times.values()) for label in labels}
+
+    def cells(t, bold=False):
+        ratio = [f"{t[label][0] / t['baseline'][0]:.2f}" for label in labels[:-1]]
+        if bold:
+            ratio = [f"**{r}**" for r in ratio]
+        return [f"{t['baseline'][0]:.2f}", f"{t['defaults'][0]:.2f}", ratio[0], f"{t['without local-linear'][0]:.2f}",
+                ratio[1]]
+
+    rows = [[f"`{name}`", *cells(t)] for name, t in times.items()]
+    rows.append(["all", *cells(total, bold=True)])
+    cpu = {label: total[label][1] / total["baseline"][1] for label in labels[:-1]}
     lines = [
         "# Runtime of the default completion",
         "",
@@ -99,11 +115,13 @@ def main(argv=None) -> int:
         "",
         __doc__.split("\n\n")[2].replace("\n", " "),
         "",
-        H.markdown_table(["frame", "baseline (s)", "defaults (s)", "defaults / baseline"], rows),
+        H.markdown_table(["frame", "baseline (s)", "defaults (s)", "defaults / baseline",
+                          "defaults without local-linear (s)", "without local-linear / baseline"], rows),
         "",
-        f"In process CPU time: defaults / baseline = {total['defaults'][1] / total['baseline'][1]:.2f}.",
+        f"In process CPU time: defaults / baseline = {cpu['defaults']:.2f}; defaults without local-linear / baseline "
+        f"= {cpu['without local-linear']:.2f}.",
         "",
-        f"Per pass ({args.repeats}), wall / CPU time: "
+        f"Per pass ({args.repeats}), defaults / baseline in wall / CPU time: "
         + ", ".join(f"{p['defaults'][0] / p['baseline'][0]:.2f} / {p['defaults'][1] / p['baseline'][1]:.2f}"
                     for p in passes) + ".",
         "",

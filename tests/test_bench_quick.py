@@ -220,14 +220,25 @@ def test_default_runtime_quick_writes_the_ratio_of_the_summed_times(tmp_path):
             if line.startswith("| `") or line.startswith("| all")]
     assert [r[0] for r in rows] == ["middlebury2003/teddy", "all"]
     assert rows[0][1:] == rows[1][1:]  # one frame: the total is that frame
-    baseline, defaults, ratio = (float(c) for c in rows[0][1:])
-    assert baseline > 0 and defaults > 0 and ratio > 0
+    baseline, defaults, ratio, without, without_ratio = (float(c) for c in rows[0][1:])
+    assert baseline > 0 and defaults > 0 and without > 0
+    assert ratio == pytest.approx(defaults / baseline, abs=0.02)  # the cells are rounded to 0.01 s
+    assert without_ratio == pytest.approx(without / baseline, abs=0.02)
     per_pass = next(line for line in text.splitlines() if line.startswith("Per pass (2)"))
     walls = [float(pair.split("/")[0]) for pair in per_pass.split(": ", 1)[1].rstrip(".").split(", ")]
     assert len(walls) == 2
     assert min(walls) - 0.01 <= ratio <= max(walls) + 0.01
     with pytest.raises(SystemExit):
         bench.main(["--quick", "--repeats", "0"])
+
+
+def test_default_runtime_without_local_linear_is_the_defaults_with_that_term_off():
+    """At any observed fraction, every field as in the library's defaults but beta_local_linear = 0."""
+    bench = load("default_runtime")
+    sd = importlib.import_module("sparsedepth")
+    for fraction in (0.001, 0.003, 0.007, 0.01, 0.03, 0.05, 0.1, 0.5):
+        assert bench.WITHOUT_LOCAL_LINEAR.weights(fraction) == sd.default_weights(fraction).replace(beta_local_linear=0)
+    assert [label for label, _ in bench.SETTINGS][-1] == "baseline"
 
 
 def test_interpolation_quick_compares_both_on_both_objectives(tmp_path):
