@@ -42,8 +42,9 @@ admm        any          primal residual ``<= tol`` (relative) starts exact
                          ``<= 2e-7`` (relative, + floor) between two of them
 lbfgsb      any          SciPy L-BFGS-B on the smoothed objective scaled by
                          ``1/F(x0)``; ``ftol = tol``
-adam        any          projected Adam on the smoothed objective; relative
-                         decrease over 50 steps ``≤ tol`` (+ floor)
+adam        any          projected Adam on the smoothed objective; the mean
+                         over the last 50 steps is ``≤ tol`` (relative, +
+                         floor) below the mean over the 50 before them
 ==========  ===========  ====================================================
 
 Modules: ``core`` (the front door: checks, scaling, :func:`solve`, the

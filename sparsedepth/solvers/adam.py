@@ -19,6 +19,21 @@ def _step_size(options, learning_rate, k, horizon):
     return learning_rate / np.sqrt(1.0 + k / options.decay_steps)
 
 
+def _stalled(values, window, tol, floor):
+    """``(earlier, last)`` window means when the last ``2 window`` values have stalled, else ``None``.
+
+    ``earlier`` and ``last`` are the means of the smoothed objective over the ``window`` steps before the last
+    ``window`` and over the last ``window``; stalled means ``0 <= earlier − last <= tol |last| + floor``.  Adam's
+    values oscillate while its step is large: comparing two window means instead of two single values keeps an
+    oscillation's low point from reading as a plateau.
+    """
+    if len(values) < 2 * window:
+        return None
+    tail = np.asarray(values[-2 * window:], dtype=float)
+    earlier, last = float(tail[:window].mean()), float(tail[window:].mean())
+    return (earlier, last) if 0 <= earlier - last <= tol * abs(last) + floor else None
+
+
 def solve_adam(objective, x0, *, tol, max_iter, recorder, options):
     """Adam (bias-corrected moments) with the projection ``z ← max(z, 0)``.
 
@@ -30,8 +45,9 @@ def solve_adam(objective, x0, *, tol, max_iter, recorder, options):
     :func:`sparsedepth.solvers.solve`); with ``"inverse_sqrt"`` ``η_k =
     learning_rate / sqrt(1 + k/decay_steps)`` (default ``learning_rate``
     ``1e-2`` times the median depth).  Either stops early, converged, when
-    the smoothed objective decreased by less than ``tol`` (relative) over
-    the last ``window`` steps (options:
+    the mean of the smoothed objective over the last ``window`` steps is
+    less than ``tol`` (relative) below its mean over the ``window`` steps
+    before them (options:
     :class:`~sparsedepth.solvers.options.AdamOptions`).
     """
     scale = max(float(np.median(x0[x0 > 0])) if np.any(x0 > 0) else 1.0, 1e-12)
@@ -63,13 +79,14 @@ def solve_adam(objective, x0, *, tol, max_iter, recorder, options):
         z = np.maximum(z - step * mhat / (np.sqrt(vhat) + 1e-8 * scale), 0.0)
         if k % record_every == 0:
             recorder(k, z, fevals=k, gevals=k)
-        if len(values) > window:
-            old = values[-window - 1]
-            if 0 <= (old - f) <= tol * abs(f) + floor:
-                converged = True
-                message = (f"relative decrease over {window} steps {relative(old - f, f):.1e} <= tol {tol:.1e} "
-                           f"(or absolute {old - f:.1e} <= floor {floor:.1e})")
-                break
+        means = _stalled(values, window, tol, floor)
+        if means is not None:
+            earlier, last = means
+            converged = True
+            message = (f"relative decrease of the mean over the last {window} steps from the {window} before "
+                       f"{relative(earlier - last, last):.1e} <= tol {tol:.1e} "
+                       f"(or absolute {earlier - last:.1e} <= floor {floor:.1e})")
+            break
     if k % record_every != 0:
         recorder(k, z, fevals=k, gevals=k)
     return output(z, k, converged, message, recorder)

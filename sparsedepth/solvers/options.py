@@ -414,7 +414,8 @@ class AdamOptions(SolverOptions):
     beta1, beta2 : float, default 0.9 and 0.999
         Decay rates of the moment estimates.
     window : int, default 50
-        Steps over which the relative decrease is measured.
+        Steps per window of the stop: the mean over the last ``window`` steps against the mean over the
+        ``window`` steps before them.
     record_every : int, default 1
         Iterations between history records.
     gap_tol : float, default 1e-1
