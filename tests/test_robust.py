@@ -12,7 +12,7 @@ import sparsedepth as sd
 from sparsedepth import Weights, build_objective, complete_depth
 from sparsedepth.objective import Objective, QuadraticTerm, RobustPenalty, RobustTerm, robust_penalty
 from sparsedepth.grid.operators import gradient_stencil
-from sparsedepth.objective.weights import MODEL_FIELDS
+from sparsedepth.objective.weights import LOCAL_LINEAR_FIELDS, MODEL_FIELDS
 from sparsedepth.solvers import scaled_objective, solve
 
 from conftest import make_problem
@@ -321,13 +321,13 @@ def test_batch_settings_of_an_l1_batch_match_files_without_the_edge_penalty_fiel
     from sparsedepth.batch import BatchOptions
     from sparsedepth.batch.csvlog import fingerprint, settings_difference
 
-    # the objective of the files written before the modelling fields and the local-linear term
-    off = dict.fromkeys((*MODEL_FIELDS, "beta_local_linear"), 0.0)
+    # the objective of the files written before the modelling fields and the local-linear terms
+    off = dict.fromkeys((*MODEL_FIELDS, *LOCAL_LINEAR_FIELDS), 0.0)
     current = fingerprint([], BatchOptions(keep_fraction=0.05, weights=Weights(gamma=0.01, **off)))
     assert "edge_penalty" not in current["options"]["weights"] and "edge_scale" not in current["options"]["weights"]
     stored = {**current, "options": {**current["options"], "weights": {
         k: v for k, v in dataclasses.asdict(Weights(gamma=0.01)).items()
-        if k not in ("edge_penalty", "edge_scale", "beta_local_linear", *MODEL_FIELDS)}}}
+        if k not in ("edge_penalty", "edge_scale", *LOCAL_LINEAR_FIELDS, *MODEL_FIELDS)}}}
     assert settings_difference(stored, current) == ""
     changed = fingerprint([], BatchOptions(keep_fraction=0.05, weights=Weights(gamma=0.02, **off)))
     assert settings_difference(stored, changed) == "options weights"

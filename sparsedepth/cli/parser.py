@@ -59,6 +59,9 @@ _WEIGHT_HELP = {
     "depth_jump": "relative depth change at which a second solve relaxes the image smoothness; 0 = one solve",
     "beta_local_linear": "windowed local-linear term: in every 3x3 window depth is fitted as an affine function of "
                          "the colour (matting Laplacian)",
+    "beta_local_linear_cross": "the local-linear term over cross-shaped windows (a pixel and its four neighbours; "
+                               "a 13-point system instead of the 3x3 windows' 25 points)",
+    "beta_local_linear_2x2": "the local-linear term over 2x2 windows (a 9-point system)",
     "local_linear_eps": "ridge weight on the slope of the local-linear fits, in squared [0, 1] image units; "
                         "0 = no ridge",
 }

@@ -18,7 +18,9 @@ is a quadratic form whose matrix is the matting Laplacian
 
 ``μ_w`` and ``Σ_w`` the mean and (biased) covariance of the colours in the window.  Two pixels of one window are
 coupled, so ``L`` has the 25-point stencil of radius 2.  Depth may follow any affine function of the colour inside
-a window (so it can jump where the colour jumps) but not vary where the colour does not.
+a window (so it can jump where the colour jumps) but not vary where the colour does not.  The same sum over the
+windows of another shape (:data:`WINDOWS`: a pixel with its four neighbours, or 2x2 pixels; ``9`` becomes the
+window's number of pixels ``n``) couples fewer pixels: a 13- or 9-point ``L``.
 
 :func:`local_linear_operator` returns an operator ``K`` (a :class:`~sparsedepth.grid.operators.StencilOperator`)
 with ``Kᵀ K = L``: per window, the nine residuals of the best fit and ``√ε a`` (one row per channel), so that
@@ -41,10 +43,18 @@ import scipy.sparse as sp
 from .._validation import as_float_image, check_nonnegative_real
 from .operators import StencilOperator
 
-__all__ = ["LocalLinearOperator", "local_linear_operator", "WINDOW_OFFSETS", "PINV_CUTOFF"]
+__all__ = ["LocalLinearOperator", "local_linear_operator", "WINDOWS", "WINDOW_OFFSETS", "PINV_CUTOFF"]
 
+#: The window shapes of the term: the offsets of a window's pixels from its anchor pixel, in C order.  ``"3x3"``
+#: couples pixels up to 2 apart in each direction (a 25-point ``L``); ``"cross"`` (a pixel and its four
+#: neighbours) and ``"2x2"`` couple pixels at most 2 apart in city-block distance, a 13- and a 9-point ``L``.
+WINDOWS = {
+    "3x3": tuple((dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)),
+    "cross": ((-1, 0), (0, -1), (0, 0), (0, 1), (1, 0)),
+    "2x2": ((0, 0), (0, 1), (1, 0), (1, 1)),
+}
 #: The nine offsets of a 3x3 window from its centre, in C order.
-WINDOW_OFFSETS = tuple((dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+WINDOW_OFFSETS = WINDOWS["3x3"]
 #: With ``ε = 0``, eigenvalues of a window's colour covariance at or below this (in [0, 1]² units) count as 0.
 PINV_CUTOFF = 1e-10
 #: pixels per band of the band-wise computations (the normal stencil, the term's value): their work arrays
@@ -52,8 +62,8 @@ PINV_CUTOFF = 1e-10
 _BAND_PIXELS = 1 << 15
 
 
-def local_linear_operator(image, eps: float, *, copy: bool = True) -> "LocalLinearOperator":
-    """The operator ``K`` with ``Kᵀ K`` the 3x3-window matting Laplacian of ``image``.
+def local_linear_operator(image, eps: float, *, window: str = "3x3", copy: bool = True) -> "LocalLinearOperator":
+    """The operator ``K`` with ``Kᵀ K`` the matting Laplacian of ``image`` over the windows of one shape.
 
     Parameters
     ----------
@@ -64,6 +74,8 @@ def local_linear_operator(image, eps: float, *, copy: bool = True) -> "LocalLine
         ``ε >= 0``, the ridge weight of the slope ``a`` (in squared image units: [0, 1]²).  Large ``ε`` makes
         every window fit a constant (``L`` becomes the sum of the windows' centring matrices); ``ε = 0`` uses
         the pseudo-inverse of the window covariance (eigenvalues at or below :data:`PINV_CUTOFF` dropped).
+    window : {"3x3", "cross", "2x2"}, default "3x3"
+        The shape of the windows (:data:`WINDOWS`); every placement of it inside the grid is a window.
     copy : bool, default True
         False: a float64 ``(H, W, C)`` image already scaled to [0, 1] is kept as it is (a view of contiguous
         channel planes, ``np.moveaxis(planes, 0, -1)``, without a copy); any other image is converted as with
@@ -76,7 +88,8 @@ def local_linear_operator(image, eps: float, *, copy: bool = True) -> "LocalLine
     Raises
     ------
     ValueError
-        If ``eps`` is not a finite number ``>= 0``, or for a bad image.
+        If ``eps`` is not a finite number ``>= 0``, ``window`` is not a name of :data:`WINDOWS`, or for a bad
+        image.
 
     Examples
     --------
@@ -86,22 +99,28 @@ def local_linear_operator(image, eps: float, *, copy: bool = True) -> "LocalLine
     0.009
     """
     eps = check_nonnegative_real(eps, name="local_linear_eps")
+    if not isinstance(window, str) or window not in WINDOWS:
+        raise ValueError(f"window must be one of {sorted(WINDOWS)}, got {window!r}")
     array = np.asarray(image)
     keep = not copy and array.dtype == np.float64 and array.ndim == 3
-    return LocalLinearOperator(array if keep else as_float_image(image), eps)
+    return LocalLinearOperator(array if keep else as_float_image(image), eps, window)
 
 
-def _window_sum(array, rows):
-    """Σ over the 3x3 window of the interior pixels of window rows ``rows = (k0, k1)`` (grid rows ``k0+1 .. k1``).
+def _window_sum(array, rows, window=WINDOW_OFFSETS):
+    """Σ over the windows of anchor rows ``rows = (k0, k1)``: shape ``array.shape[:-2] + (k1 - k0, columns)``.
 
-    ``array`` has the grid on its last two axes; the result has shape ``array.shape[:-2] + (k1 - k0, W - 2)``.
+    ``array`` has the grid on its last two axes; ``window`` is a tuple of :data:`WINDOWS`.  Anchor row ``k`` is
+    grid row ``k − min dy`` (the first row where the window fits); ``columns`` is the number of places the window
+    fits in a row.
     """
     k0, k1 = rows
     W = array.shape[-1]
-    (dy, dx), *others = WINDOW_OFFSETS
-    out = array[..., k0 + 1 + dy:k1 + 1 + dy, 1 + dx:W - 1 + dx].copy()
+    y0, x0 = -min(dy for dy, _ in window), -min(dx for _, dx in window)
+    x1 = W - max(dx for _, dx in window)
+    (dy, dx), *others = window
+    out = array[..., k0 + y0 + dy:k1 + y0 + dy, x0 + dx:x1 + dx].copy()
     for dy, dx in others:
-        out += array[..., k0 + 1 + dy:k1 + 1 + dy, 1 + dx:W - 1 + dx]
+        out += array[..., k0 + y0 + dy:k1 + y0 + dy, x0 + dx:x1 + dx]
     return out
 
 
@@ -148,31 +167,41 @@ def _dot(x, y):
 class LocalLinearOperator(StencilOperator):
     r"""``K`` of the local-linear (matting Laplacian) term on an ``(H, W)`` grid; build it with :func:`local_linear_operator`.
 
-    Row blocks (each one row per pixel, C order, non-zero only at the interior pixels ``1 <= y <= H-2``,
-    ``1 <= x <= W-2``, the centres of the windows): block ``j < 9`` is the residual
-    ``z[p + o_j] − a_pᵀ I[p + o_j] − b_p`` of the window centred at ``p`` (``o_j`` the ``j``-th of
-    :data:`WINDOW_OFFSETS`), block ``9 + c`` is ``√ε a_{p,c}``, with ``(a_p, b_p)`` the ridge fit of that window.
+    Row blocks (each one row per pixel, C order, non-zero only at the anchor pixels ``p`` of the windows, those
+    whose window ``p + o`` (``o`` in ``window``, a tuple of :data:`WINDOWS`) lies inside the grid; for a 3x3 window
+    the interior pixels ``1 <= y <= H-2``, ``1 <= x <= W-2``): with ``n`` the window's pixels, block ``j < n`` is the
+    residual ``z[p + o_j] − a_pᵀ I[p + o_j] − b_p`` of the window anchored at ``p`` (``o_j`` the ``j``-th offset),
+    block ``n + c`` is ``√ε a_{p,c}``, with ``(a_p, b_p)`` the ridge fit of that window.
 
     Notes
     -----
-    With ``X`` the window's centred colours (9 x C), ``G = XᵀX = 9 Σ`` and ``M = (G + ε 1)^{-1}``, the fit is
-    ``a = M Xᵀ z_w``, ``b = z̄ − aᵀ μ``, and the rows are ``r = C z_w − X a`` (``C = 1 − 11ᵀ/9``) and ``√ε a``.
+    With ``X`` the window's centred colours (n x C), ``G = XᵀX = n Σ`` and ``M = (G + ε 1)^{-1}``, the fit is
+    ``a = M Xᵀ z_w``, ``b = z̄ − aᵀ μ``, and the rows are ``r = C z_w − X a`` (``C = 1 − 11ᵀ/n``) and ``√ε a``.
     Since ``M (G + ε) M = M``, ``‖r‖² + ε ‖a‖² = z_wᵀ (C − X M Xᵀ) z_w = z_wᵀ L_w z_w``: ``Kᵀ K = Σ_w L_w = L``.
-    The adjoint of one window's rows ``(v, u)`` is ``C v + X M (√ε u − Xᵀ v)``.  All sums over a window are nine
+    The adjoint of one window's rows ``(v, u)`` is ``C v + X M (√ε u − Xᵀ v)``.  All sums over a window are ``n``
     shifted whole-array operations.
     """
 
-    def __init__(self, image, eps):
+    def __init__(self, image, eps, window="3x3"):
         img = np.asarray(image, dtype=np.float64)
         H, W, C = img.shape
         self.grid_shape = (H, W)
         self.eps = float(eps)
         self.channels = C
+        self.window = window
+        self.offsets_in_window = WINDOWS[window]
+        self.size = len(self.offsets_in_window)
         self._image = np.ascontiguousarray(np.moveaxis(img, -1, 0))  # (C, H, W): whole-image planes
-        window = tuple((o, float("nan")) for o in WINDOW_OFFSETS)  # taps of every block; coefficients per pixel
-        self.blocks = (window,) * (9 + C)
-        self._windows = H >= 3 and W >= 3
-        self._interior = (slice(1, H - 1), slice(1, W - 1)) if self._windows else (slice(0, 0), slice(0, 0))
+        taps = tuple((o, float("nan")) for o in self.offsets_in_window)  # taps of every block; coefficients per pixel
+        self.blocks = (taps,) * (self.size + C)
+        dys, dxs = [o[0] for o in self.offsets_in_window], [o[1] for o in self.offsets_in_window]
+        self._low = (-min(dys), -min(dxs))  # the first anchor row and column
+        self._span = (max(dys) - min(dys), max(dxs) - min(dxs))  # rows and columns a window covers, minus 1
+        self._anchor_rows = max(0, H - self._span[0])  # the anchor rows: grid rows low .. low + anchor_rows - 1
+        self._windows = H > self._span[0] and W > self._span[1]
+        self._interior = ((slice(self._low[0], self._low[0] + H - self._span[0]),
+                           slice(self._low[1], self._low[1] + W - self._span[1])) if self._windows
+                          else (slice(0, 0), slice(0, 0)))
         self._planes = None
         self._fit_cache = None
 
@@ -182,20 +211,21 @@ class LocalLinearOperator(StencilOperator):
         return max(1, _BAND_PIXELS // self.grid_shape[1])
 
     def _window_planes(self, k0, k1):
-        """``(μ, P)`` of the windows centred on grid rows ``k0+1 .. k1``: shapes ``(C, k1-k0, W-2)``, ``(C, C, ...)``.
+        """``(μ, P)`` of the windows of anchor rows ``k0 .. k1 − 1``: shapes ``(C, k1-k0, columns)``, ``(C, C, ...)``.
 
-        ``P = (Σ + ε/9 · 1)^{-1}`` (the pseudo-inverse for ``ε = 0``); ``M = P / 9`` is the ``(G + ε)^{-1}`` of
-        the class notes.  Every entry depends on its own window only, so a band gives the same numbers as the
-        whole grid.
+        Anchor row ``k`` is grid row ``k + low`` (for a 3x3 window its centre row ``k + 1``).  ``P = (Σ + ε/n ·
+        1)^{-1}`` (the pseudo-inverse for ``ε = 0``); ``M = P / n`` is the ``(G + ε)^{-1}`` of the class notes.
+        Every entry depends on its own window only, so a band gives the same numbers as the whole grid.
         """
         C = self.channels
         rows = (k0, k1)
-        mean = _window_sum(self._image, rows) / 9.0
-        band = self._image[:, k0:k1 + 2]  # the grid rows the windows cover
+        n = float(self.size)
+        mean = self._window_sum(self._image, rows) / n
+        band = self._image[:, k0:k1 + self._span[0]]  # the grid rows the windows cover
         cov = np.empty((C, C) + mean.shape[1:])
         for c in range(C):
             for d in range(c, C):
-                cov[c, d] = _window_sum(band[c] * band[d], (0, k1 - k0)) / 9.0 - mean[c] * mean[d]
+                cov[c, d] = self._window_sum(band[c] * band[d], (0, k1 - k0)) / n - mean[c] * mean[d]
                 cov[d, c] = cov[c, d]
         return mean, self._regularised_inverse(cov)
 
@@ -206,15 +236,15 @@ class LocalLinearOperator(StencilOperator):
         (:meth:`row_pieces`) work band by band and keep nothing.
         """
         if self._planes is None:
-            self._planes = self._window_planes(0, self.grid_shape[0] - 2)
+            self._planes = self._window_planes(0, self._anchor_rows)
         return self._planes
 
     def _regularised_inverse(self, cov):
-        """``P = (Σ + ε/9 · 1)^{-1}`` per window (the pseudo-inverse for ``ε = 0``), shape ``(C, C, h, w)``."""
+        """``P = (Σ + ε/n · 1)^{-1}`` per window (the pseudo-inverse for ``ε = 0``), shape ``(C, C, h, w)``."""
         C = self.channels
         if self.eps > 0:
             for c in range(C):
-                cov[c, c] += self.eps / 9.0
+                cov[c, c] += self.eps / float(self.size)
             return _symmetric_inverse(cov)
         values, vectors = np.linalg.eigh(np.moveaxis(cov, (0, 1), (-2, -1)))
         keep = values > PINV_CUTOFF
@@ -222,43 +252,49 @@ class LocalLinearOperator(StencilOperator):
         return np.einsum("...ik,...k,...jk->ij...", vectors, inv_values, vectors)
 
     def _shifted(self, array, o, rows=None):
-        """The view of ``array`` at the window pixel ``o`` of the windows of rows ``rows`` (default all)."""
-        H, W = self.grid_shape
-        k0, k1 = (0, H - 2) if rows is None else rows
-        return array[..., k0 + 1 + o[0]:k1 + 1 + o[0], 1 + o[1]:W - 1 + o[1]]
+        """The view of ``array`` at the window pixel ``o`` of the windows of anchor rows ``rows`` (default all)."""
+        W = self.grid_shape[1]
+        k0, k1 = (0, self._anchor_rows) if rows is None else rows
+        y, x = self._low
+        return array[..., k0 + y + o[0]:k1 + y + o[0], x + o[1]:x + W - self._span[1] + o[1]]
+
+    def _window_sum(self, array, rows):
+        """Σ over the window of every window of anchor rows ``rows`` (:func:`_window_sum`)."""
+        return _window_sum(array, rows, self.offsets_in_window)
 
     def _fit_rows(self, img, rows, planes):
-        """Every block of ``K z`` on the windows of ``rows``, shape ``(9 + C, k1 - k0, W - 2)``.
+        """Every block of ``K z`` on the windows of anchor rows ``rows``, shape ``(n + C, k1 - k0, columns)``.
 
         ``img`` is ``z`` as an ``(H, W)`` image, ``planes`` the :meth:`_window_planes` of those windows.
         """
         mean, inverse = planes
         C = self.channels
-        zbar = _window_sum(img, rows) / 9.0
+        n = float(self.size)
+        zbar = self._window_sum(img, rows) / n
         cross = np.zeros(mean.shape)
         product = np.empty(mean.shape)
-        for o in WINDOW_OFFSETS:
+        for o in self.offsets_in_window:
             np.multiply(self._shifted(self._image, o, rows), self._shifted(img, o, rows), out=product)
             cross += product
-        cross /= 9.0
+        cross /= n
         cross -= mean * zbar  # the covariance of image and depth in each window
         a = _apply(inverse, cross)
         intercept = zbar - _dot(a, mean)
-        out = np.empty((9 + C,) + zbar.shape)
-        for j, o in enumerate(WINDOW_OFFSETS):
+        out = np.empty((self.size + C,) + zbar.shape)
+        for j, o in enumerate(self.offsets_in_window):
             row = out[j]
             np.subtract(self._shifted(img, o, rows), intercept, out=row)
             for c in range(C):
                 np.multiply(a[c], self._shifted(self._image[c], o, rows), out=product[0])
                 row -= product[0]
-        np.multiply(a, np.sqrt(self.eps), out=out[9:])
+        np.multiply(a, np.sqrt(self.eps), out=out[self.size:])
         return out
 
     def _rows(self, z):
-        """Every block of ``K z`` on the interior pixels, shape ``(9 + C, H-2, W-2)`` (cached for the last ``z``)."""
+        """Every block of ``K z`` on the anchor pixels, shape ``(n + C, rows, columns)`` (cached for the last ``z``)."""
         if self._fit_cache is not None and np.array_equal(self._fit_cache[0], z):
             return self._fit_cache[1]
-        rows = self._fit_rows(self._as_image(z), (0, self.grid_shape[0] - 2), self._whole_planes())
+        rows = self._fit_rows(self._as_image(z), (0, self._anchor_rows), self._whole_planes())
         self._fit_cache = (np.array(z, dtype=np.float64, copy=True), rows)
         return rows
 
@@ -282,13 +318,16 @@ class LocalLinearOperator(StencilOperator):
         H, W = self.grid_shape
         n = H * W
         step = self._band_rows()
+        low_y, low_x = self._low
         for y0 in range(0, H, step):
             y1 = min(H, y0 + step)
-            k0, k1 = max(y0 - 1, 0), min(y1 - 1, H - 2)  # the windows centred on grid rows y0 .. y1 - 1
+            # the windows anchored on grid rows y0 .. y1 - 1
+            k0, k1 = max(y0 - low_y, 0), min(y1 - low_y, self._anchor_rows)
             band = np.zeros((len(self.blocks), y1 - y0, W))
             if self._windows and k1 > k0:
                 rows = (k0, k1)
-                band[:, k0 + 1 - y0:k1 + 1 - y0, 1:W - 1] = self._fit_rows(img, rows, self._window_planes(*rows))
+                band[:, k0 + low_y - y0:k1 + low_y - y0, low_x:low_x + W - self._span[1]] = \
+                    self._fit_rows(img, rows, self._window_planes(*rows))
             for b in range(len(self.blocks)):
                 yield slice(b * n + y0 * W, b * n + y1 * W), band[b].reshape(-1)
 
@@ -300,7 +339,7 @@ class LocalLinearOperator(StencilOperator):
         return self._adjoint_add(out, rows)
 
     def rmatvec(self, v):
-        """``Kᵀ v`` for a vector of length ``(9 + C) * H * W``."""
+        """``Kᵀ v`` for a vector of length ``(n + C) * H * W``."""
         v = np.asarray(v, dtype=np.float64)
         if v.ndim != 1 or v.shape[0] != self.shape[0]:
             raise ValueError(f"expected a vector of length {self.shape[0]}, got shape {v.shape}")
@@ -309,36 +348,39 @@ class LocalLinearOperator(StencilOperator):
         return self._adjoint_add(np.zeros(n), rows)
 
     def _adjoint_add(self, out, rows):
-        """``out += Kᵀ [v_0; ...; v_8; u_0; ...]`` with ``rows`` the ``9 + C`` row images (None for zero rows)."""
+        """``out += Kᵀ [v_0; ...; v_(n-1); u_0; ...]`` with ``rows`` the ``n + C`` row images (None for zero rows)."""
         if not self._windows:
             return out
         mean, inverse = self._whole_planes()
         target = out.reshape(self.grid_shape)
         interior = self._interior
         shape = mean.shape[1:]
-        v = [np.zeros(shape) if r is None else r[interior] for r in rows[:9]]
-        u = np.stack([np.zeros(shape) if r is None else r[interior] for r in rows[9:]])
+        n = self.size
+        v = [np.zeros(shape) if r is None else r[interior] for r in rows[:n]]
+        u = np.stack([np.zeros(shape) if r is None else r[interior] for r in rows[n:]])
         vsum = np.zeros(shape)
         xv = np.zeros(mean.shape)
-        for o, vj in zip(WINDOW_OFFSETS, v):
+        for o, vj in zip(self.offsets_in_window, v):
             vsum += vj
             xv += self._shifted(self._image, o) * vj
         xv -= mean * vsum  # Xᵀ v
-        g = _apply(inverse, np.sqrt(self.eps) * u - xv) / 9.0  # M (√ε u − Xᵀ v)
-        vbar = vsum / 9.0
+        g = _apply(inverse, np.sqrt(self.eps) * u - xv) / float(n)  # M (√ε u − Xᵀ v)
+        vbar = vsum / float(n)
         offset = _dot(mean, g)
-        for o, vj in zip(WINDOW_OFFSETS, v):
+        for o, vj in zip(self.offsets_in_window, v):
             self._shifted(target, o)[...] += vj - vbar - offset + _dot(self._shifted(self._image, o), g)
         return out
 
     def offsets(self):
-        """The 25 offsets ``|dy|, |dx| <= 2`` of ``Kᵀ K``, sorted."""
-        return [(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3)]
+        """The offsets of ``Kᵀ K``, sorted: the differences of two pixels of a window (25 for a 3x3 window)."""
+        window = self.offsets_in_window
+        return sorted({(a[0] - b[0], a[1] - b[1]) for a in window for b in window})
 
     def add_normal_stencil(self, stencil, offsets, row_weights=None, scale=1.0, *, symmetric=False):
         r"""Accumulate ``scale · L`` (``L = Kᵀ K``, the matting Laplacian) into stencil images, in place.
 
-        Window ``p``'s entry ``L_w[i, j] = δ_ij − (1 + (I_i − μ)ᵀ P (I_j − μ)) / 9`` (``P = (Σ + ε/9)^{-1}``)
+        Window ``p``'s entry ``L_w[i, j] = δ_ij − (1 + (I_i − μ)ᵀ P (I_j − μ)) / n`` (``P = (Σ + ε/n)^{-1}``,
+        ``n`` the window's pixels)
         is the coupling of pixel ``p + o_i`` with ``p + o_j``: it goes to the image of offset ``o_j − o_i`` at
         pixel ``p + o_i`` and, for ``i ≠ j``, to the image of ``o_i − o_j`` at ``p + o_j``.
 
@@ -347,7 +389,7 @@ class LocalLinearOperator(StencilOperator):
         stencil : ndarray, shape (len(offsets), H, W)
             Updated in place.
         offsets : list of tuple of int
-            The offsets of the images of ``stencil``; all 25 of :meth:`offsets`, or with ``symmetric`` the 13
+            The offsets of the images of ``stencil``; all of :meth:`offsets`, or with ``symmetric`` those
             ``>= (0, 0)``.
         row_weights : None
             The term has no per-row weights.
@@ -363,8 +405,8 @@ class LocalLinearOperator(StencilOperator):
 
         Notes
         -----
-        The grid is processed a band of stencil rows at a time: the windows that touch the band (its rows and
-        one more on each side) get their ``μ`` and ``P`` (:meth:`_window_planes`), then every pair ``(i, j)``
+        The grid is processed a band of stencil rows at a time: the windows that touch the band get their
+        ``μ`` and ``P`` (:meth:`_window_planes`), then every pair ``(i, j)``
         its coupling, one whole-band operation per pair.  Each stencil entry receives its terms in the order
         of the pairs, as in one pass over the whole grid, so the images do not depend on the band height;
         nothing per pixel is kept.
@@ -376,21 +418,24 @@ class LocalLinearOperator(StencilOperator):
         H, W = self.grid_shape
         slot = {o: k for k, o in enumerate(offsets)}
         C = self.channels
-        constant = -scale / 9.0
+        window, n = self.offsets_in_window, self.size
+        constant = -scale / float(n)
         # per pair, where its coupling goes: (offset, window pixel it is written at)
         writes = {}
-        for i, oi in enumerate(WINDOW_OFFSETS):
-            for j in range(i, 9):
-                oj = WINDOW_OFFSETS[j]
+        for i, oi in enumerate(window):
+            for j in range(i, n):
+                oj = window[j]
                 if i == j:
                     places = [((0, 0), oi)]
                 else:
                     places = [((oj[0] - oi[0], oj[1] - oi[1]), oi), ((oi[0] - oj[0], oi[1] - oj[1]), oj)]
                 writes[i, j] = [(o, a) for o, a in places if not symmetric or o >= (0, 0)]
         step = self._band_rows()
+        (low_y, low_x), (span_y, span_x) = self._low, self._span
         for y0 in range(0, H, step):
             y1 = min(H, y0 + step)
-            k0, k1 = max(y0 - 2, 0), min(y1, H - 2)  # the windows with a pixel on grid rows y0 .. y1 - 1
+            # the windows with a pixel on grid rows y0 .. y1 - 1 (anchor row k covers grid rows k .. k + span_y)
+            k0, k1 = max(y0 - span_y, 0), min(y1, self._anchor_rows)
             if k1 <= k0:
                 continue
             rows = (k0, k1)
@@ -398,12 +443,12 @@ class LocalLinearOperator(StencilOperator):
             centred = np.empty((C,) + mean.shape[1:])
             coupling = np.empty(mean.shape[1:])
             product = np.empty(mean.shape[1:])
-            for i, oi in enumerate(WINDOW_OFFSETS):
+            for i, oi in enumerate(window):
                 np.subtract(self._shifted(self._image, oi, rows), mean, out=centred)
                 projected = _apply(inverse, centred)
-                projected *= constant  # -(scale / 9) P (I_i - mu)
-                for j in range(i, 9):
-                    np.subtract(self._shifted(self._image, WINDOW_OFFSETS[j], rows), mean, out=centred)
+                projected *= constant  # -(scale / n) P (I_i - mu)
+                for j in range(i, n):
+                    np.subtract(self._shifted(self._image, window[j], rows), mean, out=centred)
                     np.multiply(projected[0], centred[0], out=coupling)
                     for c in range(1, C):
                         np.multiply(projected[c], centred[c], out=product)
@@ -411,9 +456,10 @@ class LocalLinearOperator(StencilOperator):
                     coupling += constant + scale if i == j else constant
                     for o, a in writes[i, j]:
                         # windows whose pixel p + a lies on the band's rows
-                        lo, hi = max(k0, y0 - 1 - a[0]), min(k1, y1 - 1 - a[0])
+                        lo, hi = max(k0, y0 - low_y - a[0]), min(k1, y1 - low_y - a[0])
                         if hi > lo:
-                            stencil[slot[o]][lo + 1 + a[0]:hi + 1 + a[0], 1 + a[1]:W - 1 + a[1]] += \
+                            x = low_x + a[1]
+                            stencil[slot[o]][lo + low_y + a[0]:hi + low_y + a[0], x:x + W - span_x] += \
                                 coupling[lo - k0:hi - k0]
         return stencil
 
@@ -430,4 +476,5 @@ class LocalLinearOperator(StencilOperator):
         return out
 
     def __repr__(self):
-        return f"LocalLinearOperator(shape={self.grid_shape}, channels={self.channels}, eps={self.eps:g})"
+        return (f"LocalLinearOperator(shape={self.grid_shape}, channels={self.channels}, eps={self.eps:g}, "
+                f"window={self.window!r})")

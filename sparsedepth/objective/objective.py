@@ -391,8 +391,10 @@ def build_objective(
         Terms ``data``, ``smooth``, ``edge``, ``prior``, ``smooth_image``,
         ``second_order``, ``second_order_image``, and ``local_linear`` when
         ``weights.beta_local_linear > 0`` (the windowed affine fit to the
-        image blurred by ``weights.edge_sigma``,
-        :func:`~sparsedepth.grid.affinity.local_linear_operator`); ``edge`` is an
+        image blurred by ``weights.edge_sigma`` over 3x3 windows,
+        :func:`~sparsedepth.grid.affinity.local_linear_operator`), then
+        ``local_linear_cross`` and ``local_linear_2x2`` (the same fit over
+        cross-shaped and 2x2 windows) when their weights are > 0; ``edge`` is an
         :class:`AbsTerm` for ``weights.edge_penalty = "l1"``, else a
         :class:`RobustTerm` with that penalty and ``weights.edge_scale``.
     coarse : ndarray, (H, W)
@@ -422,7 +424,11 @@ def build_objective(
     w = edge_weights(img, weights.kappa).ravel() if weights.gamma > 0 else None
     # with the local-linear term, the blurred image is kept once, as the channel planes that term reads, and the
     # pair weights are computed from them when read (PairEdgeWeights: the numbers of pair_edge_weights)
-    planes = np.ascontiguousarray(np.moveaxis(img, -1, 0)) if weights.beta_local_linear > 0 else None
+    local_linear = [(name, weight, window) for name, weight, window in (
+        ("local_linear", weights.beta_local_linear, "3x3"),
+        ("local_linear_cross", weights.beta_local_linear_cross, "cross"),
+        ("local_linear_2x2", weights.beta_local_linear_2x2, "2x2")) if weight > 0]
+    planes = np.ascontiguousarray(np.moveaxis(img, -1, 0)) if local_linear else None
     pair = None
     if weights.beta_image > 0 or weights.beta_second_image > 0:
         pair = pair_edge_weights(img, weights.kappa) if planes is None else PairEdgeWeights(planes, weights.kappa)
@@ -445,16 +451,16 @@ def build_objective(
         QuadraticTerm("second_order", weights.beta_second, hessian),
         QuadraticTerm("second_order_image", weights.beta_second_image, hessian, w2),
     ]
-    if weights.beta_local_linear > 0:  # no term at weight 0: the objective and its term list stay as without it
-        terms.append(QuadraticTerm("local_linear", weights.beta_local_linear,
-                                   local_linear_operator(np.moveaxis(planes, 0, -1), weights.local_linear_eps,
-                                                         copy=False)))
+    for name, weight, window in local_linear:  # no term at weight 0: the term list stays as without it
+        terms.append(QuadraticTerm(name, weight, local_linear_operator(np.moveaxis(planes, 0, -1),
+                                                                       weights.local_linear_eps, window=window,
+                                                                       copy=False)))
     quad_smooth = (weights.beta > 0 or weights.beta_image > 0 or weights.beta_second > 0
-                   or weights.beta_second_image > 0 or weights.beta_local_linear > 0)
+                   or weights.beta_second_image > 0 or bool(local_linear))
     if weights.delta == 0 and (weights.alpha == 0 or not (quad_smooth or weights.gamma > 0)):
         raise ValueError(
             "weights leave the problem without a unique solution: need delta > 0, or alpha > 0 together with a "
-            f"smoothness weight (beta, gamma, beta_image, beta_second or beta_local_linear); got {weights}"
+            f"smoothness weight (beta, gamma, beta_image, beta_second or a local-linear weight); got {weights}"
         )
     return Objective(shape, terms, l1_smoothing=l1_smoothing), coarse, observed
 

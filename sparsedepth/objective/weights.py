@@ -21,6 +21,8 @@ EDGE_PENALTIES = ("l1", *PENALTIES)
 EDGE_PENALTY_FIELDS = ("edge_penalty", "edge_scale")
 #: The fields of :class:`Weights` that shape the terms instead of weighting them (numbers >= 0, 0 = off).
 MODEL_FIELDS = ("edge_sigma", "fill_contrast", "depth_jump", "local_linear_eps")
+#: The weights of the local-linear terms, by window shape: 3x3, cross and 2x2 (they share ``local_linear_eps``).
+LOCAL_LINEAR_FIELDS = ("beta_local_linear", "beta_local_linear_cross", "beta_local_linear_2x2")
 #: Default ``edge_scale`` in depth units (metres): 5 cm.
 DEFAULT_EDGE_SCALE = 0.05
 
@@ -39,6 +41,8 @@ class Weights:
              + beta_second Σ (∂xx z)² + (∂yy z)² + 2 (∂xy z)²   second_order
              + beta_second_image  Σ w2 ⊙ (same rows)        second_order_image
              + beta_local_linear  Σ_w min_(a,b) Σ_(i∈w) (z_i − aᵀI_i − b)² + ε‖a‖²   local_linear
+             + beta_local_linear_cross  (the same over cross-shaped windows)    local_linear_cross
+             + beta_local_linear_2x2    (the same over 2x2 windows)              local_linear_2x2
 
     with the per-pixel edge weight ``w = exp(-kappa ‖∇I‖)`` of the reference
     paper, the per-pair weights ``wx = exp(-kappa ‖I[i, j+1] - I[i, j]‖)``,
@@ -48,7 +52,9 @@ class Weights:
     The ``local_linear`` term sums over every 3x3 window ``w`` the cost of the
     best affine fit of depth to the image's colour there (the matting
     Laplacian of Levin et al.; ``ε = local_linear_eps``, see
-    :mod:`sparsedepth.grid.affinity`).
+    :mod:`sparsedepth.grid.affinity`); ``local_linear_cross`` and
+    ``local_linear_2x2`` sum it over windows of those shapes, whose normal
+    equations have 13 and 9 points instead of 25.
     A weight of 0 removes its term, so "L2 only" or "data only" is a choice of weights.
     With ``edge_penalty`` other than ``"l1"`` the edge term penalises each
     difference by the robust ``φ(t) = s ρ(t/s)`` of that name instead of
@@ -86,6 +92,14 @@ class Weights:
         jumps with the image but not where the image is flat.  Couples pixels
         up to two apart (a 25-point system).  An extension beyond the
         reference paper.
+    beta_local_linear_cross : float
+        Weight (>= 0) of the same fit over every cross-shaped window (a
+        pixel and its four neighbours), the term ``local_linear_cross``:
+        couples pixels at most two apart in city-block distance (a 13-point
+        system, like the second-order terms').
+    beta_local_linear_2x2 : float
+        Weight (>= 0) of the same fit over every 2x2 window, the term
+        ``local_linear_2x2`` (a 9-point system).
     edge_penalty : {"l1", "charbonnier", "cauchy", "geman_mcclure", "welsch"}
         The penalty of the edge term (weight ``gamma``): ``"l1"`` (default,
         convex) or a robust penalty, Barron's shape ``a`` = 1, 0, -2, -inf
@@ -122,8 +136,8 @@ class Weights:
         slope.  Windows whose colour varies much less than ``sqrt(ε / 9)``
         fit a constant (depth smooth there); strongly varying windows let
         depth follow the colour.  0 fits without a ridge (the pseudo-inverse
-        of the window's colour covariance).  Unused while
-        ``beta_local_linear = 0``.
+        of the window's colour covariance).  Shared by the three local-linear
+        terms; unused while their weights are all 0.
 
     Raises
     ------
@@ -185,6 +199,8 @@ class Weights:
     # which also wins on REPORT_FRAMES and leave-one-dataset-out (docs/accuracy.md)
     beta_local_linear: float = 0.01
     local_linear_eps: float = 1e-5
+    beta_local_linear_cross: float = 0.0
+    beta_local_linear_2x2: float = 0.0
 
     def __post_init__(self):
         for f in fields(self):
@@ -231,8 +247,8 @@ class Weights:
         """``{field: value}``; with ``used_only``, without the fields that do not act on this objective.
 
         Those are ``edge_penalty`` and ``edge_scale`` for the L1 edge term (it
-        has no scale), ``beta_local_linear`` and ``local_linear_eps`` while
-        ``beta_local_linear = 0`` (the term is absent), and every
+        has no scale), each local-linear weight at 0 (its term is absent),
+        ``local_linear_eps`` while all three are 0, and every
         :data:`MODEL_FIELDS` entry at 0 (switched off); reports and batch fingerprints list only what is used, so an
         objective without a modelling option reads as it did before those
         fields existed.
@@ -241,8 +257,12 @@ class Weights:
         if used_only and self.edge_penalty == "l1":
             for name in EDGE_PENALTY_FIELDS:
                 del items[name]
-        if used_only and self.beta_local_linear == 0:
-            del items["beta_local_linear"], items["local_linear_eps"]
+        if used_only:
+            for name in LOCAL_LINEAR_FIELDS:
+                if items[name] == 0:
+                    del items[name]
+            if not any(name in items for name in LOCAL_LINEAR_FIELDS):
+                del items["local_linear_eps"]
         if used_only:
             for name in MODEL_FIELDS:
                 if items.get(name, 1) == 0:
