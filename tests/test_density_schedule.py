@@ -5,7 +5,7 @@ import math
 import pytest
 
 import sparsedepth as sd
-from sparsedepth.objective.weights import DENSITY_FIELDS
+from sparsedepth.objective.weights import DENSITY_FIELDS, OPTIONAL_DENSITY_FIELDS
 
 
 def _schedule():
@@ -77,3 +77,33 @@ def test_an_interior_anchor_gives_its_own_values_exactly():
     assert (w.kappa, w.delta) == (50.0, 3e-4)
     for fraction, values in schedule.anchors:
         assert {name: getattr(schedule.weights(fraction), name) for name in DENSITY_FIELDS} == values
+
+
+def test_the_window_weights_are_scheduled_at_every_anchor_or_come_from_the_base():
+    values = {name: getattr(sd.DEFAULT_WEIGHTS, name) for name in DENSITY_FIELDS}
+    scheduled = sd.DensitySchedule(((0.01, dict(values, beta_local_linear_cross=0.004, beta_local_linear_2x2=0.0)),
+                                    (0.1, dict(values, beta_local_linear_cross=0.001, beta_local_linear_2x2=0.002))))
+    assert scheduled.scheduled == DENSITY_FIELDS + OPTIONAL_DENSITY_FIELDS
+    w = scheduled.weights(0.01 * 10 ** 0.5)  # half way in log-density
+    assert w.beta_local_linear_cross == pytest.approx(math.sqrt(0.004 * 0.001), rel=1e-12)
+    assert w.beta_local_linear_2x2 == pytest.approx(0.5 * 0.002, rel=1e-12)  # linear through 0
+    # replace sets a scheduled field at every anchor, the others in the base
+    fixed = scheduled.replace(beta_local_linear_cross=0.5)
+    assert all(v["beta_local_linear_cross"] == 0.5 for _, v in fixed.anchors) and fixed.base == scheduled.base
+    plain = sd.DensitySchedule(((0.01, values), (0.1, values)), sd.DEFAULT_WEIGHTS.replace(beta_local_linear_2x2=0.3))
+    assert plain.scheduled == DENSITY_FIELDS
+    assert plain.weights(0.05).beta_local_linear_2x2 == 0.3
+    moved = plain.replace(beta_local_linear_cross=0.2)
+    assert moved.base.beta_local_linear_cross == 0.2 and moved.anchors == plain.anchors
+    with pytest.raises(ValueError, match="at every anchor or at none"):
+        sd.DensitySchedule(((0.01, dict(values, beta_local_linear_cross=0.1)), (0.1, values)))
+
+
+def test_from_weights_schedules_a_window_weight_only_where_some_anchor_uses_it():
+    low, high = sd.DEFAULT_WEIGHTS, sd.DEFAULT_WEIGHTS.replace(delta=1e-3)
+    assert sd.DensitySchedule.from_weights(((0.01, low), (0.1, high))).scheduled == DENSITY_FIELDS
+    crossed = sd.DensitySchedule.from_weights(((0.01, low), (0.1, high.replace(beta_local_linear_cross=0.01))))
+    assert crossed.scheduled == DENSITY_FIELDS + ("beta_local_linear_cross",)
+    assert crossed.weights(0.01).beta_local_linear_cross == 0.0 and crossed.weights(0.1).beta_local_linear_cross == 0.01
+    # the library's schedule sets no window weight: its settings (batch fingerprints) read as before
+    assert not any(set(v) & set(OPTIONAL_DENSITY_FIELDS) for v in sd.DEFAULT_SCHEDULE.as_dict().values())

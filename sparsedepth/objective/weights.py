@@ -282,6 +282,8 @@ def check_weights(weights, *, name: str = "weights") -> None:
 #: The fields of :class:`Weights` a :class:`DensitySchedule` sets (the others come from its base).
 DENSITY_FIELDS = ("delta", "kappa", "beta_image", "beta_second", "beta_second_image", "beta_local_linear",
                   "local_linear_eps")
+#: Fields a :class:`DensitySchedule` may also set, at every anchor or at none (then they come from its base).
+OPTIONAL_DENSITY_FIELDS = ("beta_local_linear_cross", "beta_local_linear_2x2")
 
 
 @dataclass(frozen=True)
@@ -292,7 +294,9 @@ class DensitySchedule:
     ----------
     anchors : sequence of (float, mapping)
         ``(fraction, {field: value})`` pairs, fractions in (0, 1] strictly
-        increasing; each mapping gives every field of :data:`DENSITY_FIELDS`.
+        increasing; each mapping gives every field of :data:`DENSITY_FIELDS`,
+        and a field of :data:`OPTIONAL_DENSITY_FIELDS` at every anchor or at
+        none.
     base : Weights
         The weights of every other field (default :data:`DEFAULT_WEIGHTS`).
 
@@ -300,7 +304,8 @@ class DensitySchedule:
     ------
     ValueError
         No anchor, fractions not increasing or outside (0, 1], a missing or
-        unknown field, or a value :class:`Weights` rejects.
+        unknown field, an optional field at some anchors only, or a value
+        :class:`Weights` rejects.
     TypeError
         ``base`` not a :class:`Weights` or a fraction not a real number.
 
@@ -334,21 +339,34 @@ class DensitySchedule:
         fractions = [f for f, _ in anchors]
         if fractions[-1] > 1 or any(b <= a for a, b in zip(fractions, fractions[1:])):
             raise ValueError(f"anchor fractions must increase strictly within (0, 1]; got {fractions}")
+        optional = set(anchors[0][1]) & set(OPTIONAL_DENSITY_FIELDS)
         for _, values in anchors:
-            if set(values) != set(DENSITY_FIELDS):
-                raise ValueError(f"each anchor gives exactly the fields {list(DENSITY_FIELDS)}; got {sorted(values)}")
+            if set(values) != set(DENSITY_FIELDS) | optional:
+                raise ValueError(f"each anchor gives exactly the fields {list(DENSITY_FIELDS)}, and each of "
+                                 f"{list(OPTIONAL_DENSITY_FIELDS)} at every anchor or at none; got {sorted(values)}")
             self.base.replace(**values)  # the values Weights accepts
         object.__setattr__(self, "anchors", anchors)
+
+    @property
+    def scheduled(self) -> tuple:
+        """The fields this schedule sets per density: :data:`DENSITY_FIELDS` and the optional ones it gives."""
+        return DENSITY_FIELDS + tuple(name for name in OPTIONAL_DENSITY_FIELDS if name in self.anchors[0][1])
 
     def __hash__(self):
         return hash((tuple((f, tuple(sorted(values.items()))) for f, values in self.anchors), self.base))
 
     @classmethod
     def from_weights(cls, anchors, base: Weights = DEFAULT_WEIGHTS) -> "DensitySchedule":
-        """The schedule through ``(fraction, Weights)`` anchors (their :data:`DENSITY_FIELDS` are used)."""
+        """The schedule through ``(fraction, Weights)`` anchors.
+
+        Their :data:`DENSITY_FIELDS` are used, and a field of :data:`OPTIONAL_DENSITY_FIELDS` where some anchor's
+        value of it is not 0.
+        """
         for _, weights in anchors:
             check_weights(weights, name="anchor weights")
-        return cls(tuple((f, {name: getattr(w, name) for name in DENSITY_FIELDS}) for f, w in anchors), base)
+        names = DENSITY_FIELDS + tuple(name for name in OPTIONAL_DENSITY_FIELDS
+                                       if any(getattr(w, name) != 0 for _, w in anchors))
+        return cls(tuple((f, {name: getattr(w, name) for name in names}) for f, w in anchors), base)
 
     def weights(self, fraction) -> Weights:
         """The :class:`Weights` for an observed ``fraction`` of the pixels (a real number in (0, 1])."""
@@ -365,14 +383,14 @@ class DensitySchedule:
         i = max(k for k, f in enumerate(fractions) if f <= fraction)
         (f0, low), (f1, high) = self.anchors[i], self.anchors[i + 1]
         t = math.log(fraction / f0) / math.log(f1 / f0)
-        return self.base.replace(**{name: _between(low[name], high[name], t) for name in DENSITY_FIELDS})
+        return self.base.replace(**{name: _between(low[name], high[name], t) for name in self.scheduled})
 
     def replace(self, **changes) -> "DensitySchedule":
         """A copy with some fields fixed at every density.
 
-        A field of :data:`DENSITY_FIELDS` is set at every anchor (it no longer
-        depends on the density); any other field of :class:`Weights` is set
-        in ``base``.  ``DEFAULT_SCHEDULE.replace(gamma=0.1)`` keeps the
+        A field the schedule sets (:attr:`scheduled`) is set at every anchor
+        (it no longer depends on the density); any other field of
+        :class:`Weights` is set in ``base``.  ``DEFAULT_SCHEDULE.replace(gamma=0.1)`` keeps the
         schedule and adds the edge term.
 
         Raises
@@ -382,8 +400,8 @@ class DensitySchedule:
         ValueError
             A value :class:`Weights` rejects.
         """
-        scheduled = {name: value for name, value in changes.items() if name in DENSITY_FIELDS}
-        base = self.base.replace(**{name: value for name, value in changes.items() if name not in DENSITY_FIELDS})
+        scheduled = {name: value for name, value in changes.items() if name in self.scheduled}
+        base = self.base.replace(**{name: value for name, value in changes.items() if name not in self.scheduled})
         return DensitySchedule(tuple((f, {**values, **scheduled}) for f, values in self.anchors), base)
 
     def as_dict(self) -> dict:
