@@ -31,6 +31,9 @@ frame use the schedule tuned on all of them).
 Run from the repository root::
 
     python -m bench.density --seeds 0 1 --jobs 2   # about half an hour on 2 cores: writes docs/density.md
+    python -m bench.density --seeds 0 1 --jobs 2 --local-linear-windows --out docs/density_windows.md
+                                                   # the same from WINDOWS_START: the local-linear term on
+                                                   # cross-shaped and 2x2 windows (a 13-point system)
     python -m bench.density --quick                # a smoke run on the tiny quick frames
 
 May import :mod:`sparsedepth`, numpy, :mod:`bench.frames`, :mod:`bench.harness` and :mod:`bench.accuracy`.
@@ -52,7 +55,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 import sparsedepth as sd  # noqa: E402
-from sparsedepth.objective.weights import DENSITY_FIELDS  # noqa: E402
+from sparsedepth.objective.weights import DENSITY_FIELDS, OPTIONAL_DENSITY_FIELDS  # noqa: E402
 
 from . import harness  # noqa: E402
 from .accuracy import dataset_of, load  # noqa: E402
@@ -64,8 +67,15 @@ ANCHORS = (0.01, 0.05, 0.10)
 LOW_ANCHOR = 0.003
 #: The factors of one coordinate step.
 FACTORS = (0.5, 2.0)
-#: A field's value stays within this factor of its value in ``sd.DEFAULT_WEIGHTS`` (both ways).
+#: A field's value stays within this factor of its value in the starting weights (both ways).
 SPAN = 8.0
+#: ``--local-linear-windows``: the descent starts from ``sd.DEFAULT_WEIGHTS`` with the local-linear term moved
+#: from 3x3 windows to cross-shaped and 2x2 windows (each at the 3x3 term's weight) ...
+WINDOWS_START = sd.DEFAULT_WEIGHTS.replace(beta_local_linear=0.0,
+                                           beta_local_linear_cross=sd.DEFAULT_WEIGHTS.beta_local_linear,
+                                           beta_local_linear_2x2=sd.DEFAULT_WEIGHTS.beta_local_linear)
+#: ... and descends these fields (the 3x3 weight stays 0: a 13-point system instead of 25).
+WINDOWS_FIELDS = tuple(name for name in DENSITY_FIELDS if name != "beta_local_linear") + OPTIONAL_DENSITY_FIELDS
 
 
 class Sample:
@@ -121,29 +131,31 @@ def with_value(schedule: sd.DensitySchedule, anchor: int, name: str, value: floa
 
 
 def descend(samples, *, rounds: int, span: float = SPAN, balanced: bool = True, label: str = "",
-            start: sd.DensitySchedule | None = None, tuned=None,
-            scorer: Scorer | None = None) -> tuple[sd.DensitySchedule, list[float]]:
+            start: sd.DensitySchedule | None = None, tuned=None, scorer: Scorer | None = None,
+            start_weights: sd.Weights = sd.DEFAULT_WEIGHTS,
+            fields=DENSITY_FIELDS) -> tuple[sd.DensitySchedule, list[float]]:
     """Coordinate descent of a schedule's anchors; the schedule and the score after each round.
 
-    ``start`` (default: ``sd.DEFAULT_WEIGHTS`` at every fraction of :data:`ANCHORS`) is the first schedule and
-    ``tuned`` the indices of the anchors the descent changes (default: all).  Every field stays within a factor
-    ``span`` of its default; ``balanced`` scores the dataset-balanced mean.  ``scorer`` (default: a new one) keeps
-    the completions already scored, e.g. those of an earlier descent on the same inputs.
+    ``start`` (default: ``start_weights`` at every fraction of :data:`ANCHORS`) is the first schedule and
+    ``tuned`` the indices of the anchors the descent changes (default: all); ``fields`` are the fields it changes.
+    Every field stays within a factor ``span`` of its value in ``start_weights``; ``balanced`` scores the
+    dataset-balanced mean.  ``scorer`` (default: a new one) keeps the completions already scored, e.g. those of an
+    earlier descent on the same inputs.
     """
     scorer = Scorer() if scorer is None else scorer
     schedule = start if start is not None else sd.DensitySchedule.from_weights(
-        tuple((f, sd.DEFAULT_WEIGHTS) for f in ANCHORS))
+        tuple((f, start_weights) for f in ANCHORS))
     tuned = range(len(schedule.anchors)) if tuned is None else tuple(tuned)
     best = scorer.mean(schedule, samples, balanced=balanced)
     trace = [best]
     for r in range(rounds):
         changed = False
         for anchor in tuned:
-            for name in DENSITY_FIELDS:
+            for name in fields:
                 for factor in FACTORS:
                     while True:
                         value = schedule.anchors[anchor][1][name] * factor
-                        default = getattr(sd.DEFAULT_WEIGHTS, name)
+                        default = getattr(start_weights, name)
                         if value == 0 or not default / span <= value <= default * span:
                             break
                         candidate = with_value(schedule, anchor, name, value)
@@ -160,8 +172,9 @@ def descend(samples, *, rounds: int, span: float = SPAN, balanced: bool = True, 
 
 
 def extend(schedule: sd.DensitySchedule, fraction: float, samples, *, rounds: int, span: float = SPAN,
-           balanced: bool = True, label: str = "", scorer: Scorer | None = None) -> tuple[sd.DensitySchedule,
-                                                                                             list[float]]:
+           balanced: bool = True, label: str = "", scorer: Scorer | None = None,
+           start_weights: sd.Weights = sd.DEFAULT_WEIGHTS,
+           fields=DENSITY_FIELDS) -> tuple[sd.DensitySchedule, list[float]]:
     """``schedule`` with one anchor added below its lowest, at ``fraction``, tuned with the other anchors fixed.
 
     The new anchor starts from the values of the lowest anchor (so the first score is the schedule's own: below
@@ -172,18 +185,19 @@ def extend(schedule: sd.DensitySchedule, fraction: float, samples, *, rounds: in
         raise ValueError(f"an added anchor lies below the lowest ({lowest:g}); got {fraction:g}")
     start = sd.DensitySchedule(((fraction, dict(schedule.anchors[0][1])),) + tuple(schedule.anchors), schedule.base)
     return descend(samples, rounds=rounds, span=span, balanced=balanced, label=label, start=start, tuned=(0,),
-                   scorer=scorer)
+                   scorer=scorer, start_weights=start_weights, fields=fields)
 
 
 def _descend_job(job):
     """``(label, schedule, trace, extension trace)``: the descent of :data:`ANCHORS` on the inputs at the standard
     fractions, then :data:`LOW_ANCHOR` added by :func:`extend` on every input."""
-    label, samples, rounds, span, balanced = job
+    label, samples, rounds, span, balanced, start_weights, fields = job
     standard = [s for s in samples if s.fraction in harness.FRACTIONS]
     scorer = Scorer()  # the extension's first score re-reads the descent's last completions of the standard inputs
-    schedule, trace = descend(standard, rounds=rounds, span=span, balanced=balanced, label=label, scorer=scorer)
+    schedule, trace = descend(standard, rounds=rounds, span=span, balanced=balanced, label=label, scorer=scorer,
+                              start_weights=start_weights, fields=fields)
     schedule, low_trace = extend(schedule, LOW_ANCHOR, samples, rounds=rounds, span=span, balanced=balanced,
-                                 label=f"{label} (low)", scorer=scorer)
+                                 label=f"{label} (low)", scorer=scorer, start_weights=start_weights, fields=fields)
     return label, schedule, trace, low_trace
 
 
@@ -198,6 +212,9 @@ def parse_args(argv):
     parser.add_argument("--unbalanced", action="store_true",
                         help="score the mean over all tuning inputs (default: the mean over datasets of each "
                              "dataset's mean)")
+    parser.add_argument("--local-linear-windows", action="store_true",
+                        help="start from the defaults with the local-linear term on cross-shaped and 2x2 windows "
+                             "instead of 3x3 (WINDOWS_START) and descend their weights (WINDOWS_FIELDS)")
     parser.add_argument("--quick", action="store_true", help="the tiny quick frames, one round (smoke test)")
     parser.add_argument("--out", type=Path, default=harness.DOCS / "density.md", help="markdown output")
     return parser.parse_args(argv)
@@ -221,8 +238,11 @@ def main(argv=None) -> int:
     if args.quick:
         held_out = []
     balanced = not args.unbalanced
-    jobs = [("all", tune, args.rounds, args.span, balanced)] + [
-        (d, [s for s in tune if dataset_of(s.frame.name) != d], args.rounds, args.span, balanced) for d in held_out]
+    start_weights, fields = (WINDOWS_START, WINDOWS_FIELDS) if args.local_linear_windows else (sd.DEFAULT_WEIGHTS,
+                                                                                               DENSITY_FIELDS)
+    common = (args.rounds, args.span, balanced, start_weights, fields)
+    jobs = [("all", tune, *common)] + [(d, [s for s in tune if dataset_of(s.frame.name) != d], *common)
+                                       for d in held_out]
     if args.jobs > 1:
         with multiprocessing.get_context("fork").Pool(min(args.jobs, len(jobs))) as pool:
             tuned = {label: rest for label, *rest in pool.map(_descend_job, jobs)}
@@ -238,8 +258,9 @@ def _schedule_differences(tuned: sd.DensitySchedule, library: sd.DensitySchedule
     out = [f"an anchor at {100 * f:g} % only {'here' if f in ours else 'in the library'}"
            for f in sorted(set(ours) ^ set(theirs))]
     for f in sorted(set(ours) & set(theirs)):
-        out += [f"{100 * f:g} % {name} = {theirs[f][name]:.6g} (tuned here {ours[f][name]:.6g})"
-                for name in DENSITY_FIELDS if theirs[f][name] != ours[f][name]]
+        mine, lib = tuned.weights(f), library.weights(f)  # a field one schedule does not set is its base's
+        out += [f"{100 * f:g} % {name} = {getattr(lib, name):.6g} (tuned here {getattr(mine, name):.6g})"
+                for name in DENSITY_FIELDS + OPTIONAL_DENSITY_FIELDS if getattr(lib, name) != getattr(mine, name)]
     if tuned.base != library.base:
         out.append("the fields outside the schedule")
     return out
@@ -248,11 +269,14 @@ def _schedule_differences(tuned: sd.DensitySchedule, library: sd.DensitySchedule
 def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
     schedule, trace, low_trace = tuned["all"]
     scorer = Scorer()
-    constant = sd.DensitySchedule.from_weights(((ANCHORS[0], sd.DEFAULT_WEIGHTS),))
+    start_weights = WINDOWS_START if args.local_linear_windows else sd.DEFAULT_WEIGHTS
+    start_name = ("`sd.DEFAULT_WEIGHTS` on cross and 2x2 windows" if args.local_linear_windows
+                  else "`sd.DEFAULT_WEIGHTS`")
+    constant = sd.DensitySchedule.from_weights(((ANCHORS[0], start_weights),))
     without_low = sd.DensitySchedule(schedule.anchors[1:], schedule.base)
     library = sd.DEFAULT_SCHEDULE
     low = f"{100 * LOW_ANCHOR:g} %"
-    methods = [("constant `sd.DEFAULT_WEIGHTS`", constant), (f"schedule tuned here without its {low} anchor",
+    methods = [(f"constant {start_name}", constant), (f"schedule tuned here without its {low} anchor",
                                                                without_low),
                ("schedule tuned here", schedule), ("library defaults at run time (`sd.default_weights`)", library)]
     fractions = harness.FRACTIONS
@@ -283,7 +307,7 @@ def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
         lodo.append([d, label, f"{scorer.mean(sched, held, which=1):.3f}",
                      f"{scorer.mean(constant, held, which=1):.3f}"])
     anchors = [[name, *(f"{values[name]:.6g}" for _, values in schedule.anchors),
-                f"{getattr(sd.DEFAULT_WEIGHTS, name):.6g}"] for name in DENSITY_FIELDS]
+                f"{getattr(start_weights, name):.6g}"] for name in schedule.scheduled]
     densities = [[f.name, f"{100 * np.isfinite(f.depth).mean():.0f} %",
                   *(f"{100 * p * np.isfinite(f.depth).mean():.2g} %" for p in (LOW_ANCHOR, *fractions))]
                  for f in report_frames]
@@ -302,7 +326,8 @@ def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
         "are completed with the weights of a lower density).",
         "",
         f"Coordinate descent on the tuning frames' inputs at 1 / 5 / 10 % (score (RMSE + MAE) / 2 over nearest's, "
-        f"{score_name}; every field within a factor {args.span:g} of its default): "
+        f"{score_name}; starting from {start_name} at every anchor, every field within a factor {args.span:g} of its value "
+        f"there): "
         + " -> ".join(f"{v:.4f}" for v in trace) + f" ({len(trace) - 1} rounds).",
         "",
         f"Then an anchor at {low} of all pixels (without it the schedule keeps the 1 % anchor's values below 1 %), "
@@ -311,7 +336,7 @@ def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
         "",
         "Tuned anchors (observed fraction of all pixels), beside the constant defaults:",
         "",
-        harness.markdown_table(["field", *(f"{100 * f:g} %" for f, _ in schedule.anchors), "`sd.DEFAULT_WEIGHTS`"],
+        harness.markdown_table(["field", *(f"{100 * f:g} %" for f, _ in schedule.anchors), start_name],
                                anchors, align=["---"] + ["---:"] * (len(schedule.anchors) + 1)),
         "",
         library_line,
@@ -330,7 +355,7 @@ def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
         "Leave-one-dataset-out: for each dataset with tuning frames the descent and the added anchor repeated "
         "without them, scored on that dataset's report frames at 1 / 5 / 10 %:",
         "",
-        harness.markdown_table(["held-out dataset", "schedule", "score", "constant `sd.DEFAULT_WEIGHTS`"], lodo,
+        harness.markdown_table(["held-out dataset", "schedule", "score", f"constant {start_name}"], lodo,
                                align=["---", "---", "---:", "---:"]),
         "",
         f"Leave-one-dataset-out mean over the report frames: {np.mean(lodo_scores):.3f}.",

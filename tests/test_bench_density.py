@@ -93,3 +93,32 @@ def test_schedule_differences_name_each_changed_field_and_anchor():
                                                (0.1, sd.DEFAULT_WEIGHTS)))
     assert density._schedule_differences(tuned, library) == [
         "an anchor at 0.3 % only in the library", f"1 % kappa = 50 (tuned here {sd.DEFAULT_WEIGHTS.kappa:g})"]
+
+
+def test_windows_descent_moves_the_window_weights_and_keeps_the_3x3_term_off(monkeypatch):
+    density = _density()
+    start = density.WINDOWS_START
+    assert (start.beta_local_linear, start.beta_local_linear_cross, start.beta_local_linear_2x2) == (
+        0.0, sd.DEFAULT_WEIGHTS.beta_local_linear, sd.DEFAULT_WEIGHTS.beta_local_linear)
+    assert "beta_local_linear" not in density.WINDOWS_FIELDS
+    assert {"beta_local_linear_cross", "beta_local_linear_2x2"} <= set(density.WINDOWS_FIELDS)
+    cross, two = start.beta_local_linear_cross / 4, start.beta_local_linear_2x2 * 2
+
+    def ratios(self, sample, weights):  # minimum at (cross, two), whatever the other fields
+        value = (abs(math.log2(weights.beta_local_linear_cross / cross))
+                 + abs(math.log2(weights.beta_local_linear_2x2 / two)) + 1.0 + 10 * weights.beta_local_linear)
+        return value, value
+    monkeypatch.setattr(density.Scorer, "ratios", ratios)
+    schedule, trace = density.descend([_sample("nyu_a/0", 0.05, 0)], rounds=3, span=8.0, start_weights=start,
+                                      fields=density.WINDOWS_FIELDS)
+    w = schedule.weights(0.05)
+    assert w.beta_local_linear_cross == pytest.approx(cross, rel=1e-12)
+    assert w.beta_local_linear_2x2 == pytest.approx(two, rel=1e-12)
+    assert w.beta_local_linear == 0.0 and trace[-1] == pytest.approx(1.0)
+
+
+def test_schedule_differences_name_a_window_weight_one_schedule_does_not_set():
+    density = _density()
+    library = sd.DensitySchedule.from_weights(((0.01, sd.DEFAULT_WEIGHTS),))
+    tuned = sd.DensitySchedule.from_weights(((0.01, sd.DEFAULT_WEIGHTS.replace(beta_local_linear_cross=0.02)),))
+    assert density._schedule_differences(tuned, library) == ["1 % beta_local_linear_cross = 0 (tuned here 0.02)"]
