@@ -263,12 +263,18 @@ def test_weight_zero_reproduces_the_objective_and_completion_bit_for_bit():
     assert "local_linear" in sd.complete_depth(image, sparse, mask).terms  # the defaults use the term
 
 
+def _step_scene(shape, seed):
+    """A noisy image with a vertical step at column 21, depth stepping there (and a ramp down), 5 % sampled."""
+    rng = np.random.default_rng(seed)
+    H, W = shape
+    image = np.clip(rng.random(shape + (3,)) * 0.2 + (np.arange(W) > 20)[None, :, None] * 0.7, 0, 1)
+    truth = 2.0 + np.where(np.arange(W) > 20, 1.0, 0.0)[None, :] + 0.01 * np.arange(H)[:, None]
+    return (image, *sd.sample_depth(truth, fraction=0.05, seed=1))
+
+
 def test_the_25_point_system_is_solved_by_the_multigrid_and_amg():
-    rng = np.random.default_rng(7)
     shape = (33, 47)
-    image = np.clip(rng.random(shape + (3,)) * 0.2 + (np.arange(47) > 20)[None, :, None] * 0.7, 0, 1)
-    truth = 2.0 + np.where(np.arange(47) > 20, 1.0, 0.0)[None, :] + 0.01 * np.arange(33)[:, None]
-    sparse, mask = sd.sample_depth(truth, fraction=0.05, seed=1)
+    image, sparse, mask = _step_scene(shape, 7)
     w = sd.Weights(beta_local_linear=0.05, local_linear_eps=1e-4)
     objective, _, _ = build_objective(image, sparse, mask, weights=w)
     A, b, _ = objective.normal_equations()
@@ -310,11 +316,7 @@ def test_cross_and_2x2_terms_add_their_laplacians_and_keep_a_13_point_system():
 
 
 def test_the_13_point_system_of_the_cross_and_2x2_terms_is_solved_by_the_multigrid():
-    rng = np.random.default_rng(12)
-    shape = (31, 45)
-    image = np.clip(rng.random(shape + (3,)) * 0.2 + (np.arange(45) > 20)[None, :, None] * 0.7, 0, 1)
-    truth = 2.0 + np.where(np.arange(45) > 20, 1.0, 0.0)[None, :] + 0.01 * np.arange(31)[:, None]
-    sparse, mask = sd.sample_depth(truth, fraction=0.05, seed=1)
+    image, sparse, mask = _step_scene((31, 45), 12)
     w = sd.Weights(beta_local_linear=0.0, beta_local_linear_cross=0.05, beta_local_linear_2x2=0.1,
                    local_linear_eps=1e-4)
     objective, _, _ = build_objective(image, sparse, mask, weights=w)
