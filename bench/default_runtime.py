@@ -6,10 +6,9 @@ Run (a few minutes on 2 cores)::
 
 Every report frame (subsampled by ``--step``, default 2) at 1 / 5 / 10 % of its valid pixels and every seed is
 completed with the library's defaults (``sd.complete_depth`` without ``weights=``), with the defaults without
-the local-linear term (:data:`WITHOUT_LOCAL_LINEAR`: ``beta_local_linear = 0`` at every anchor of
-``sd.DEFAULT_SCHEDULE``, whose 25-point normal stencil it turns into a 13-point one) and with :data:`BASELINE` (the
-baseline row of ``docs/accuracy.md``: the density-independent weights without the modelling fields edge_sigma,
-fill_contrast and the local-linear term), the order of the three turning from one input to the next, the whole
+the local-linear terms (:data:`WITHOUT_LOCAL_LINEAR`: every local-linear weight 0 at every density) and with
+:data:`BASELINE` (the baseline row of ``docs/accuracy.md``: the density-independent weights without the modelling
+fields edge_sigma, fill_contrast and the local-linear term), the order of the three turning from one input to the next, the whole
 pass ``--repeats`` times.  A ratio is Σ wall time of a setting over Σ wall time of the baseline over every pass (and
 the same in process CPU time); each pass's own ratio of the defaults shows the spread of the measurement on a shared
 machine.
@@ -28,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 import sparsedepth as sd
+from sparsedepth.objective.weights import LOCAL_LINEAR_FIELDS
 
 from . import frames as frame_list
 from . import harness as H
@@ -36,10 +36,9 @@ FRACTIONS = (0.01, 0.05, 0.10)
 #: The baseline objective of docs/accuracy.md (its "Baseline weights"), modelling fields off.
 BASELINE = sd.Weights(alpha=1, beta=0, gamma=0, delta=0.000131, kappa=25, beta_image=0.00673, beta_second=0.000286,
                       beta_second_image=0.039, edge_sigma=0, fill_contrast=0, beta_local_linear=0)
-#: The library's defaults with the local-linear term switched off at every anchor (the rest as in the defaults).
-WITHOUT_LOCAL_LINEAR = sd.DensitySchedule(
-    tuple((fraction, {**dict(values), "beta_local_linear": 0.0}) for fraction, values in sd.DEFAULT_SCHEDULE.anchors),
-    sd.DEFAULT_SCHEDULE.base.replace(beta_local_linear=0.0))
+#: The library's defaults with the local-linear terms (every window shape) switched off at every anchor (the rest
+#: as in the defaults).
+WITHOUT_LOCAL_LINEAR = sd.DEFAULT_SCHEDULE.replace(**dict.fromkeys(LOCAL_LINEAR_FIELDS, 0.0))
 #: (label, weights) of the settings timed, ``None`` for the library's defaults; the baseline last.
 SETTINGS = (("defaults", None), ("without local-linear", WITHOUT_LOCAL_LINEAR), ("baseline", BASELINE))
 

@@ -5,8 +5,8 @@ Run (a few minutes on 2 cores)::
     python -m bench.interpolation --out docs/interpolation.md
 
 Every report frame (subsampled by ``--step``, default 1: full size) at 5 % of its valid pixels, seed 0, with two
-objectives: the library's defaults at that density (a 25-point system: the local-linear term) and the baseline
-objective of ``docs/accuracy.md`` (13-point: the second-order terms).  Each system is solved as the default
+objectives: the library's defaults at that density and the baseline objective of ``docs/accuracy.md`` (13-point:
+the second-order terms); each label gives the points of the objective's normal stencil.  Each system is solved as the default
 ``amg`` solve does (the hierarchy of :func:`sparsedepth.solvers.quadratic.default_hierarchy`, line Gauss-Seidel,
 PCG from the prior fill, stopping at the depth rule), once with ``interpolation="bilinear"`` (what ``"auto"``
 picks for these stencils) and once with ``interpolation="operator"``, which reads the radius-2 stencil collapsed
@@ -94,7 +94,8 @@ def memory_8mp(interpolation):
 
 
 def measure(frame, weights, turn):
-    """Per interpolation: ``(seconds, iterations at the depth rule, at 1e-8)``, and the solutions' RMS difference."""
+    """Per interpolation: ``(seconds, iterations at the depth rule, at 1e-8)``, the solutions' RMS difference and
+    the points of the normal stencil."""
     sparse, mask = H.sample(frame, fraction=FRACTION, seed=SEED)
     scale = depth_scale(sparse[mask])
     objective, coarse, _ = sd.build_objective(frame.image, sparse, mask,
@@ -105,7 +106,7 @@ def measure(frame, weights, turn):
     order = INTERPOLATIONS if turn % 2 == 0 else INTERPOLATIONS[::-1]
     out = {name: solve(A, b, x0, scaled.shape, name) for name in order}
     difference = float(np.sqrt(np.mean((out["bilinear"][3] - out["operator"][3]) ** 2)))
-    return {name: out[name][:3] for name in INTERPOLATIONS}, difference
+    return {name: out[name][:3] for name in INTERPOLATIONS}, difference, len(scaled.normal_stencil()[0])
 
 
 def main(argv=None) -> int:
@@ -124,8 +125,9 @@ def main(argv=None) -> int:
         return 2
     rows, totals, turn = [], {}, 0
     for frame in frames:
-        for label, weights in (("defaults (25-point)", None), ("baseline (13-point)", BASELINE)):
-            per, difference = measure(frame, weights, turn)
+        for name, weights in (("defaults", None), ("baseline", BASELINE)):
+            per, difference, points = measure(frame, weights, turn)
+            label = f"{name} ({points}-point)"
             turn += 1
             total = totals.setdefault(label, {name: np.zeros(3) for name in INTERPOLATIONS})
             for name in INTERPOLATIONS:

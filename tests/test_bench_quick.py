@@ -234,11 +234,12 @@ def test_default_runtime_quick_writes_the_ratio_of_the_summed_times(tmp_path):
 
 
 def test_default_runtime_without_local_linear_is_the_defaults_with_that_term_off():
-    """At any observed fraction, every field as in the library's defaults but beta_local_linear = 0."""
+    """At any observed fraction, every field as in the library's defaults but the local-linear weights 0."""
     bench = load("default_runtime")
     sd = importlib.import_module("sparsedepth")
+    off = dict(beta_local_linear=0, beta_local_linear_cross=0, beta_local_linear_2x2=0)
     for fraction in (0.001, 0.003, 0.007, 0.01, 0.03, 0.05, 0.1, 0.5):
-        assert bench.WITHOUT_LOCAL_LINEAR.weights(fraction) == sd.default_weights(fraction).replace(beta_local_linear=0)
+        assert bench.WITHOUT_LOCAL_LINEAR.weights(fraction) == sd.default_weights(fraction).replace(**off)
     assert [label for label, _ in bench.SETTINGS][-1] == "baseline"
 
 
@@ -247,7 +248,11 @@ def test_interpolation_quick_compares_both_on_both_objectives(tmp_path):
     rows = [[c.strip().strip("*`") for c in line.split("|")[1:-1]]
             for line in quick_report(load("interpolation"), tmp_path).splitlines()
             if line.startswith("| `") or line.startswith("| all")]
-    assert [r[1] for r in rows] == ["defaults (25-point)", "baseline (13-point)"] * 2
+    sd = importlib.import_module("sparsedepth")
+    frame = importlib.import_module("bench.harness").load_frame("middlebury2003/teddy", 4)
+    sparse, mask = sd.sample_depth(frame.depth, fraction=0.05, seed=0)
+    points = len(sd.build_objective(frame.image, sparse, mask)[0].normal_stencil()[0])  # the defaults' stencil
+    assert [r[1] for r in rows] == [f"defaults ({points}-point)", "baseline (13-point)"] * 2
     for frame_row, total_row in zip(rows[:2], rows[2:]):
         assert frame_row[2:7] == total_row[2:7]  # one frame: the totals are that frame
         for cell in frame_row[2:4]:
