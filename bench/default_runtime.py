@@ -5,13 +5,13 @@ Run (a few minutes on 2 cores)::
     python -m bench.default_runtime --out docs/default_runtime.md
 
 Every report frame (subsampled by ``--step``, default 2) at 1 / 5 / 10 % of its valid pixels and every seed is
-completed with the library's defaults (``sd.complete_depth`` without ``weights=``), with the defaults without
-the local-linear terms (:data:`WITHOUT_LOCAL_LINEAR`: every local-linear weight 0 at every density) and with
+completed with the library's defaults (``sd.complete_depth`` without ``weights=``), with the defaults without the
+local-linear terms (:data:`WITHOUT_LOCAL_LINEAR`: every local-linear weight 0 at every density) and with
 :data:`BASELINE` (the baseline row of ``docs/accuracy.md``: the density-independent weights without the modelling
-fields edge_sigma, fill_contrast and the local-linear term), the order of the three turning from one input to the next, the whole
-pass ``--repeats`` times.  A ratio is Σ wall time of a setting over Σ wall time of the baseline over every pass (and
-the same in process CPU time); each pass's own ratio of the defaults shows the spread of the measurement on a shared
-machine.
+fields edge_sigma, fill_contrast and the local-linear term), the order of the three turning from one input to the
+next, the whole pass ``--repeats`` times. A ratio is Σ wall time of a setting over Σ wall time of the baseline over
+every pass (and the same in process CPU time); each pass's own ratio of the defaults shows the spread of the
+measurement on a shared machine.
 
 May import :mod:`sparsedepth`, :mod:`bench.harness` and :mod:`bench.frames`.
 """

@@ -326,8 +326,8 @@ def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
         "are completed with the weights of a lower density).",
         "",
         f"Coordinate descent on the tuning frames' inputs at 1 / 5 / 10 % (score (RMSE + MAE) / 2 over nearest's, "
-        f"{score_name}; starting from {start_name} at every anchor, every field within a factor {args.span:g} of its value "
-        f"there): "
+        f"{score_name}; starting from {start_name} at every anchor, every field within a factor {args.span:g} of "
+        f"its value there): "
         + " -> ".join(f"{v:.4f}" for v in trace) + f" ({len(trace) - 1} rounds).",
         "",
         f"Then an anchor at {low} of all pixels (without it the schedule keeps the 1 % anchor's values below 1 %), "

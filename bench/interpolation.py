@@ -5,17 +5,17 @@ Run (a few minutes on 2 cores)::
     python -m bench.interpolation --out docs/interpolation.md
 
 Every report frame (subsampled by ``--step``, default 1: full size) at 5 % of its valid pixels, seed 0, with two
-objectives: the library's defaults at that density and the baseline objective of ``docs/accuracy.md`` (13-point:
-the second-order terms); each label gives the points of the objective's normal stencil.  Each system is solved as the default
-``amg`` solve does (the hierarchy of :func:`sparsedepth.solvers.quadratic.default_hierarchy`, line Gauss-Seidel,
-PCG from the prior fill, stopping at the depth rule), once with ``interpolation="bilinear"`` (what ``"auto"``
-picks for these stencils) and once with ``interpolation="operator"``, which reads the radius-2 stencil collapsed
-to radius 1 (:class:`sparsedepth.linalg.multigrid.stencils.CollapsedSource`); the order alternates from one
-frame to the next.  Columns: CG iterations at the depth rule and to the relative residual 1e-8, the wall time
-of set-up + depth-rule solve, and the RMS difference of the two depth-rule solutions in units of the depth
-scale (the rule's tolerance is :data:`sparsedepth.solvers.quadratic.DEFAULT_DEPTH_RTOL`).  Last, the peak memory
-of one default ``complete_depth`` on the 8-megapixel frame of ``bench.scaling`` with each interpolation (a fresh
-process each, the solve's hierarchy built by :func:`operator_hierarchy` for "operator"); not with ``--quick``.
+objectives: the library's defaults at that density and the baseline objective of ``docs/accuracy.md`` (13-point: the
+second-order terms); each label gives the points of the objective's normal stencil. Each system is solved as the
+default ``amg`` solve does (the hierarchy of :func:`sparsedepth.solvers.quadratic.default_hierarchy`, line
+Gauss-Seidel, PCG from the prior fill, stopping at the depth rule), once with ``interpolation="bilinear"`` (what
+``"auto"`` picks for these stencils) and once with ``interpolation="operator"``, which reads the radius-2 stencil
+collapsed to radius 1 (:class:`sparsedepth.linalg.multigrid.stencils.CollapsedSource`); the order alternates from
+one frame to the next. Columns: CG iterations at the depth rule and to the relative residual 1e-8, the wall time of
+set-up + depth-rule solve, and the RMS difference of the two depth-rule solutions in units of the depth scale (the
+rule's tolerance is :data:`sparsedepth.solvers.quadratic.DEFAULT_DEPTH_RTOL`). Last, the peak memory of one default
+``complete_depth`` on the 8-megapixel frame of ``bench.scaling`` with each interpolation (a fresh process each, the
+solve's hierarchy built by :func:`operator_hierarchy` for "operator"); not with ``--quick``.
 
 May import :mod:`sparsedepth`, numpy, :mod:`bench.blas`, :mod:`bench.frames` and :mod:`bench.harness`.
 """

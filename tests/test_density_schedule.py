@@ -105,5 +105,6 @@ def test_from_weights_schedules_a_window_weight_only_where_some_anchor_uses_it()
     crossed = sd.DensitySchedule.from_weights(((0.01, low), (0.1, high.replace(beta_local_linear_cross=0.01))))
     assert crossed.scheduled == DENSITY_FIELDS + ("beta_local_linear_cross",)
     assert crossed.weights(0.01).beta_local_linear_cross == 0.0 and crossed.weights(0.1).beta_local_linear_cross == 0.01
-    # the library's schedule sets no window weight: its settings (batch fingerprints) read as before
-    assert not any(set(v) & set(OPTIONAL_DENSITY_FIELDS) for v in sd.DEFAULT_SCHEDULE.as_dict().values())
+    # the library's schedule sets both window weights at every anchor (and the 3x3 weight to 0)
+    assert all(set(OPTIONAL_DENSITY_FIELDS) <= set(v) and v["beta_local_linear"] == 0
+               for v in sd.DEFAULT_SCHEDULE.as_dict().values())

@@ -422,18 +422,23 @@ def _between(a: float, b: float, t: float) -> float:
 
 
 #: The schedule the library uses when no weights are given (:func:`default_weights`): the anchors chosen on the
-#: tuning frames by ``python -m bench.density`` (docs/density.md; the 1 / 5 / 10 % anchors by one descent, then the
-#: 0.3 % anchor with those fixed), every value the default's times a power of 2; the other fields are
-#: :data:`DEFAULT_WEIGHTS`'.
+#: tuning frames by ``python -m bench.density --local-linear-windows`` (docs/density.md; the 1 / 5 / 10 % anchors
+#: by one descent, then the 0.3 % anchor with those fixed), every value the starting weights' times a power of 2.
+#: The local-linear term sums its fit over cross-shaped and 2x2 windows (a 13-point normal stencil), not 3x3
+#: windows; the other fields are :data:`DEFAULT_WEIGHTS`'.
 DEFAULT_SCHEDULE = DensitySchedule((
     (0.003, dict(delta=1.6375e-05, kappa=25.0, beta_image=0.000252375, beta_second=3.575e-05, beta_second_image=0.0936,
-                 beta_local_linear=0.00125, local_linear_eps=2e-05)),
-    (0.01, dict(delta=6.55e-05, kappa=50.0, beta_image=0.000252375, beta_second=0.001144, beta_second_image=0.0936,
-                beta_local_linear=0.0025, local_linear_eps=2e-05)),
-    (0.05, dict(delta=0.000262, kappa=100.0, beta_image=0.016152, beta_second=3.575e-05, beta_second_image=0.0936,
-                beta_local_linear=0.00125, local_linear_eps=2.5e-06)),
-    (0.10, dict(delta=1.6375e-05, kappa=100.0, beta_image=0.016152, beta_second=3.575e-05, beta_second_image=0.0936,
-                beta_local_linear=0.00125, local_linear_eps=2e-05)),
+                 beta_local_linear=0.0, local_linear_eps=1.25e-06, beta_local_linear_cross=0.0025,
+                 beta_local_linear_2x2=0.02)),
+    (0.01, dict(delta=3.275e-05, kappa=50.0, beta_image=0.000252375, beta_second=0.001144, beta_second_image=0.0936,
+                beta_local_linear=0.0, local_linear_eps=1.25e-06, beta_local_linear_cross=0.00125,
+                beta_local_linear_2x2=0.04)),
+    (0.05, dict(delta=0.000524, kappa=100.0, beta_image=0.000252375, beta_second=7.15e-05, beta_second_image=0.0936,
+                beta_local_linear=0.0, local_linear_eps=1.25e-06, beta_local_linear_cross=0.00125,
+                beta_local_linear_2x2=0.08)),
+    (0.10, dict(delta=6.55e-05, kappa=100.0, beta_image=0.004038, beta_second=3.575e-05, beta_second_image=0.0936,
+                beta_local_linear=0.0, local_linear_eps=5e-06, beta_local_linear_cross=0.00125,
+                beta_local_linear_2x2=0.02)),
 ))
 
 
