@@ -39,6 +39,7 @@ import numpy as np  # noqa: E402
 
 import sparsedepth as sd  # noqa: E402
 from sparsedepth.linalg import pcg_info  # noqa: E402
+from sparsedepth.objective.weights import LOCAL_LINEAR_FIELDS  # noqa: E402
 from sparsedepth.solvers import depth_scale, scaled_objective  # noqa: E402
 from sparsedepth.solvers.quadratic import (DEFAULT_DEPTH_RTOL, RemainingChange, default_hierarchy,  # noqa: E402
                                            system_form)
@@ -137,9 +138,9 @@ def stopping_section(frames, argv, started) -> tuple[str, list]:
 #: The objectives of the iteration-count section: which of the default weights are set to 0.
 TERM_VARIANTS = {
     "default": {},
-    "without the local-linear term": {"beta_local_linear": 0.0},
+    "without the local-linear terms": dict.fromkeys(LOCAL_LINEAR_FIELDS, 0.0),
     "without the second-order terms": {"beta_second": 0.0, "beta_second_image": 0.0},
-    "first-order terms only": {"beta_local_linear": 0.0, "beta_second": 0.0, "beta_second_image": 0.0},
+    "first-order terms only": {**dict.fromkeys(LOCAL_LINEAR_FIELDS, 0.0), "beta_second": 0.0, "beta_second_image": 0.0},
 }
 TERMS_HEADER = ["frame"] + [f"{name}: CG its depth / 1e-8" for name in TERM_VARIANTS]
 
@@ -174,8 +175,9 @@ def terms_section(frames, argv, started) -> str:
         f"the depth rule, and again to the relative residual 1e-8). Means over the frames (depth rule / 1e-8): "
         + "; ".join(f"{name} {d:.1f} / {r:.1f}" for name, (d, r) in mean.items()) + ". "
         "The first-order terms give a 5-point system, whose hierarchy interpolates by the operator (Dendy's "
-        "black-box interpolation); the second-order terms (13-point) and the local-linear term (25-point, 3x3 "
-        "windows) give a stencil of radius 2, whose hierarchy interpolates bilinearly.")
+        "black-box interpolation); the second-order terms (13-point) and the local-linear terms (13-point on "
+        "cross and 2x2 windows, 25-point on 3x3 windows) give a stencil of radius 2, whose hierarchy interpolates "
+        "bilinearly.")
     return H.section("Iterations by the terms of the objective", command=H.command_line("speed", argv),
                      frames_=frames, seeds=[SEED], body=body, notes=notes, elapsed=time.perf_counter() - started)
 
