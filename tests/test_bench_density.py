@@ -122,3 +122,19 @@ def test_schedule_differences_name_a_window_weight_one_schedule_does_not_set():
     library = sd.DensitySchedule.from_weights(((0.01, sd.DEFAULT_WEIGHTS),))
     tuned = sd.DensitySchedule.from_weights(((0.01, sd.DEFAULT_WEIGHTS.replace(beta_local_linear_cross=0.02)),))
     assert density._schedule_differences(tuned, library) == ["1 % beta_local_linear_cross = 0 (tuned here 0.02)"]
+
+
+def test_quick_windows_run_reports_the_window_weights_and_keeps_the_3x3_term_off(tmp_path):
+    """``--local-linear-windows`` end to end on the tiny quick frames: the anchor table lists both window weights
+    beside the starting weights, and the 3x3 weight is 0 at every anchor."""
+    density = _density()
+    out = tmp_path / "density.md"
+    assert density.main(["--quick", "--local-linear-windows", "--out", str(out)]) == 0
+    rows = {cells[0]: cells[1:] for cells in ([c.strip() for c in line.split("|")[1:-1]]
+                                              for line in out.read_text().splitlines() if line.startswith("| beta_"))}
+    start = density.WINDOWS_START
+    assert rows["beta_local_linear"] == ["0"] * 5
+    for name in ("beta_local_linear_cross", "beta_local_linear_2x2"):
+        assert len(rows[name]) == 5 and float(rows[name][-1]) == getattr(start, name)  # 4 anchors, then the start
+        assert all(float(v) > 0 for v in rows[name])
+    assert "constant `sd.DEFAULT_WEIGHTS` on cross and 2x2 windows" in out.read_text()
