@@ -36,7 +36,7 @@ _COVERAGE_TOLERANCE = (0.08, 0.04)
 _GOOD_LOSS = 0.5
 #: Depth fraction per unit of RGB distance (channels in [0, 1]) of the colour-novelty cue, and how many nearest
 #: samples it compares with; chosen on the tuning frames.
-NOVELTY_WEIGHT = 0.3
+NOVELTY_WEIGHT = 0.8
 NOVELTY_NEIGHBOURS = 8
 _NOVELTY_CHUNK = 1 << 16
 
