@@ -106,24 +106,6 @@ def local_linear_operator(image, eps: float, *, window: str = "3x3", copy: bool 
     return LocalLinearOperator(array if keep else as_float_image(image), eps, window)
 
 
-def _window_sum(array, rows, window=WINDOW_OFFSETS):
-    """Σ over the windows of anchor rows ``rows = (k0, k1)``: shape ``array.shape[:-2] + (k1 - k0, columns)``.
-
-    ``array`` has the grid on its last two axes; ``window`` is a tuple of :data:`WINDOWS`.  Anchor row ``k`` is
-    grid row ``k − min dy`` (the first row where the window fits); ``columns`` is the number of places the window
-    fits in a row.
-    """
-    k0, k1 = rows
-    W = array.shape[-1]
-    y0, x0 = -min(dy for dy, _ in window), -min(dx for _, dx in window)
-    x1 = W - max(dx for _, dx in window)
-    (dy, dx), *others = window
-    out = array[..., k0 + y0 + dy:k1 + y0 + dy, x0 + dx:x1 + dx].copy()
-    for dy, dx in others:
-        out += array[..., k0 + y0 + dy:k1 + y0 + dy, x0 + dx:x1 + dx]
-    return out
-
-
 def _symmetric_inverse(S):
     """Inverses of symmetric positive definite matrices stored as ``S[c, d]`` images: shape ``(C, C, h, w)``.
 
@@ -259,8 +241,13 @@ class LocalLinearOperator(StencilOperator):
         return array[..., k0 + y + o[0]:k1 + y + o[0], x + o[1]:x + W - self._span[1] + o[1]]
 
     def _window_sum(self, array, rows):
-        """Σ over the window of every window of anchor rows ``rows`` (:func:`_window_sum`)."""
-        return _window_sum(array, rows, self.offsets_in_window)
+        """Σ over the window of every window of anchor rows ``rows = (k0, k1)``: :meth:`_shifted` summed over the
+        window's pixels, shape ``array.shape[:-2] + (k1 - k0, columns)``."""
+        first, *others = self.offsets_in_window
+        out = self._shifted(array, first, rows).copy()
+        for o in others:
+            out += self._shifted(array, o, rows)
+        return out
 
     def _fit_rows(self, img, rows, planes):
         """Every block of ``K z`` on the windows of anchor rows ``rows``, shape ``(n + C, k1 - k0, columns)``.

@@ -263,7 +263,6 @@ class Weights:
                     del items[name]
             if not any(name in items for name in LOCAL_LINEAR_FIELDS):
                 del items["local_linear_eps"]
-        if used_only:
             for name in MODEL_FIELDS:
                 if items.get(name, 1) == 0:
                     del items[name]
