@@ -30,10 +30,11 @@ frame use the schedule tuned on all of them).
 
 Run from the repository root::
 
-    python -m bench.density --seeds 0 1 --jobs 2   # about half an hour on 2 cores: writes docs/density.md
-    python -m bench.density --seeds 0 1 --jobs 2 --local-linear-windows --out docs/density_windows.md
-                                                   # the same from WINDOWS_START: the local-linear term on
-                                                   # cross-shaped and 2x2 windows (a 13-point system)
+    python -m bench.density --seeds 0 1 --jobs 2 --local-linear-windows
+        # about 15 minutes on 2 cores: writes docs/density.md, the descent from WINDOWS_START (the local-linear
+        # term on cross-shaped and 2x2 windows, a 13-point system) that gave sd.DEFAULT_SCHEDULE
+    python -m bench.density --seeds 0 1 --jobs 2 --out /tmp/density_3x3.md
+        # the same descent from sd.DEFAULT_WEIGHTS (the term on 3x3 windows, a 25-point system)
     python -m bench.density --quick                # a smoke run on the tiny quick frames
 
 May import :mod:`sparsedepth`, numpy, :mod:`bench.frames`, :mod:`bench.harness` and :mod:`bench.accuracy`.
@@ -76,6 +77,13 @@ WINDOWS_START = sd.DEFAULT_WEIGHTS.replace(beta_local_linear=0.0,
                                            beta_local_linear_2x2=sd.DEFAULT_WEIGHTS.beta_local_linear)
 #: ... and descends these fields (the 3x3 weight stays 0: a 13-point system instead of 25).
 WINDOWS_FIELDS = tuple(name for name in DENSITY_FIELDS if name != "beta_local_linear") + OPTIONAL_DENSITY_FIELDS
+
+
+def starting_point(args) -> tuple[sd.Weights, tuple, str]:
+    """``(weights, fields, name)``: where the descent starts, what it changes, and how the report names the start."""
+    if args.local_linear_windows:
+        return WINDOWS_START, WINDOWS_FIELDS, "`sd.DEFAULT_WEIGHTS` on cross and 2x2 windows"
+    return sd.DEFAULT_WEIGHTS, DENSITY_FIELDS, "`sd.DEFAULT_WEIGHTS`"
 
 
 class Sample:
@@ -238,8 +246,7 @@ def main(argv=None) -> int:
     if args.quick:
         held_out = []
     balanced = not args.unbalanced
-    start_weights, fields = (WINDOWS_START, WINDOWS_FIELDS) if args.local_linear_windows else (sd.DEFAULT_WEIGHTS,
-                                                                                               DENSITY_FIELDS)
+    start_weights, fields, _ = starting_point(args)
     common = (args.rounds, args.span, balanced, start_weights, fields)
     jobs = [("all", tune, *common)] + [(d, [s for s in tune if dataset_of(s.frame.name) != d], *common)
                                        for d in held_out]
@@ -269,9 +276,7 @@ def _schedule_differences(tuned: sd.DensitySchedule, library: sd.DensitySchedule
 def report_text(args, tune_frames, report_frames, report, tuned, start) -> str:
     schedule, trace, low_trace = tuned["all"]
     scorer = Scorer()
-    start_weights = WINDOWS_START if args.local_linear_windows else sd.DEFAULT_WEIGHTS
-    start_name = ("`sd.DEFAULT_WEIGHTS` on cross and 2x2 windows" if args.local_linear_windows
-                  else "`sd.DEFAULT_WEIGHTS`")
+    start_weights, _, start_name = starting_point(args)
     constant = sd.DensitySchedule.from_weights(((ANCHORS[0], start_weights),))
     without_low = sd.DensitySchedule(schedule.anchors[1:], schedule.base)
     library = sd.DEFAULT_SCHEDULE
