@@ -414,6 +414,7 @@ def _with_uncertainty(result, image, sparse_depth, mask, settings, max_uncertain
 
     The halves start from ``result.depth``: a start near their answer saves iterations, and every solver
     stops on its own criterion for the half's objective, so the start does not decide where they end.
+    No unobserved pixel's uncertainty is below the precision of the solve (:func:`_solve_precision`).
     """
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     if np.count_nonzero(observed) < MIN_OBSERVED:
@@ -424,7 +425,8 @@ def _with_uncertainty(result, image, sparse_depth, mask, settings, max_uncertain
         warnings.simplefilter("ignore", ClampWarning)  # the halves' clamps are not the user's result
         halves = [_complete(image, np.where(half, depth, np.nan), half, x0=result.depth, callback=None,
                             **settings).depth for half in (half_a, half_b)]
-    sigma, calibration = estimate_uncertainty(result.depth, *halves, depth, half_a, half_b, image=image)
+    sigma, calibration = estimate_uncertainty(result.depth, *halves, depth, half_a, half_b, image=image,
+                                              precision=_solve_precision(settings["options"], depth[observed]))
     dense, removed = result.depth, 0
     if max_uncertainty is not None:
         too_uncertain = sigma > max_uncertainty
@@ -432,6 +434,18 @@ def _with_uncertainty(result, image, sparse_depth, mask, settings, max_uncertain
         dense = np.where(too_uncertain, np.nan, dense)
     return dataclasses.replace(result, depth=dense, uncertainty=sigma, uncertainty_calibration=calibration,
                                removed=removed)
+
+
+def _solve_precision(options, observed_depth) -> float:
+    """The RMS depth precision a solve stops at: its ``depth_atol`` or ``depth_rtol`` times the depth scale (the larger).
+
+    Solves without a depth rule (other solvers, an explicit ``tol``) are taken at the default's
+    :data:`~sparsedepth.solvers.quadratic.DEFAULT_DEPTH_RTOL`.
+    """
+    rtol, atol = options.get("depth_rtol"), options.get("depth_atol")
+    if rtol is None and atol is None:
+        rtol = DEFAULT_DEPTH_RTOL
+    return max(0.0 if rtol is None else rtol * depth_scale(observed_depth), 0.0 if atol is None else atol)
 
 
 def _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed):

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, spatial
 
-from ._validation import as_float_image
+from ._validation import as_float_image, check_nonnegative_real
 from .result import UncertaintyCalibration
 
 __all__ = ["MIN_OBSERVED", "TARGET_COVERAGE", "NOVELTY_WEIGHT", "NOVELTY_NEIGHBOURS", "split_samples", "error_cues", "colour_novelty",
@@ -27,9 +27,9 @@ __all__ = ["MIN_OBSERVED", "TARGET_COVERAGE", "NOVELTY_WEIGHT", "NOVELTY_NEIGHBO
 MIN_OBSERVED = 16
 
 #: Coverage the calibration aims at on the held-out samples: |error| <= 1 sigma and <= 2 sigma.  Wider apart
-#: than a Gaussian's 0.68 and 0.95 because the map of the full completion covers more at 1 sigma and less at
-#: 2 sigma than the held-out fit (the extrapolation term, the mapping of the full cue); chosen on the tuning frames.
-TARGET_COVERAGE = (0.62, 0.96)
+#: than a Gaussian's 0.68 and 0.95 because the map of the full completion covers more at 1 sigma than the
+#: held-out fit (the extrapolation term, the mapping of the full cue); chosen on the tuning frames.
+TARGET_COVERAGE = (0.62, 0.95)
 #: How far each coverage may stray from its target before the other is preferred (the loss weights).
 _COVERAGE_TOLERANCE = (0.08, 0.04)
 #: A calibration loss this small is good enough to prefer a smaller offset (see :func:`fit_calibration`).
@@ -206,7 +206,7 @@ def colour_novelty(depth, image, observed, *, neighbours=NOVELTY_NEIGHBOURS):
     return NOVELTY_WEIGHT * depth * novelty.reshape(observed.shape)
 
 
-def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=None):
+def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=None, *, precision=0.0):
     """Per-pixel uncertainty of ``depth`` from two completions of disjoint halves of its samples.
 
     Parameters
@@ -221,6 +221,9 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=
         Disjoint halves of the observed pixels (:func:`split_samples`).
     image : ndarray, (H, W, 3) or (H, W), optional
         The guide image; adds :func:`colour_novelty` to the cue.
+    precision : float, default 0
+        The precision to which ``depth`` was computed (depth units, ``>= 0``):
+        the least ``sigma`` of an unobserved pixel.
 
     Returns
     -------
@@ -263,7 +266,12 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=
     steep slope of this scene would make where nothing was seen.  This term
     is a prior, not calibrated; :func:`sparsedepth.complete_depth`'s
     ``max_uncertainty`` uses it to leave such regions missing.
+
+    *Floor.*  Where every cue vanishes (a plane the samples fit exactly, with
+    no fitted offset) the line gives ``sigma`` near 0, below the error the
+    solver leaves; ``sigma`` is at least ``precision`` there.
     """
+    precision = check_nonnegative_real(precision, name="precision")
     observed = half_a | half_b
     unobserved = ~observed
     held_out_a = np.abs(depth_a - sparse)[half_b]  # half a's errors where half b observed
@@ -288,8 +296,8 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=
 
     sigma = np.abs(depth - np.where(observed, sparse, depth))
     if unobserved.any():
-        sigma[unobserved] = (slope * _quantile_map(cue, cue_full, unobserved) + offset
-                             + _extrapolation_term(depth, observed, layout))[unobserved]
+        sigma[unobserved] = np.maximum(slope * _quantile_map(cue, cue_full, unobserved) + offset
+                                       + _extrapolation_term(depth, observed, layout), precision)[unobserved]
     return sigma, calibration
 
 

@@ -192,6 +192,38 @@ def test_estimate_uncertainty_orders_pixels_by_the_cue_and_is_the_residual_at_ob
     assert cal.coverage_1sigma == pytest.approx(np.mean(held <= cal.slope * held_cue + cal.offset))
 
 
+def test_precision_is_the_least_sigma_of_an_unobserved_pixel():
+    image, truth, sparse, mask = _scene()
+    a, b = split_samples(mask, seed=0)
+    full = sd.complete_depth(image, sparse, mask).depth
+    za = sd.complete_depth(image, np.where(a, sparse, np.nan), a).depth
+    zb = sd.complete_depth(image, np.where(b, sparse, np.nan), b).depth
+    plain, cal = estimate_uncertainty(full, za, zb, sparse, a, b, image=image)
+    precision = float(np.median(plain[~mask]))
+    floored, cal_floored = estimate_uncertainty(full, za, zb, sparse, a, b, image=image, precision=precision)
+    np.testing.assert_array_equal(floored[mask], plain[mask])
+    np.testing.assert_array_equal(floored[~mask], np.maximum(plain[~mask], precision))
+    assert cal_floored == cal
+    with pytest.raises(ValueError, match="precision"):
+        estimate_uncertainty(full, za, zb, sparse, a, b, precision=-1.0)
+
+
+@pytest.mark.parametrize("flat, options, least", [
+    (True, None, lambda scale: 3e-4 * scale),             # the default solve's depth_rtol times the depth scale
+    (False, {"depth_atol": 0.05}, lambda scale: 0.05),    # the user's own depth tolerance
+])
+def test_complete_depth_floors_sigma_at_the_solve_precision(flat, options, least):
+    image, truth, sparse, mask = _scene()
+    if flat:  # every completion fits the samples exactly: the cues and the fitted line are all but 0
+        sparse = np.where(mask, 3.0, np.nan)
+    result = sd.complete_depth(image, sparse, mask, uncertainty=True, options=options)
+    sigma = result.uncertainty[~mask]
+    scale = 2.0 ** np.round(np.log2(np.median(sparse[mask])))
+    assert sigma.min() >= least(scale) * (1 - 1e-12)
+    if flat:
+        assert np.median(sigma) == pytest.approx(least(scale), rel=1e-9)
+
+
 def test_complete_depth_uncertainty_keeps_the_depth_and_fills_the_fields():
     image, truth, sparse, mask = _scene()
     plain = sd.complete_depth(image, sparse, mask)
