@@ -37,6 +37,8 @@ import numpy as np
 from scipy import ndimage
 
 import sparsedepth as sd
+from sparsedepth import uncertainty as unc
+from sparsedepth.solvers.quadratic import DEFAULT_DEPTH_RTOL
 
 from . import harness as H
 
@@ -160,7 +162,9 @@ def run(argv=None):
     section = H.section("Measured on the report frames", command=H.command_line("uncertainty", argv or []),
                         frames_=frames, seeds=seeds, body=body, notes=notes, elapsed=time.perf_counter() - t0)
     text = Template(TEMPLATE.read_text()).substitute(
-        section=section, cover1=f"{_mean(records, lambda r: r['cover1']):.0%}",
+        section=section, target1=f"{unc.TARGET_COVERAGE[0]:.0%}", target2=f"{unc.TARGET_COVERAGE[1]:.0%}",
+        neighbours=unc.NOVELTY_NEIGHBOURS, novelty=f"{unc.NOVELTY_WEIGHT:.0%}", precision=f"{DEFAULT_DEPTH_RTOL:.0e}".replace("e-0", "e-"),
+        cover1=f"{_mean(records, lambda r: r['cover1']):.0%}",
         cover2=f"{_mean(records, lambda r: r['cover2']):.0%}", cost=f"{_mean(records, lambda r: r['cost']):.1f}")
     return text, records
 
