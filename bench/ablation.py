@@ -19,8 +19,9 @@ solved with ``solver="auto"``:
 * extension terms: the paper's objective plus each weight of
   ``Weights`` beyond α, β, γ, δ, κ (``beta_image`` image-weighted L2,
   ``beta_second`` second-order, ``beta_second_image`` image-weighted
-  second-order), one at a time, at its default weight if > 0, else at the
-  paper's β, and each modelling option the defaults use (``edge_sigma``
+  second-order, the local-linear terms), one at a time, at its default
+  weight if > 0, else at the density schedule's weight at 5 % (with the
+  schedule's ``local_linear_eps``) if > 0, else at the paper's β, and each modelling option the defaults use (``edge_sigma``
   blurred edge weights, ``fill_contrast`` the image-aware prior fill,
   ``depth_jump``) at its default; the image-weighted L2 *instead of* the
   plain L2; and the tuned defaults.
@@ -37,7 +38,8 @@ import sys
 import time
 
 import sparsedepth as sd
-from sparsedepth.objective.weights import EDGE_PENALTY_FIELDS, MODEL_FIELDS
+from sparsedepth.objective.weights import (DEFAULT_SCHEDULE, EDGE_PENALTY_FIELDS, LOCAL_LINEAR_FIELDS, MODEL_FIELDS,
+                                           resolve_weights)
 
 from . import harness as H
 
@@ -47,9 +49,11 @@ PAPER_FIELDS = ("alpha", "beta", "gamma", "delta", "kappa")
 EXT_LABELS = {"beta_image": "image-weighted L2", "beta_second": "second-order",
               "beta_second_image": "image-weighted second-order", "edge_sigma": "edge weights of a blurred image",
               "fill_contrast": "image-aware (geodesic) prior fill", "depth_jump": "depth-aware re-solve",
-              "beta_local_linear": "windowed local-linear (matting Laplacian)"}
-#: Fields that only shape another term (not a row of their own): the row of that term carries the default's value.
-PARAMETER_OF = {"local_linear_eps": "beta_local_linear"}
+              "beta_local_linear": "windowed local-linear (matting Laplacian)",
+              "beta_local_linear_cross": "local-linear on cross-shaped windows",
+              "beta_local_linear_2x2": "local-linear on 2x2 windows"}
+#: Fields that only shape other terms (not a row of their own): the rows of those terms carry the default's value.
+PARAMETER_OF = {"local_linear_eps": LOCAL_LINEAR_FIELDS}
 
 
 def variants(D=None, P=None):
@@ -76,9 +80,11 @@ def variants(D=None, P=None):
         ("L2 + edge (α, β, γ)", P.replace(delta=0.0)),
         ("full objective of the paper (α, β, γ, δ)", P),
     ]
+    scheduled = resolve_weights(DEFAULT_SCHEDULE, FRACTION)
     for k in ext:
-        value = getattr(D, k) if getattr(D, k) > 0 else P.beta
-        shape = {name: getattr(D, name) for name, term in PARAMETER_OF.items() if term == k}
+        source = D if getattr(D, k) > 0 or getattr(scheduled, k) == 0 else scheduled
+        value = getattr(source, k) if getattr(source, k) > 0 else P.beta
+        shape = {name: getattr(source, name) for name, terms in PARAMETER_OF.items() if k in terms}
         label = ", ".join(f"{name} = {v:g}" for name, v in {k: value, **shape}.items())
         out.append((f"paper + {EXT_LABELS.get(k, k)} ({label})", P.replace(**{k: value}, **shape)))
         if k == "beta_image":

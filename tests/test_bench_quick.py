@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import sparsedepth as sd
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -80,6 +82,21 @@ def test_ablation_quick_variants_and_data_only_equals_nearest():
         a = H.evaluate(H.ours("data", weights=w), frame, fraction=0.05, seed=0).metrics.rmse
         b = H.evaluate(H.NEAREST, frame, fraction=0.05, seed=0).metrics.rmse
         assert a == pytest.approx(b, rel=1e-6)
+
+
+def test_ablation_rows_of_the_local_linear_windows_carry_a_ridge():
+    """Each window term is ablated at a used weight with the eps that goes with it (the constant defaults leave
+    the cross and 2x2 terms at 0: their rows take the density schedule's weight and eps at the ablation's 5 %)."""
+    ablation = load("ablation")
+    from sparsedepth.objective.weights import DEFAULT_SCHEDULE, LOCAL_LINEAR_FIELDS, resolve_weights
+    scheduled = resolve_weights(DEFAULT_SCHEDULE, ablation.FRACTION)
+    rows = dict(ablation.variants())
+    for field in LOCAL_LINEAR_FIELDS:
+        (label, w), = [(lbl, w) for lbl, w in rows.items() if lbl.startswith("paper + ") and getattr(w, field) > 0]
+        source = sd.DEFAULT_WEIGHTS if getattr(sd.DEFAULT_WEIGHTS, field) > 0 else scheduled
+        assert getattr(w, field) == getattr(source, field) > 0
+        assert w.local_linear_eps == source.local_linear_eps > 0
+        assert f"local_linear_eps = {source.local_linear_eps:g}" in label
 
 
 def test_solvers_quick_gaps_and_plots(tmp_path):
