@@ -154,12 +154,19 @@ def test_fit_calibration_recovers_a_gaussian_scale():
     np.testing.assert_allclose(slope * probe + offset, 0.3 * probe, rtol=0.15)
 
 
-def test_estimate_uncertainty_orders_pixels_by_the_cue_and_is_the_residual_at_observations():
-    image, truth, sparse, mask = _scene()
+def _three_completions():
+    """``_scene()``'s image, samples and mask, a seeded split of the samples into halves, and the completions
+    from all samples and from each half."""
+    image, _, sparse, mask = _scene()
     a, b = split_samples(mask, seed=0)
     full = sd.complete_depth(image, sparse, mask).depth
     za = sd.complete_depth(image, np.where(a, sparse, np.nan), a).depth
     zb = sd.complete_depth(image, np.where(b, sparse, np.nan), b).depth
+    return image, sparse, mask, a, b, full, za, zb
+
+
+def test_estimate_uncertainty_orders_pixels_by_the_cue_and_is_the_residual_at_observations():
+    image, sparse, mask, a, b, full, za, zb = _three_completions()
     sigma, cal = estimate_uncertainty(full, za, zb, sparse, a, b, image=image)
     np.testing.assert_allclose(sigma[mask], np.abs(full - sparse)[mask])
     held = np.zeros(mask.shape)
@@ -193,11 +200,7 @@ def test_estimate_uncertainty_orders_pixels_by_the_cue_and_is_the_residual_at_ob
 
 
 def test_precision_is_the_least_sigma_of_an_unobserved_pixel():
-    image, truth, sparse, mask = _scene()
-    a, b = split_samples(mask, seed=0)
-    full = sd.complete_depth(image, sparse, mask).depth
-    za = sd.complete_depth(image, np.where(a, sparse, np.nan), a).depth
-    zb = sd.complete_depth(image, np.where(b, sparse, np.nan), b).depth
+    image, sparse, mask, a, b, full, za, zb = _three_completions()
     plain, cal = estimate_uncertainty(full, za, zb, sparse, a, b, image=image)
     precision = float(np.median(plain[~mask]))
     floored, cal_floored = estimate_uncertainty(full, za, zb, sparse, a, b, image=image, precision=precision)
