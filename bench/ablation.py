@@ -21,9 +21,10 @@ solved with ``solver="auto"``:
   ``beta_second`` second-order, ``beta_second_image`` image-weighted
   second-order, the local-linear terms), one at a time, at its default
   weight if > 0, else at the density schedule's weight at 5 % (with the
-  schedule's ``local_linear_eps``) if > 0, else at the paper's β, and each modelling option the defaults use (``edge_sigma``
-  blurred edge weights, ``fill_contrast`` the image-aware prior fill,
-  ``depth_jump``) at its default; the image-weighted L2 *instead of* the
+  schedule's ``local_linear_eps``) if > 0, else at the paper's β, and
+  each modelling option the defaults use (``edge_sigma`` blurred edge
+  weights, ``fill_contrast`` the image-aware prior fill, ``depth_jump``)
+  at its default; the image-weighted L2 *instead of* the
   plain L2; and the tuned defaults.
 
 Variants equal to an earlier one (e.g. when a default weight is 0) are

@@ -163,7 +163,8 @@ def run(argv=None):
                         frames_=frames, seeds=seeds, body=body, notes=notes, elapsed=time.perf_counter() - t0)
     text = Template(TEMPLATE.read_text()).substitute(
         section=section, target1=f"{unc.TARGET_COVERAGE[0]:.0%}", target2=f"{unc.TARGET_COVERAGE[1]:.0%}",
-        neighbours=unc.NOVELTY_NEIGHBOURS, novelty=f"{unc.NOVELTY_WEIGHT:.0%}", precision=f"{DEFAULT_DEPTH_RTOL:.0e}".replace("e-0", "e-"),
+        neighbours=unc.NOVELTY_NEIGHBOURS, novelty=f"{unc.NOVELTY_WEIGHT:.0%}",
+        precision=f"{DEFAULT_DEPTH_RTOL:.0e}".replace("e-0", "e-"),
         cover1=f"{_mean(records, lambda r: r['cover1']):.0%}",
         cover2=f"{_mean(records, lambda r: r['cover2']):.0%}", cost=f"{_mean(records, lambda r: r['cost']):.1f}")
     return text, records

@@ -437,7 +437,7 @@ def _with_uncertainty(result, image, sparse_depth, mask, settings, max_uncertain
 
 
 def _solve_precision(options, observed_depth) -> float:
-    """The RMS depth precision a solve stops at: its ``depth_atol`` or ``depth_rtol`` times the depth scale (the larger).
+    """The RMS depth precision a solve stops at: the larger of ``depth_atol`` and ``depth_rtol`` × the depth scale.
 
     Solves without a depth rule (other solvers, an explicit ``tol``) are taken at the default's
     :data:`~sparsedepth.solvers.quadratic.DEFAULT_DEPTH_RTOL`.

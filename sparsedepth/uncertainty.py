@@ -26,9 +26,9 @@ __all__ = ["MIN_OBSERVED", "TARGET_COVERAGE", "NOVELTY_WEIGHT", "NOVELTY_NEIGHBO
 #: Fewest observed pixels for which the uncertainty is estimated (each half keeps at least 8).
 MIN_OBSERVED = 16
 
-#: Coverage the calibration aims at on the held-out samples: |error| <= 1 sigma and <= 2 sigma.  Wider apart
-#: than a Gaussian's 0.68 and 0.95 because the map of the full completion covers more at 1 sigma than the
-#: held-out fit (the extrapolation term, the mapping of the full cue); chosen on the tuning frames.
+#: Coverage the calibration aims at on the held-out samples: |error| <= 1 sigma and <= 2 sigma.  Below a
+#: Gaussian's 0.68 at 1 sigma because the map of the full completion covers more at 1 sigma than the held-out
+#: fit (the extrapolation term, the mapping of the full cue); chosen on the tuning frames.
 TARGET_COVERAGE = (0.62, 0.95)
 #: How far each coverage may stray from its target before the other is preferred (the loss weights).
 _COVERAGE_TOLERANCE = (0.08, 0.04)
@@ -138,9 +138,8 @@ def fit_calibration(errors, cue):
     Notes
     -----
     With ``c1`` and ``c2`` the fractions of ``|errors| <= sigma`` and
-    ``<= 2 sigma``, the loss is ``max(|c1 - 0.62| / 0.08, |c2 - 0.96| /
-    0.04)`` (:data:`TARGET_COVERAGE`).  For each
-    offset on a grid (0 and quantiles of ``|errors|``) the slope minimising
+    ``<= 2 sigma`` and ``(t1, t2)`` = :data:`TARGET_COVERAGE`, the loss is
+    ``max(|c1 - t1| / 0.08, |c2 - t2| / 0.04)``.  For each offset on a grid (0 and quantiles of ``|errors|``) the slope minimising
     the loss is found on a grid; the smallest offset whose loss is at most
     1/2 wins (the plain scale ``sigma = slope * cue`` when it covers well),
     else the pair of least loss.  The errors are heavy-tailed: the scale
