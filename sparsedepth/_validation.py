@@ -11,7 +11,8 @@ concept is refused with the same exception and message everywhere:
   ``TypeError``, a number out of range a ``ValueError``;
 - grid shapes: :func:`check_grid_shape`, :func:`check_same_shape`;
 - images, depth and masks: :func:`as_float_image`, :func:`as_depth_and_mask`,
-  :func:`check_bool_mask`;
+  :func:`check_observed_depth` (every pixel a mask marks as observed holds a
+  finite depth ``> 0``), :func:`check_bool_mask`;
 - sparse operators on a grid: :func:`as_grid_operator`;
 - paths and frame indices: :func:`check_input_file` (a regular file, checked
   with :func:`os.stat` only), :func:`check_folder`, :func:`check_index`, and
@@ -50,6 +51,7 @@ __all__ = [
     "check_same_shape",
     "as_float_image",
     "as_depth_and_mask",
+    "check_observed_depth",
     "check_bool_mask",
     "as_grid_operator",
     "argument_label",
@@ -195,8 +197,18 @@ def as_float_image(image, *, name: str = "image", dtype=np.float64) -> np.ndarra
 def as_depth_and_mask(sparse_depth, mask=None, *, name: str = "sparse_depth"):
     """Return ``(depth, mask)``: float64 ``(H, W)`` depth with 0 where unobserved, bool mask.
 
-    Without ``mask``, observed means finite and ``> 0`` (0 and NaN mean "no
-    measurement").  With ``mask``, every masked value must be finite and ``>= 0``.
+    Observed depth is finite and ``> 0``: 0 and NaN mean "no measurement".
+    Without ``mask``, the observed pixels are those; a negative value is an
+    error.  With ``mask`` (True where depth is observed), every pixel it
+    marks must hold such a depth: a 0, a negative, a NaN or an infinite value
+    there is an error (:func:`check_observed_depth`).
+
+    Raises
+    ------
+    ValueError
+        For a depth that is not a numeric 2-D array, a mask of another shape
+        or not boolean (or 0/1), a negative depth without mask, a masked pixel
+        without a depth, or no observed pixel.
     """
     depth = np.asarray(sparse_depth)
     if depth.ndim != 2:
@@ -222,18 +234,45 @@ def as_depth_and_mask(sparse_depth, mask=None, *, name: str = "sparse_depth"):
             observed = observed.astype(bool)
         else:
             observed = observed.copy()
-        values = depth[observed]
-        if not np.all(np.isfinite(values)):
-            raise ValueError(f"{name} has NaN or infinite values at {int(np.sum(~np.isfinite(values)))} observed (masked) pixels")
+        check_observed_depth(depth[observed], name=name)
     if not observed.any():
         raise ValueError(f"{name} has no observed pixel (no finite value > 0 or nothing in mask); nothing to complete from")
-    obs_values = depth[observed]
-    if np.any(obs_values < 0):
-        raise ValueError(
-            f"{name} has {int(np.sum(obs_values < 0))} negative observed values (min {obs_values.min():g}); depth must be >= 0"
-        )
     depth[~observed] = 0.0
     return depth, observed
+
+
+def check_observed_depth(values, *, name: str = "sparse_depth", mask_name: str = "mask") -> None:
+    """``ValueError`` unless every depth in ``values`` (those ``mask_name`` marks as observed) is finite and ``> 0``.
+
+    The message counts the zeros, negatives and NaN/infinite values among
+    them.  When they are most of the marked pixels, the mask is most likely
+    flipped: scikit-image's inpainting masks (``skimage.restoration``) are
+    True where depth is *missing*; the message says so and gives the fix
+    (``~mask``).
+    """
+    values = np.asarray(values, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        zero, negative, nonfinite = values == 0, values < 0, ~np.isfinite(values)
+    bad = int(np.count_nonzero(zero | negative | nonfinite))
+    if not bad:
+        return
+    kinds = []
+    if zero.any():
+        kinds.append(f"0 at {int(np.count_nonzero(zero)):,}")
+    if negative.any():
+        count = int(np.count_nonzero(negative))
+        kinds.append(f"{count:,} negative observed value{'s' if count > 1 else ''} (min {values[negative].min():g})")
+    if nonfinite.any():
+        count = int(np.count_nonzero(nonfinite))
+        kinds.append(f"NaN or infinite values at {count:,} observed pixel{'s' if count > 1 else ''}")
+    if 2 * bad > values.size:
+        fix = (f"{mask_name} must be True where depth is observed (scikit-image's inpainting masks mean the "
+               f"opposite: pass ~{mask_name})")
+    else:
+        fix = (f"depth must be finite and > 0 where {mask_name} is True: leave those pixels out of {mask_name}, or "
+               f"mark missing depth with 0 or NaN and pass no {mask_name}")
+    raise ValueError(f"{name} has no depth at {bad:,} of the {values.size:,} pixels {mask_name} marks as observed "
+                     f"({'; '.join(kinds)}): {fix}")
 
 
 def check_bool_mask(mask, shape, *, name: str = "mask", shape_name: str = "depth") -> np.ndarray:

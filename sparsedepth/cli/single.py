@@ -303,12 +303,36 @@ def _writers(args, planned, outcome, image, report, png_scale, intrinsics=None) 
     return items
 
 
+def _check_mask_observes_depth(args, valid, mask) -> None:
+    """UsageError naming --mask when it marks as observed pixels where --depth has no valid value.
+
+    Without --keep-fraction/--keep-count, --mask says which pixels are observed, so each of them must hold depth
+    (the rule of :func:`~sparsedepth._validation.as_depth_and_mask`); with them, it is the region sampled from.
+    """
+    if args.keep_fraction is not None or args.keep_count is not None:
+        return
+    marked = int(np.count_nonzero(mask))
+    missing = int(np.count_nonzero(mask & ~valid))
+    if not missing:
+        return
+    if 2 * missing > marked:
+        fix = ("--mask must be non-zero where depth is observed; an inpainting mask (non-zero where to fill) means "
+               "the opposite: invert it")
+    else:
+        fix = "--mask must mark only pixels with depth: leave those out of it"
+    raise UsageError(f"--mask '{args.mask}': --depth '{args.depth}' has no valid value (0, NaN, inf or excluded by "
+                     f"--invalid-value/--min-depth/--max-depth) at {missing:,} of the {marked:,} pixels it marks as "
+                     f"observed; {fix}")
+
+
 def _check_observable(args, mode, depth, mask) -> None:
-    """UsageError naming the flags when the (downsampled, masked) depth has no valid pixel or fewer than --keep-count."""
+    """UsageError naming the flags when the (downsampled, masked) depth has no valid pixel or fewer than --keep-count,
+    or when --mask marks pixels without depth as observed."""
     if depth.ndim != 2 or depth.dtype.kind not in "uif":
         return  # the library names what is wrong with such a depth
     valid = valid_depth_mask(depth)
     if mask is not None and mask.shape == depth.shape:
+        _check_mask_observes_depth(args, valid, mask)
         valid &= mask
     count = int(valid.sum())
     source = "the demo's depth" if mode == "demo" else f"--depth '{args.depth}'"
