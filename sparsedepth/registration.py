@@ -27,7 +27,7 @@ from ._validation import (
 from .grid.geodesic import geodesic_fill
 
 __all__ = ["ImageShift", "shift_image", "estimate_image_shift", "pool_image_shifts", "check_shift",
-           "check_image_shift"]
+           "check_image_shift", "check_shift_fits"]
 
 
 def check_shift(shift, *, name: str = "shift") -> tuple[int, int]:
@@ -56,6 +56,23 @@ def check_image_shift(value, *, name: str = "image_shift"):
     return check_shift(value, name=name)
 
 
+def check_shift_fits(shift, shape, *, name: str = "shift") -> tuple[int, int]:
+    """``shift`` as ``(dy, dx)`` ints that keep part of an image of ``shape`` in its frame.
+
+    ``TypeError`` unless ``shift`` is a pair of integers; ``ValueError``
+    naming ``name``, the shift and the frame size unless ``|dy| < H`` and
+    ``|dx| < W`` (a larger shift moves the whole image out of its frame:
+    every pixel would repeat one border row or column).  Python integers of
+    any size are compared exactly (no overflow).
+    """
+    dy, dx = check_shift(shift, name=name)
+    H, W = (int(n) for n in tuple(shape)[:2])
+    if abs(dy) >= H or abs(dx) >= W:
+        raise ValueError(f"{name} ({dy}, {dx}) moves the image out of its {H}x{W} (H x W) frame: give "
+                         f"|dy| < {H} and |dx| < {W} (a registration shift is a few pixels, e.g. (0, -2))")
+    return dy, dx
+
+
 def shift_image(image, shift) -> np.ndarray:
     """The image moved by ``shift = (dy, dx)`` pixels, its border rows and columns repeated into the gap.
 
@@ -65,7 +82,7 @@ def shift_image(image, shift) -> np.ndarray:
         Any dtype; the result keeps it.
     shift : pair of int
         ``(dy, dx)``: the content moves ``dy`` rows down and ``dx`` columns
-        right (negative: up, left).
+        right (negative: up, left); ``|dy| < H`` and ``|dx| < W``.
 
     Returns
     -------
@@ -77,7 +94,8 @@ def shift_image(image, shift) -> np.ndarray:
     TypeError
         If ``shift`` is not a pair of integers.
     ValueError
-        If ``image`` is not 2-D or 3-D.
+        If ``image`` is not 2-D or 3-D, or ``shift`` moves it out of its
+        frame (``|dy| >= H`` or ``|dx| >= W``).
 
     Examples
     --------
@@ -85,10 +103,16 @@ def shift_image(image, shift) -> np.ndarray:
     >>> shift_image(np.array([[1, 2, 3]]), (0, 1))
     array([[1, 1, 2]])
     """
-    dy, dx = check_shift(shift)
+    check_shift(shift)
     image = np.asarray(image)
     if image.ndim not in (2, 3):
         raise ValueError(f"image must be (H, W) or (H, W, C), got shape {image.shape}")
+    H, W = image.shape[:2]
+    return _moved(image, *check_shift_fits(shift, (H, W)))
+
+
+def _moved(image, dy: int, dx: int) -> np.ndarray:
+    """:func:`shift_image` without its checks (any ``dy``, ``dx`` that fit a C long)."""
     H, W = image.shape[:2]
     rows = np.clip(np.arange(H) - dy, 0, H - 1)
     cols = np.clip(np.arange(W) - dx, 0, W - 1)
@@ -223,7 +247,7 @@ def estimate_image_shift(image, sparse_depth, mask=None, *, max_shift: int = 2, 
     errors = np.empty((size, size))
     for i in range(size):
         for j in range(size):
-            moved = shift_image(img, (i - max_shift, j - max_shift))
+            moved = _moved(img, i - max_shift, j - max_shift)
             total = 0.0
             for held, kept in zip(held_out, kept_masks):
                 fill = geodesic_fill(moved, depth, kept, contrast=fill_contrast)
