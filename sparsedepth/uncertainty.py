@@ -20,8 +20,8 @@ from scipy import ndimage, spatial
 from ._validation import as_float_image, check_nonnegative_real
 from .result import UncertaintyCalibration
 
-__all__ = ["MIN_OBSERVED", "TARGET_COVERAGE", "NOVELTY_WEIGHT", "NOVELTY_NEIGHBOURS", "split_samples", "error_cues", "colour_novelty",
-           "fit_calibration", "estimate_uncertainty"]
+__all__ = ["MIN_OBSERVED", "MIN_SHAPE", "TARGET_COVERAGE", "NOVELTY_WEIGHT", "NOVELTY_NEIGHBOURS", "split_samples",
+           "error_cues", "colour_novelty", "fit_calibration", "estimate_uncertainty", "check_uncertainty_shape"]
 
 #: Fewest observed pixels for which the uncertainty is estimated (each half keeps at least 8).
 MIN_OBSERVED = 16
@@ -39,6 +39,24 @@ _GOOD_LOSS = 0.5
 NOVELTY_WEIGHT = 0.8
 NOVELTY_NEIGHBOURS = 8
 _NOVELTY_CHUNK = 1 << 16
+
+
+#: Smallest frame (rows, columns) with an uncertainty map: its cues take the depth gradient along both axes.
+MIN_SHAPE = (2, 2)
+
+
+def check_uncertainty_shape(shape, *, name: str = "uncertainty") -> None:
+    """``ValueError`` unless a frame of ``shape`` ``(H, W, ...)`` has at least :data:`MIN_SHAPE` pixels.
+
+    ``name`` labels the option in the message (``"uncertainty"`` for
+    :func:`sparsedepth.complete_depth`, ``"--uncertainty"`` on the command
+    line).  Call it before any solve: the map needs the gradient of the
+    completed depth along both axes, which a 1 x N or N x 1 frame lacks.
+    """
+    H, W = (int(n) for n in tuple(shape)[:2])
+    if H < MIN_SHAPE[0] or W < MIN_SHAPE[1]:
+        raise ValueError(f"{name} needs a frame of at least {MIN_SHAPE[0]}x{MIN_SHAPE[1]} pixels (the map uses the "
+                         f"depth gradient along both axes); this frame is {H}x{W} (H x W)")
 
 
 def split_samples(observed, seed=0):
@@ -231,6 +249,12 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=
         at an observed pixel, ``|depth - observation|``.
     calibration : UncertaintyCalibration
 
+    Raises
+    ------
+    ValueError
+        If the frame is smaller than :data:`MIN_SHAPE` (see
+        :func:`check_uncertainty_shape`) or ``precision`` is negative.
+
     Notes
     -----
     The cue ranks the unobserved pixels by expected error; the calibration
@@ -271,6 +295,7 @@ def estimate_uncertainty(depth, depth_a, depth_b, sparse, half_a, half_b, image=
     solver leaves; ``sigma`` is at least ``precision`` there.
     """
     precision = check_nonnegative_real(precision, name="precision")
+    check_uncertainty_shape(np.shape(depth))
     observed = half_a | half_b
     unobserved = ~observed
     held_out_a = np.abs(depth_a - sparse)[half_b]  # half a's errors where half b observed
