@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from .._validation import check_input_file, check_intrinsics
+from .._validation import argument_label, check_input_file, check_intrinsics
 from .files import atomic_target, check_extension, file_label, read_bytes
 from .stored import check_real_array
 
@@ -61,7 +61,10 @@ def _as_colors(image, shape: tuple[int, int]) -> np.ndarray:
     return array.astype(np.uint8)
 
 
-def depth_to_points(depth, intrinsics, *, image=None) -> tuple[np.ndarray, np.ndarray | None]:
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def depth_to_points(depth, intrinsics, *, image=None, name: str = "intrinsics") -> tuple[np.ndarray, np.ndarray | None]:
     """Back-project a depth map to 3-D points in the camera frame (pinhole model).
 
     Parameters
@@ -76,6 +79,9 @@ def depth_to_points(depth, intrinsics, *, image=None) -> tuple[np.ndarray, np.nd
         The image registered with ``depth``.  uint8 as is, uint16 divided by
         257, float in [0, 1] times 255; grey is repeated in the three
         channels, alpha dropped.
+    name : str, optional
+        How ``intrinsics`` is named in messages (``"--intrinsics"`` on the
+        command line).
 
     Returns
     -------
@@ -89,7 +95,9 @@ def depth_to_points(depth, intrinsics, *, image=None) -> tuple[np.ndarray, np.nd
     ------
     ValueError
         If ``depth`` is not 2-D, ``image`` does not match its grid or has
-        values out of range, or a focal length is not a positive number.
+        values out of range, a focal length is not a positive number, or a
+        point would lie beyond the float32 range (focal lengths far too
+        small for the image, or a depth beyond it).
     TypeError
         If ``depth`` or ``image`` is not real-valued, or ``intrinsics`` is not
         four numbers.
@@ -115,7 +123,7 @@ def depth_to_points(depth, intrinsics, *, image=None) -> tuple[np.ndarray, np.nd
     >>> points
     array([[0., 0., 2.]], dtype=float32)
     """
-    fx, fy, cx, cy = check_intrinsics(intrinsics)
+    fx, fy, cx, cy = check_intrinsics(intrinsics, name=name)
     array = check_real_array(depth, "depth")
     if array.ndim != 2:
         raise ValueError(f"`depth` must be a 2-D (H, W) array, got shape {array.shape}.")
@@ -125,11 +133,30 @@ def depth_to_points(depth, intrinsics, *, image=None) -> tuple[np.ndarray, np.nd
     colors = None if image is None else _as_colors(image, values.shape)
     rows, cols = np.nonzero(valid)
     z = values[rows, cols]
+    with np.errstate(over="ignore"):
+        xyz = ((cols - cx) * z / fx, (rows - cy) * z / fy, z)
+    _check_float32_range(xyz, (fx, fy, cx, cy), values.shape, argument_label(name))
     points = np.empty((z.size, 3), dtype=np.float32)
-    points[:, 0] = (cols - cx) * z / fx
-    points[:, 1] = (rows - cy) * z / fy
-    points[:, 2] = z
+    for axis, coordinate in enumerate(xyz):
+        points[:, axis] = coordinate
     return points, None if colors is None else np.ascontiguousarray(colors[rows, cols])
+
+
+def _check_float32_range(xyz, intrinsics, shape, label: str) -> None:
+    """``ValueError`` naming the intrinsics (or the depth) if a coordinate is beyond the float32 range."""
+    largest = [float(np.max(np.abs(c), initial=0.0)) for c in xyz]
+    if all(value <= _FLOAT32_MAX for value in largest):
+        return
+    if largest[2] > _FLOAT32_MAX:
+        raise ValueError(f"`depth` reaches {largest[2]:.4g}, beyond the float32 range of a point cloud "
+                         f"({_FLOAT32_MAX:.4g}); give the depth in metres.")
+    fx, fy, cx, cy = intrinsics
+    axis = "x" if largest[0] > _FLOAT32_MAX else "y"
+    raise ValueError(
+        f"{label} (fx, fy, cx, cy) = ({fx:.6g}, {fy:.6g}, {cx:.6g}, {cy:.6g}) put the points of this "
+        f"{shape[0]}x{shape[1]} (H x W) depth at |{axis}| up to {max(largest[:2]):.4g} m, beyond the float32 range "
+        f"of a point cloud ({_FLOAT32_MAX:.4g}); focal lengths and principal point are in pixels of this grid "
+        "(focal lengths of hundreds to thousands for common cameras).")
 
 
 def _vertex_dtype(with_colors: bool) -> np.dtype:
