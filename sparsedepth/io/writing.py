@@ -1,4 +1,5 @@
-"""Writing depth maps: :func:`write_depth` and :func:`depth_writer`, the format chosen from the extension.
+"""Writing depth and uncertainty maps: :func:`write_depth` / :func:`depth_writer` and :func:`write_uncertainty` /
+:func:`uncertainty_writer`, the format chosen from the extension.
 
 Every write is atomic (see :func:`sparsedepth.io.files.atomic_target`).
 :func:`depth_writer` makes every check and encodes the data before anything is
@@ -25,7 +26,7 @@ from .images import TIFF_EXTENSIONS
 from .pfm import check_pfm_values, write_pfm_file
 from .stored import check_real_array
 
-__all__ = ["depth_writer", "write_depth"]
+__all__ = ["depth_writer", "write_depth", "uncertainty_writer", "write_uncertainty", "png_saturated"]
 
 _EXTENSIONS = (".png", ".pfm") + TIFF_EXTENSIONS + ARRAY_EXTENSIONS + HDF5_EXTENSIONS
 _UINT16_MAX = np.iinfo(np.uint16).max
@@ -79,11 +80,11 @@ def _quantise_png(depth: np.ndarray, scale: float) -> np.ndarray:
     return stored
 
 
-def _as_float32(depth: np.ndarray) -> np.ndarray:
+def _as_float32(depth: np.ndarray, name: str = "depth") -> np.ndarray:
     """``depth`` as float32 (NaN kept); ``ValueError`` if a value exceeds the float32 range."""
     finite = depth[np.isfinite(depth)]
     if finite.size and finite.max() > np.finfo(np.float32).max:
-        raise ValueError(f"`depth` up to {finite.max():g} exceeds the float32 range of a TIFF; "
+        raise ValueError(f"`{name}` up to {finite.max():g} exceeds the float32 range of a TIFF; "
                          "use .npy, .npz or .h5 (float64).")
     return depth.astype(np.float32)
 
@@ -151,32 +152,120 @@ def depth_writer(path, depth, *, scale=1000.0) -> Callable[[Path], None]:
     """
     ext = check_extension(Path(path), _EXTENSIONS, "write depth")
     scale = resolve_scale(scale)
-    array = check_real_array(depth, "depth")
+    values = _checked_map(depth, "depth")
+    values[values == 0] = np.nan
+    if ext == ".png":
+        stored = _quantise_png(values, scale)
+        return lambda tmp: _write_png_file(tmp, stored)
+    return _float_writer(ext, values, "depth")
+
+
+def _checked_map(array, name: str) -> np.ndarray:
+    """A 2-D, non-empty, non-negative float64 copy of ``array``, NaN where it is not finite."""
+    array = check_real_array(array, name)
     if array.ndim != 2:
-        raise ValueError(f"`depth` must be a 2-D (H, W) array, got shape {array.shape}.")
+        raise ValueError(f"`{name}` must be a 2-D (H, W) array, got shape {array.shape}.")
     if array.size == 0:
-        raise ValueError(f"`depth` is empty (shape {array.shape}).")
+        raise ValueError(f"`{name}` is empty (shape {array.shape}).")
     values = array.astype(np.float64)
     values[~np.isfinite(values)] = np.nan
     if np.any(values < 0):
         raise ValueError(
-            f"`depth` has negative values (min {np.nanmin(values):g}); use NaN for invalid pixels."
+            f"`{name}` has negative values (min {np.nanmin(values):g}); use NaN for invalid pixels."
         )
-    values[values == 0] = np.nan
+    return values
+
+
+def _float_writer(ext: str, values: np.ndarray, name: str) -> Callable[[Path], None]:
+    """The writer of ``values`` (NaN where missing) in a float format."""
     writer: Callable[[Path], None]
-    if ext == ".png":
-        stored = _quantise_png(values, scale)
-        writer = lambda tmp: _write_png_file(tmp, stored)  # noqa: E731
-    elif ext == ".npy":
+    if ext == ".npy":
         writer = lambda tmp: _write_npy_file(tmp, values)  # noqa: E731
     elif ext == ".npz":
         writer = lambda tmp: _write_npz_file(tmp, values)  # noqa: E731
     elif ext in HDF5_EXTENSIONS:
         writer = lambda tmp: _write_hdf5_file(tmp, values)  # noqa: E731
     elif ext in TIFF_EXTENSIONS:
-        single = _as_float32(values)
+        single = _as_float32(values, name)
         writer = lambda tmp: _write_tiff_file(tmp, single)  # noqa: E731
     else:  # .pfm
-        pfm = check_pfm_values(np.where(np.isnan(values), np.inf, values), "depth")
+        pfm = check_pfm_values(np.where(np.isnan(values), np.inf, values), name)
         writer = lambda tmp: write_pfm_file(tmp, pfm, "little")  # noqa: E731
     return writer
+
+
+def png_saturated(sigma, scale) -> int:
+    """How many finite values of ``sigma`` a 16-bit PNG at ``scale`` stores saturated (above ``65535 / scale``)."""
+    values = np.asarray(sigma, dtype=np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        return int(np.count_nonzero(np.isfinite(values) & (np.rint(values * resolve_scale(scale)) > _UINT16_MAX)))
+
+
+def write_uncertainty(path, sigma, *, scale=1000.0) -> None:
+    """Write an uncertainty map (standard-deviation-like errors), the format chosen from the extension (atomically).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Destination, with the extensions of :func:`write_depth`.
+    sigma : (H, W) array_like of real numbers
+        Errors ``>= 0`` in the unit of the depth; NaN (or inf) where the
+        pixel has no estimate.  ``0`` is an estimate, not a missing value.
+    scale : float or str, optional
+        PNG only: stored value ``= round(sigma * scale)``, as in
+        :func:`write_depth`.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the destination folder does not exist.
+    ValueError
+        If the extension is not supported, or ``sigma`` is not 2-D or has
+        negative values.
+    TypeError
+        If ``sigma`` is not real-valued.
+
+    Notes
+    -----
+    Float formats (``.npy``, ``.npz``, ``.h5``, ``.tif``, ``.pfm``) store
+    ``sigma`` as it is, 0 included; only pixels without an estimate are
+    missing (NaN, ``inf`` in PFM); the float32 formats (TIFF, PFM) store a
+    value beyond the float32 range as its largest value.  A 16-bit PNG cannot hold every value and
+    never fails on one: 0 means missing there, so an estimate below one unit
+    (``1 / scale``) is stored as one unit, and one above the largest value
+    ``65535 / scale`` is stored as that value (saturated: read it as "at
+    least"; :func:`png_saturated` counts them).  Read a PNG back with
+    :func:`read_depth` and the same ``scale``.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os
+    >>> fname = os.path.join(tempfile.mkdtemp(), "sigma.npy")
+    >>> write_uncertainty(fname, np.array([[0.0, 0.25, np.nan]]))
+    >>> np.load(fname)
+    array([[0.  , 0.25,  nan]])
+    """
+    writer = uncertainty_writer(path, sigma, scale=scale)
+    with atomic_target(path) as tmp:
+        writer(tmp)
+
+
+def uncertainty_writer(path, sigma, *, scale=1000.0) -> Callable[[Path], None]:
+    """Check and encode ``sigma`` for ``path`` as :func:`write_uncertainty` does; return ``writer(tmp)``.
+
+    Every check happens here, before anything is written (as
+    :func:`depth_writer`); the returned function only writes the encoded
+    data.  It cannot fail on the values: a PNG saturates (see
+    :func:`write_uncertainty`).
+    """
+    ext = check_extension(Path(path), _EXTENSIONS, "write uncertainty")
+    scale = resolve_scale(scale)
+    values = _checked_map(sigma, "sigma")
+    if ext == ".png":
+        valid = ~np.isnan(values)
+        stored = np.zeros(values.shape, dtype=np.uint16)
+        stored[valid] = np.clip(np.rint(values[valid] * scale), 1, _UINT16_MAX).astype(np.uint16)
+        return lambda tmp: _write_png_file(tmp, stored)
+    if ext in TIFF_EXTENSIONS or ext == ".pfm":
+        values = np.minimum(values, np.finfo(np.float32).max)  # NaN stays NaN
+    return _float_writer(ext, values, "sigma")
