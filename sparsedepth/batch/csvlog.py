@@ -34,7 +34,7 @@ from ..objective.weights import weights_settings
 
 __all__ = ["CSV_COLUMNS", "LINE_END", "HEADER", "settings_path", "lock_path", "locked", "fingerprint",
            "settings_difference", "csv_line", "append_row", "read_log", "compact", "write_text_atomic", "start_log",
-           "compact_file"]
+           "compact_file", "write_error"]
 
 #: Columns of the batch CSV, in order.
 CSV_COLUMNS = (
@@ -220,10 +220,32 @@ def write_text_atomic(path: Path, text: str) -> None:
             handle.write(text)
 
 
+def write_error(exc: OSError, path, what: str) -> OSError:
+    """``exc`` (a failed write) as an ``OSError`` of the same errno whose message names the file and the option.
+
+    ``what`` says what was being written (``"the row of frame 'a'"``); the
+    message names ``path`` and the CSV's argument (``csv_path``, ``--csv``
+    on the command line), keeps the system's reason (``No space left on
+    device``, ``File too large``) and says that the finished rows are kept.
+    """
+    reason = exc.strerror or " ".join(str(exc).split()) or type(exc).__name__
+    error = OSError(f"could not write {what} to '{path}' (`csv_path`, command line --csv): {reason}; the rows of "
+                    "finished frames are kept: free space (or choose another --csv), then run the same batch again "
+                    "to resume")
+    error.errno = exc.errno
+    return error
+
+
 def append_row(handle, row: dict) -> None:
-    """Append the line of ``row`` to the open CSV ``handle`` and flush it, so that it survives an interruption."""
-    handle.write(csv_line(row))
-    handle.flush()
+    """Append the line of ``row`` to the open CSV ``handle`` and flush it, so that it survives an interruption.
+
+    An ``OSError`` (a full disk) names the CSV and the frame (:func:`write_error`).
+    """
+    try:
+        handle.write(csv_line(row))
+        handle.flush()
+    except OSError as exc:
+        raise write_error(exc, handle.name, f"the row of frame '{row.get('name', '')}'") from exc
 
 
 def _stored_settings(settings: Path):
@@ -246,8 +268,8 @@ def start_log(csv_path: Path, current: dict, names, *, resume: bool, overwrite: 
     """
     settings = settings_path(csv_path)
     if not csv_path.exists() or overwrite:
-        write_text_atomic(settings, json.dumps(current, indent=1) + "\n")
-        write_text_atomic(csv_path, HEADER + LINE_END)
+        _write_log_file(settings, json.dumps(current, indent=1) + "\n", "the settings of the batch")
+        _write_log_file(csv_path, HEADER + LINE_END, "the CSV header")
         return []
     if not resume:
         raise ValueError(f"'{csv_path}' exists; pass resume=True to continue it or overwrite=True to start afresh")
@@ -259,7 +281,7 @@ def start_log(csv_path: Path, current: dict, names, *, resume: bool, overwrite: 
                 f"'{csv_path}' has rows but no settings file '{settings.name}', so a resumed run cannot be "
                 "checked against it; give another CSV path or overwrite=True (command line: --overwrite)"
             )
-        write_text_atomic(settings, json.dumps(current, indent=1) + "\n")
+        _write_log_file(settings, json.dumps(current, indent=1) + "\n", "the settings of the batch")
     else:
         difference = settings_difference(stored, current)
         if difference:
@@ -270,8 +292,16 @@ def start_log(csv_path: Path, current: dict, names, *, resume: bool, overwrite: 
     kept = compact(entries, set(names))
     compacted = HEADER + LINE_END + "".join(line for _, _, line in kept)
     if compacted != text:
-        write_text_atomic(csv_path, compacted)
+        _write_log_file(csv_path, compacted, "the compacted CSV")
     return kept
+
+
+def _write_log_file(path: Path, text: str, what: str) -> None:
+    """:func:`write_text_atomic`; an ``OSError`` names the file and the option (:func:`write_error`)."""
+    try:
+        write_text_atomic(path, text)
+    except OSError as exc:
+        raise write_error(exc, path, what) from exc
 
 
 def compact_file(csv_path: Path, names) -> None:

@@ -324,8 +324,9 @@ def run_batch(
     TypeError
         If a frame is not one of the frame types.
     OSError
-        If the CSV cannot be written (e.g. a full disk); the rows written
-        so far are kept.
+        If the CSV or its settings file cannot be written (e.g. a full
+        disk): the message names the file, ``csv_path`` (``--csv``) and the
+        system's reason; the rows written so far are kept.
 
     Notes
     -----

@@ -127,7 +127,8 @@ def process_frame(position: int, source, options: BatchOptions) -> dict:
     Notes
     -----
     The output depth (with ``options.out_dir``) is written atomically: it
-    appears complete, or not at all.  :class:`~sparsedepth.ClampWarning` is
+    appears complete, or not at all; a failed write (a full disk) is an
+    error row naming the file and ``out_dir``.  :class:`~sparsedepth.ClampWarning` is
     not shown: the row's ``clamped`` column carries it.
     """
     row = {"position": position, "name": source.name, "status": "ok"}
@@ -154,11 +155,24 @@ def process_frame(position: int, source, options: BatchOptions) -> dict:
                 row["nn_" + key] = _fmt(getattr(out.nearest_metrics, key))
         if options.out_dir is not None:
             target = output_path(source.name, options)
-            write_depth(target, out.depth, scale=options.out_scale)
+            _write_output(target, out.depth, options)
             row["output"] = str(target)
     except Exception as exc:  # noqa: BLE001 - a failing frame is reported, not fatal
         row.update(status="error", error=error_text(exc))
     return row
+
+
+def _write_output(target: Path, depth, options: BatchOptions) -> None:
+    """:func:`~sparsedepth.io.write_depth` of a frame's output; an ``OSError`` (a full disk) names the file and
+    the option (``out_dir``, ``--outdir`` on the command line), with the system's reason."""
+    try:
+        write_depth(target, depth, scale=options.out_scale)
+    except OSError as exc:
+        reason = exc.strerror or one_line(exc)
+        error = OSError(f"could not write the output '{target}' (`out_dir`, command line --outdir): {reason}; "
+                        "free space (or choose another --outdir), then run the same batch again to redo this frame")
+        error.errno = exc.errno
+        raise error from exc
 
 
 def one_line(exc: BaseException) -> str:
