@@ -398,8 +398,10 @@ def _add_output_options(parser) -> None:
                      help="scale of a PNG output (default: --depth-scale if given, else mm = 1000).")
     out.add_argument("--uncertainty", metavar="PATH",
                      help="per-pixel uncertainty in metres (a standard-deviation-like error estimate, calibrated "
-                          "on held-out samples; two more solves), in any --out format; a PNG stores at least one "
-                          "unit of its scale.")
+                          "on held-out samples; two more solves), in any --out format: .npy, .npz, .h5, .tif and "
+                          ".pfm store it as it is (0 included; missing only where there is no estimate); a 16-bit "
+                          "PNG stores between one unit of its scale and its largest value 65535/scale (a larger "
+                          "sigma is stored as that value: read it as 'at least'; the count is reported).")
     out.add_argument("--max-uncertainty", type=_nonnegative, metavar="M",
                      help="leave the pixels whose uncertainty exceeds M metres missing in --out (0 in PNG, NaN in "
                           "float formats) instead of extrapolating; the count is reported.")

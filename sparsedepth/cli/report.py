@@ -18,12 +18,15 @@ import numpy as np
 
 from .. import __version__
 from .._validation import as_float_image
+from ..io.writing import png_saturated
 from ..objective import weights as weights_module
 from ..visualize import DEPTH_COLORMAP
 from .parser import PROG
 
 __all__ = ["matplotlib_classes", "build_report", "print_table", "build_figure", "render_figure", "panel_pixels",
-           "sample_radius", "dilate_samples"]
+           "sample_radius", "dilate_samples", "uncertainty_png", "uncertainty_png_line"]
+
+_UINT16_MAX = 65535
 
 
 def matplotlib_classes():
@@ -88,7 +91,36 @@ def build_report(args, argv, outcome, description, weights, weights_given, png_s
         )
     if result is not None and result.uncertainty is not None:
         report["uncertainty"] = _uncertainty_summary(outcome)
+        png = uncertainty_png(args, outcome, png_scale)
+        if png is not None:
+            report["uncertainty"]["png"] = png
     return _jsonable(report)
+
+
+def uncertainty_png(args, outcome, png_scale) -> dict | None:
+    """With ``--uncertainty X.png``: ``{"scale", "largest", "saturated"}`` of the 16-bit PNG, else None.
+
+    The PNG stores ``round(sigma * scale)`` between 1 and 65535
+    (:func:`~sparsedepth.io.writing.write_uncertainty`): ``saturated`` counts
+    the pixels whose sigma exceeds ``largest = 65535 / scale`` metres and is
+    stored as ``largest``.
+    """
+    path = getattr(args, "uncertainty", None)
+    result = outcome.result
+    if path is None or not str(path).lower().endswith(".png") or result is None or result.uncertainty is None:
+        return None
+    return {"scale": png_scale, "largest": _UINT16_MAX / png_scale,
+            "saturated": png_saturated(result.uncertainty, png_scale)}
+
+
+def uncertainty_png_line(args, outcome, png_scale) -> str | None:
+    """The stdout line saying how many sigma values ``--uncertainty X.png`` stores saturated, or None if none is."""
+    png = uncertainty_png(args, outcome, png_scale)
+    if png is None or not png["saturated"]:
+        return None
+    return (f"--uncertainty {args.uncertainty}: {png['saturated']} pixels have sigma above {png['largest']:.6g} m, "
+            f"the largest value of a 16-bit PNG at scale {png_scale:g}, and are stored as {png['largest']:.6g} m "
+            "(read: at least that); .npy, .tif or .pfm store every value")
 
 
 def _weights_source(args, weights) -> dict:
