@@ -19,8 +19,12 @@ import numpy as np
 
 from ..batch import evaluate_frame
 from ..datasets import load_motorcycle
-from ..io import KINECT_NYU, read_calib, read_depth, read_image, read_mask
+from .._validation import check_input_file
+from ..io import KINECT_NYU, KinectDisparity, read_calib, read_depth, read_image, read_mask
 from ..io import depth_to_points, depth_writer, ply_writer, resolve_scale
+from ..io.depth import _READ_EXTENSIONS, _read_stored  # the stored values read_depth starts from
+from ..io.files import check_extension
+from ..priors import as_prior
 from ..registration import shift_image
 from ..sampling import valid_depth_mask
 from ..visualize import colorize_depth
@@ -123,22 +127,38 @@ def _read_inputs(args, stream):
             raise ValueError(f"--truth '{args.truth}' has shape {truth.shape} but --depth '{args.depth}' has "
                              f"shape {depth.shape}")
         _warn_scale(truth, f"--truth '{args.truth}'", args.depth_scale, stream)
-    prior = None if args.prior is None else _read_prior(args, calib, depth.shape, stream)
+    prior = None if args.prior is None else _read_prior(args, calib, depth.shape)
     description = f"{args.image} + {args.depth}" + ("" if prior is None else f" + prior {args.prior}")
     return image, depth, mask, truth, prior, description
 
 
-def _read_prior(args, calib, shape, stream) -> np.ndarray:
-    """The --prior map in the units of --depth; UsageError unless it has the frame's size and a value everywhere."""
-    prior = _read_depth_flag(args.prior, "--prior", args, calib, stream)
-    if prior.shape != shape:
-        raise UsageError(f"--prior '{args.prior}' is {prior.shape[0]}x{prior.shape[1]} but --depth '{args.depth}' is "
-                          f"{shape[0]}x{shape[1]} (H x W); they must have the same size")
-    missing = int(np.count_nonzero(~np.isfinite(prior)))
-    if missing:
-        raise UsageError(f"--prior '{args.prior}' has {missing} pixels without a value (0, NaN, inf or excluded by "
-                          "--invalid-value/--min-depth/--max-depth); a prior must be dense: fill its holes first")
-    return prior
+def _read_prior(args, calib, shape) -> np.ndarray:
+    """The --prior map in the units of --depth, checked by :func:`~sparsedepth.priors.as_prior` (the library's rule).
+
+    It is read like --depth (its format, --depth-key, --byteorder and --max-pixels; divided by --depth-scale and
+    converted by --calib), but every stored value is a value: a prior is dense, and 0 and negative values are
+    relative depth, so --invalid-value, --min-depth and --max-depth, which mark depth readings missing, do not apply.
+    NaN or inf anywhere (a non-positive disparity under --calib included) is refused.
+    """
+    path = check_input_file(args.prior, name="--prior")
+    _check_units(path, "--prior", args)
+    ext = check_extension(path, _READ_EXTENSIONS, "read depth", "--prior")
+    # io's readers turn 0 into NaN and refuse negatives (depth readings); the prior needs the stored values
+    stored, source = _read_stored(path, ext, args.depth_key, args.byteorder, args.max_pixels, "--prior",
+                                  READER_FLAGS)
+    if np.issubdtype(stored.dtype, np.integer) and args.depth_scale is None and not isinstance(calib, KinectDisparity):
+        raise UsageError(f"{source} holds integers ({stored.dtype}): give --depth-scale, the divisor of --depth's "
+                          "stored values, which --prior shares")
+    values = stored.astype(np.float64)
+    divisor = 1.0 if args.depth_scale is None else resolve_scale(args.depth_scale, "--depth-scale")
+    if divisor != 1.0:
+        values /= divisor
+    if calib is not None:
+        values = calib.depth_from_disparity(values)
+    if values.shape != shape:
+        raise UsageError(f"--prior '{args.prior}' is {values.shape[0]}x{values.shape[1]} but --depth '{args.depth}' "
+                          f"is {shape[0]}x{shape[1]} (H x W); they must have the same size")
+    return as_prior(values, shape, name=f"--prior '{args.prior}'", shape_name=f"--depth '{args.depth}'")
 
 
 _DEPTH_OUTPUTS = ("--out", "depth.npy", "depth.png")
