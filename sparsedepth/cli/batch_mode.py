@@ -3,8 +3,9 @@
 SIGINT and SIGTERM stop the batch (exit codes 130 and 143) with its finished
 rows kept; :func:`~sparsedepth.batch.run_batch` (or
 :func:`~sparsedepth.batch.distributed.run_batch_on_cluster` with a Dask
-scheduler) does the work.  Imports :mod:`sparsedepth.batch` and the other
-modules of :mod:`sparsedepth.cli` except the command and the one-frame mode.
+scheduler) does the work.  Imports :mod:`sparsedepth.batch`,
+:class:`~sparsedepth.io.NYUDepthV2Labeled` and the other modules of
+:mod:`sparsedepth.cli` except the command and the one-frame mode.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from ..batch import (
     settings_path,
 )
 from ..batch.csvlog import lock_path
+from ..io import NYUDepthV2Labeled
 from .checks import cluster_address
 from .messages import UsageError, one_line, warnings_as_lines
 from .outputs import Named, check_distinct, check_writable
@@ -70,6 +72,8 @@ def _batch_options(args, weights) -> BatchOptions:
 def _batch_frames(args):
     """The frames of --nyu-mat, --batch with --batch-depths, a folder of NYU .h5 files, or a --batch folder."""
     if args.nyu_mat is not None:
+        with NYUDepthV2Labeled(args.nyu_mat, name="--nyu-mat"):  # a bad file is an error naming the flag
+            pass
         return nyu_frames(args.nyu_mat, args.indices)
     if args.batch_depths is not None:
         return find_frame_pairs(args.batch, args.batch_depths, truth_folder=args.batch_truths)

@@ -4,7 +4,10 @@ What lives here: :func:`read_depth_array`, the header-first ``.npy`` reader
 (shape, dtype and pixel limit are checked before the data are read; pickled
 objects are refused), the ``.npz`` member choice, and the HDF5 helpers that
 :mod:`.nyu` and :func:`sparsedepth.io.read_depth` share (:func:`open_hdf5`,
-:func:`hdf5_dataset`, :func:`hdf5_read`, :func:`read_hdf5_array`).
+:func:`hdf5_dataset`, :func:`hdf5_read`, :func:`read_hdf5_array`).  HDF5 can
+make a reader open other files (external links, virtual datasets, external
+raw storage); :func:`hdf5_dataset` refuses all three before anything is read,
+so no file the user did not name is ever opened.
 
 Imports NumPy, h5py, :mod:`sparsedepth._validation` and :mod:`.files` /
 :mod:`.stored` only.
@@ -151,13 +154,93 @@ def open_hdf5(path: Path, where: str | None = None) -> h5py.File:
         ) from exc
 
 
-def hdf5_dataset(handle: h5py.File, key: str, where) -> h5py.Dataset:
-    """Dataset ``key`` of ``handle`` with its metadata readable; ``ValueError`` listing the datasets if absent."""
+#: Soft links followed on one path before it is taken for a cycle.
+_MAX_SOFT_LINKS = 32
+
+
+def _outside_error(where: str, key: str, what: str) -> ValueError:
+    """The refusal of dataset ``key``, which ``what`` says is stored outside the file."""
+    return ValueError(
+        f"{where} dataset '{key}' {what}; sparsedepth reads only data stored in the file itself, so that it never "
+        "opens a file you did not name: store the data in the file (e.g. copy it with h5py)."
+    )
+
+
+def _resolve(handle: h5py.File, key: str, where: str):
+    """The object at ``key`` in ``handle``, or None if there is none.
+
+    Every link on the path is examined before it is followed: hard links and
+    soft links (paths inside the same file) are followed; an external link, or
+    a link of a user-defined class, is refused with a ``ValueError`` without
+    being opened.
+    """
+    pending = [part for part in reversed(key.split("/")) if part not in ("", ".")]
+    node = handle
+    hops = 0
+    while pending:
+        if not isinstance(node, h5py.Group):
+            return None
+        part = pending.pop()
+        link = node.get(part, getlink=True)
+        if link is None:
+            return None
+        if isinstance(link, h5py.HardLink):
+            node = node[part]
+        elif isinstance(link, h5py.SoftLink):
+            hops += 1
+            if hops > _MAX_SOFT_LINKS:
+                raise ValueError(f"{where} dataset '{key}': its path follows more than {_MAX_SOFT_LINKS} soft "
+                                 "links (a cycle of links); give the dataset's own path.")
+            if link.path.startswith("/"):
+                node = handle
+            pending += [p for p in reversed(link.path.split("/")) if p not in ("", ".")]
+        elif isinstance(link, h5py.ExternalLink):
+            raise _outside_error(where, key, f"is reached through an external link to '{link.path}' in file "
+                                             f"'{link.filename}'")
+        else:
+            raise _outside_error(where, key, f"is reached through a link of a user-defined class "
+                                             f"({type(link).__name__})")
+    return node
+
+
+def _check_storage(dset: h5py.Dataset, key: str, where: str) -> None:
+    """Refuse a dataset whose data live in other files: external raw storage or a virtual dataset."""
+    if dset.is_virtual:
+        raise _outside_error(where, key, "is a virtual dataset (its data are read from other HDF5 files)")
+    plist = dset.id.get_create_plist()
+    count = plist.get_external_count()
+    if count > 0:
+        names = [plist.get_external(i)[0].decode(errors="replace") for i in range(count)]
+        raise _outside_error(where, key, f"keeps its data in external raw file{'s' if count > 1 else ''} {names}")
+
+
+def _datasets_here(handle: h5py.File, where: str) -> list[str]:
+    """Names of the datasets at the top of ``handle`` that may be read (those reached without leaving the file)."""
+    names = []
+    for name in handle.keys():
+        try:
+            if isinstance(_resolve(handle, name, where), h5py.Dataset):
+                names.append(name)
+        except ValueError:
+            continue
+    return sorted(names)
+
+
+def hdf5_dataset(handle: h5py.File, key: str, where, *, optional: bool = False) -> h5py.Dataset | None:
+    """Dataset ``key`` of ``handle`` with its metadata readable; ``ValueError`` listing the datasets if absent.
+
+    Nothing outside the file is opened: a path through an external link, a
+    virtual dataset and a dataset with external raw storage are refused with
+    a ``ValueError`` naming ``where`` and ``key`` (see :func:`_resolve`).
+    With ``optional``, an absent ``key`` gives None instead.
+    """
     try:
-        item = handle.get(key)
+        item = _resolve(handle, key, where)
+        if item is None and optional:
+            return None
         if not isinstance(item, h5py.Dataset):
-            available = sorted(k for k in handle.keys() if isinstance(handle.get(k), h5py.Dataset))
-            raise ValueError(f"{where} has no dataset '{key}'; available datasets: {available}.")
+            raise ValueError(f"{where} has no dataset '{key}'; available datasets: {_datasets_here(handle, where)}.")
+        _check_storage(item, key, where)
         item.shape, item.dtype  # noqa: B018 - reading the metadata may fail on corrupt files
     except (ValueError, MemoryError):
         raise

@@ -50,7 +50,9 @@ def read_nyu_h5(path, *, max_pixels: int | None = MAX_PIXELS, name: str = "path"
         If ``path`` does not exist.
     ValueError
         If ``path`` is not a regular file, not HDF5, lacks ``rgb`` or
-        ``depth``, or their shapes or dtypes do not match the layout above.
+        ``depth``, their shapes or dtypes do not match the layout above, or
+        one of them is stored outside the file (an external link, a virtual
+        dataset or external raw storage, which are never followed).
     """
     path = check_input_file(path, name=name)
     where = file_label(path, name)
@@ -95,8 +97,10 @@ class NYUDepthV2Labeled:
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If ``path`` is not a regular file, not HDF5, or the datasets are
-        missing or inconsistent.
+        If ``path`` is not a regular file, not HDF5, the datasets are
+        missing or inconsistent, or one of them is stored outside the file
+        (an external link, a virtual dataset or external raw storage, which
+        are never followed).
 
     Examples
     --------
@@ -113,9 +117,7 @@ class NYUDepthV2Labeled:
         try:
             self._images = hdf5_dataset(self._file, "images", self._where)
             self._depths = hdf5_dataset(self._file, "depths", self._where)
-            self._raw = None
-            if "rawDepths" in self._file:
-                self._raw = hdf5_dataset(self._file, "rawDepths", self._where)
+            self._raw = hdf5_dataset(self._file, "rawDepths", self._where, optional=True)
             images, depths = self._images, self._depths
             if images.ndim != 4 or images.shape[1] != 3 or images.dtype != np.uint8:
                 raise ValueError(
