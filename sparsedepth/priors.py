@@ -142,18 +142,20 @@ def align_prior(prior, sparse_depth, mask=None, *, alignment: str = "scale_shift
     if alignment == "scale":
         denominator = float(at @ at)
         if denominator == 0:
-            raise ValueError(f"prior is 0 at all {count} observed pixels, so no scale fits it to the samples; use "
-                             "prior_alignment='scale_shift', or a prior that is not 0 where depth is observed")
+            raise ValueError(f"prior is 0 at all {count} observed pixels, so no scale fits it to the samples: "
+                             "observe pixels where the prior is not 0, or check that it is the map of this frame")
         unit_scale, unit_shift = float(at @ values) / denominator, 0.0
     else:
         mean = float(at.mean())
         centred = at - mean
         if np.ptp(at) <= 4 * np.finfo(np.float64).eps * np.max(np.abs(at)):
             if np.ptp(unit_prior) > 0:
+                value = float(p[observed][0])
+                other = "prior_alignment='scale' or " if value != 0 else ""
                 raise ValueError(
-                    f"prior takes the one value {p[observed][0]:g} at all {count} observed pixels but varies "
-                    "elsewhere, so its scale is undetermined; use prior_alignment='scale' (or 'none' for metric "
-                    "depth), or observe pixels where the prior differs")
+                    f"prior takes the one value {value:g} at all {count} observed pixels but varies elsewhere, so "
+                    f"its scale is undetermined: use {other}prior_alignment='none' (metric depth), or observe "
+                    "pixels where the prior differs")
             unit_scale, unit_shift = 0.0, float(values.mean())  # a constant prior carries no shape
         else:
             unit_scale = float(centred @ (values - values.mean())) / float(centred @ centred)
