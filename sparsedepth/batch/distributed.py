@@ -17,7 +17,9 @@ submitting.
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import dataclasses
+import ipaddress
 import json
 import os
 import re
@@ -34,6 +36,7 @@ from .worker import one_line
 __all__ = [
     "DEFAULT_TIMEOUT",
     "connect",
+    "scheduler_address",
     "cluster_threads",
     "absolute_frames",
     "remove_stale_outputs",
@@ -44,6 +47,14 @@ __all__ = [
 DEFAULT_TIMEOUT = 15.0
 
 _ENV_ADDRESS = "DASK_SCHEDULER_ADDRESS"
+
+#: The address schemes of a scheduler reachable from other processes (``inproc://`` lives inside one process).
+_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+
+_HOST_NAME = re.compile(r"[A-Za-z0-9_]([A-Za-z0-9_.-]*[A-Za-z0-9_])?")
+
+#: Extra seconds the handshake is given beyond the timeout, so that an unreachable address is reported as such.
+_HANDSHAKE_GRACE = 0.25
 
 
 def _import_distributed():
@@ -63,22 +74,162 @@ def _check_timeout(timeout) -> float:
     return float(timeout)
 
 
+def _address_error(described: str, reason: str, option: str | None) -> ValueError:
+    """A malformed scheduler address (``described``: its source and value); ``option`` lets the command line name
+    its flag."""
+    exc = ValueError(f"{described} is not a Dask scheduler address: {reason}; give tcp://HOST:PORT, "
+                     "e.g. tcp://10.0.0.5:8786")
+    exc.option = option
+    return exc
+
+
+def _address_problem(address: str) -> str | None:
+    """What is wrong with ``address`` as ``[scheme://]host:port``, or None if nothing is."""
+    if not address:
+        return "it is empty"
+    if any(c.isspace() or not c.isprintable() for c in address):
+        return "it contains white space or control characters"
+    scheme, sep, location = address.partition("://")
+    if not sep:
+        scheme, location = "tcp", address
+    if scheme == "inproc":
+        return "inproc:// names a scheduler inside one process, which a batch's driver cannot reach"
+    if scheme not in _SCHEMES:
+        return f"unknown scheme '{scheme}://' (known: {', '.join(s + '://' for s in _SCHEMES)})"
+    if location.startswith("["):
+        host, bracket, rest = location[1:].partition("]")
+        if not bracket:
+            return "the IPv6 address has no closing ']'"
+        try:
+            ipaddress.IPv6Address(host.split("%")[0])
+        except ValueError:
+            return f"'{host}' is not an IPv6 address"
+        if not rest.startswith(":"):
+            return "no port after the IPv6 address"
+        port = rest[1:]
+    else:
+        host, colon, port = location.rpartition(":")
+        if not colon:
+            return "no port"
+        if ":" in host:
+            return "an IPv6 address needs brackets, as in tcp://[::1]:8786"
+        if not _HOST_NAME.fullmatch(host):
+            return f"'{host}' is not a host name or IP address" if host else "no host"
+    if not (port.isascii() and port.isdigit()) or not 0 < int(port) < 65536:
+        return f"'{port}' is not a port number (1 to 65535)" if port else "no port"
+    return None
+
+
+def _check_address(address, described: str, option: str | None) -> str:
+    """``address`` if well formed; else a ValueError starting with ``described`` (its source and value)."""
+    if not isinstance(address, str):
+        raise TypeError(f"{described} must be a str such as 'tcp://10.0.0.5:8786', got {type(address).__name__}")
+    problem = _address_problem(address)
+    if problem is not None:
+        raise _address_error(described, problem, option)
+    return address
+
+
 def _address_from_file(scheduler_file) -> str:
     path = Path(scheduler_file)
     if not path.is_file():
-        raise FileNotFoundError(
+        exc = FileNotFoundError(
             f"scheduler file '{path}' does not exist; start the scheduler with "
             f"'dask scheduler --scheduler-file {path}' first (or give the address instead)"
         )
+        exc.option = "scheduler_file"
+        raise exc
     try:
         address = json.loads(path.read_text(encoding="utf-8"))["address"]
-    except (ValueError, KeyError, TypeError) as exc:
-        raise ValueError(
+    except (ValueError, KeyError, TypeError, OSError) as exc:
+        error = ValueError(
             f"scheduler file '{path}' is not a Dask scheduler file (JSON with an 'address' entry): {exc}"
-        ) from None
-    if not isinstance(address, str) or not address:
-        raise ValueError(f"scheduler file '{path}' has no usable 'address' entry, got {address!r}")
-    return address
+        )
+        error.option = "scheduler_file"
+        raise error from None
+    described = f"the address {address!r} in scheduler file '{path}'"
+    if not isinstance(address, str):
+        raise _address_error(described, "it is not a string", "scheduler_file")
+    return _check_address(address, described, "scheduler_file")
+
+
+def scheduler_address(address: str | None = None, *, scheduler_file=None) -> str:
+    """The scheduler address :func:`connect` would use, checked without connecting.
+
+    Parameters
+    ----------
+    address : str, optional
+        ``[scheme://]host:port`` with scheme ``tcp`` (the default), ``tls``,
+        ``ws``, ``wss`` or ``ucx``; an IPv6 host in brackets.  Default: the
+        environment variable ``DASK_SCHEDULER_ADDRESS``.
+    scheduler_file : str or os.PathLike, optional
+        The JSON file of ``dask scheduler --scheduler-file PATH`` (exclusive
+        with ``address``).
+
+    Returns
+    -------
+    str
+        The address.
+
+    Raises
+    ------
+    ValueError
+        If both or neither are given (and ``DASK_SCHEDULER_ADDRESS`` is
+        unset or empty), the scheduler file is not one, or the address is
+        malformed (empty, unclosed ``[``, no port, ``inproc://``, an unknown
+        scheme, ...): the message names where the address came from.  Its
+        ``option`` attribute is ``"address"``, ``"scheduler_file"`` or None
+        (the environment variable).
+    FileNotFoundError
+        If ``scheduler_file`` does not exist.
+    TypeError
+        If ``address`` is not a str.
+    """
+    if address is not None and scheduler_file is not None:
+        raise ValueError("give a scheduler address or a scheduler file, not both")
+    if scheduler_file is not None:
+        return _address_from_file(scheduler_file)
+    if address is not None:
+        return _check_address(address, f"scheduler address {address!r}", "address")
+    address = os.environ.get(_ENV_ADDRESS) or None
+    if address is None:
+        raise ValueError(f"no scheduler: give its address or scheduler file, or set {_ENV_ADDRESS}")
+    return _check_address(address, f"{_ENV_ADDRESS} {address!r}", None)
+
+
+def _handshake(distributed, address: str, timeout: float) -> None:
+    """Open one connection to ``address`` and wait for the Dask handshake, at most ``timeout`` seconds.
+
+    :class:`distributed.Client` waits for the handshake without a time limit,
+    so a server that accepts TCP connections but does not speak Dask (any
+    other program on that port) would keep it waiting forever.  The
+    connection is made in an event loop of its own, on a thread of its own,
+    so that this works whether or not the caller runs an event loop.
+    """
+    connection_args = distributed.Security().get_connection_args("client")
+
+    async def handshake():
+        comm = await distributed.comm.connect(address, timeout=timeout, **connection_args)
+        await comm.close()
+
+    def run():
+        asyncio.run(asyncio.wait_for(handshake(), timeout + _HANDSHAKE_GRACE))
+
+    failure = f"no Dask scheduler answered at {address} within {timeout:g} s"
+    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="sparsedepth-handshake") as pool:
+        try:
+            pool.submit(run).result()
+        except (TimeoutError, asyncio.TimeoutError):
+            raise OSError(f"{failure}: nothing accepted a connection there, or what did (another program on that "
+                          "port?) did not answer the Dask handshake") from None
+        except OSError as exc:
+            raise OSError(f"{failure} ({one_line(exc)})") from None
+        except MemoryError:  # another protocol's first bytes read as a Dask frame length ask for exabytes
+            raise OSError(f"{failure}: the server there does not speak the Dask protocol (its first bytes are "
+                          "not a Dask message)") from None
+        except Exception as exc:  # a message that does not decode, a TLS set-up error, ...
+            raise OSError(f"{failure}: the server there does not speak the Dask protocol ({one_line(exc)})") \
+                from None
 
 
 def connect(address: str | None = None, *, scheduler_file=None, timeout: float = DEFAULT_TIMEOUT):
@@ -87,8 +238,9 @@ def connect(address: str | None = None, *, scheduler_file=None, timeout: float =
     Parameters
     ----------
     address : str, optional
-        Scheduler address, e.g. ``"tcp://10.0.0.5:8786"``.  Default: the
-        environment variable ``DASK_SCHEDULER_ADDRESS``.
+        Scheduler address, e.g. ``"tcp://10.0.0.5:8786"`` (see
+        :func:`scheduler_address`).  Default: the environment variable
+        ``DASK_SCHEDULER_ADDRESS``.
     scheduler_file : str or os.PathLike, optional
         The JSON file written by ``dask scheduler --scheduler-file PATH``
         (exclusive with ``address``).
@@ -107,23 +259,28 @@ def connect(address: str | None = None, *, scheduler_file=None, timeout: float =
         If dask.distributed is not installed.
     ValueError
         If both or neither of ``address`` / ``scheduler_file`` are given (and
-        ``DASK_SCHEDULER_ADDRESS`` is unset), or ``timeout`` is not positive.
+        ``DASK_SCHEDULER_ADDRESS`` is unset), the address is malformed (see
+        :func:`scheduler_address`; checked before any client is made), or
+        ``timeout`` is not positive.
     FileNotFoundError
         If ``scheduler_file`` does not exist (its scheduler has not started).
     OSError
-        If the scheduler does not answer within ``timeout`` (``TimeoutError``
-        if it has no worker within a second ``timeout``).
+        If no Dask scheduler answers within ``timeout``: nothing accepts a
+        connection at the address, or what does does not answer the Dask
+        handshake (``TimeoutError`` if the scheduler has no worker within a
+        second ``timeout``).
+
+    Notes
+    -----
+    Before the client is made, one connection is opened to the address and
+    closed again once the scheduler has answered Dask's handshake, within
+    ``timeout``: :class:`distributed.Client` itself would wait for that
+    answer without limit.
     """
     timeout = _check_timeout(timeout)
-    if address is not None and scheduler_file is not None:
-        raise ValueError("give a scheduler address or a scheduler file, not both")
-    if scheduler_file is not None:
-        address = _address_from_file(scheduler_file)
-    elif address is None:
-        address = os.environ.get(_ENV_ADDRESS) or None
-        if address is None:
-            raise ValueError(f"no scheduler: give its address or scheduler file, or set {_ENV_ADDRESS}")
+    address = scheduler_address(address, scheduler_file=scheduler_file)
     distributed = _import_distributed()
+    _handshake(distributed, address, timeout)
     try:
         client = distributed.Client(address, timeout=timeout, set_as_default=False)
     except OSError as exc:

@@ -44,6 +44,9 @@ _OPTION_FLAGS = {
 }
 
 
+_SCHEDULER_FLAGS = {"address": "--scheduler", "scheduler_file": "--scheduler-file"}
+
+
 class _Terminated(BaseException):
     """Raised in the batch driver by SIGTERM (a BaseException, like KeyboardInterrupt)."""
 
@@ -64,6 +67,23 @@ def _batch_options(args, weights) -> BatchOptions:
         )
     except (ValueError, TypeError, OSError) as exc:
         flag = _OPTION_FLAGS.get(getattr(exc, "option", None))
+        if flag is None:
+            raise
+        raise UsageError(f"{flag}: {one_line(exc)}") from None
+
+
+def _check_scheduler(args) -> None:
+    """Refuse a malformed --scheduler, --scheduler-file or $DASK_SCHEDULER_ADDRESS before anything else runs.
+
+    Without either flag the library reads the environment variable itself,
+    so that its message names it.
+    """
+    from ..batch.distributed import scheduler_address
+
+    try:
+        scheduler_address(args.scheduler, scheduler_file=args.scheduler_file)
+    except (ValueError, OSError) as exc:
+        flag = _SCHEDULER_FLAGS.get(getattr(exc, "option", None))
         if flag is None:
             raise
         raise UsageError(f"{flag}: {one_line(exc)}") from None
@@ -184,6 +204,9 @@ def run_batch_mode(args, stderr) -> int:
     SIGINT and SIGTERM stop the batch with its finished rows kept (exit codes
     130 and 143); the previous signal handlers are restored at the end.
     """
+    cluster = cluster_address(args)
+    if cluster is not None:
+        _check_scheduler(args)
     weights, _ = weights_of(args)
     options = _batch_options(args, weights)
     frames = _batch_frames(args)
@@ -196,12 +219,11 @@ def run_batch_mode(args, stderr) -> int:
     except ValueError:  # not the main thread: signals stay as they are
         pass
     try:
-        cluster = cluster_address(args)
         if cluster is not None:
             from ..batch.distributed import DEFAULT_TIMEOUT, run_batch_on_cluster
             with warnings_as_lines(stderr):
                 summary = run_batch_on_cluster(frames, args.csv, options=options, progress=reporter,
-                                               address=cluster[0], scheduler_file=cluster[1],
+                                               address=args.scheduler, scheduler_file=args.scheduler_file,
                                                timeout=args.scheduler_timeout or DEFAULT_TIMEOUT,
                                                overwrite=args.overwrite)
         else:
