@@ -11,6 +11,7 @@ import subprocess
 import sys
 
 import h5py
+import imageio.v3 as iio
 import numpy as np
 import pytest
 
@@ -158,8 +159,6 @@ def test_nyu_labeled_reader_refuses_indirect_depths_and_raw_depths(tmp_path):
 
 def test_command_line_refuses_an_indirection_with_one_line_and_exit_2(indirect_files, tmp_path, capsys):
     rgb = tmp_path / "rgb.png"
-    import imageio.v3 as iio
-
     iio.imwrite(rgb, np.full(SHAPE + (3,), 100, np.uint8))
     code = main(["--image", str(rgb), "--depth", str(indirect_files["external link"]), "--out",
                  str(tmp_path / "out.npy")])

@@ -21,7 +21,8 @@ import sparsedepth.batch.distributed as dist
 from conftest import REPO, make_scene
 
 MALFORMED = ["", "tcp://[::1", "inproc://x", "foo://10.0.0.5:8786", "tcp://10.0.0.5", "tcp://10.0.0.5:99999",
-             "tcp://10.0.0.5:port", "tcp://10.0.0.5:²", "tcp://10.0.0.5:8786/path", " tcp://10.0.0.5:8786", "tcp://::1:8786"]
+             "tcp://10.0.0.5:port", "tcp://10.0.0.5:²", "tcp://10.0.0.5:8786/path", " tcp://10.0.0.5:8786",
+             "tcp://::1:8786"]
 
 
 @pytest.fixture
