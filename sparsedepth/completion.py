@@ -23,15 +23,16 @@ from .grid.operators import StencilOperator
 from .linalg.krylov import pcg_info
 from .priors import align_prior
 from .objective.objective import DEFAULT_L1_SMOOTHING, build_objective
-from .result import ClampWarning, CompletionResult
+from .result import ClampWarning, CompletionResult, RangeOutlierWarning
 from .solvers import SOLVERS, solve_scaled, check_solver_arguments, depth_scale
 from .solvers.common import Recorder, output
 from .solvers.quadratic import DEFAULT_DEPTH_RTOL
 from .objective.weights import (DEFAULT_WEIGHTS, DensitySchedule, Weights, check_weights, observed_fraction,
                                resolve_weights)
-from .uncertainty import MIN_OBSERVED, estimate_uncertainty, split_samples
+from .uncertainty import MIN_OBSERVED, check_uncertainty_shape, estimate_uncertainty, split_samples
 
-__all__ = ["complete_depth", "choose_solver", "depth_jump_factor", "QUALITIES", "fast_factor"]
+__all__ = ["complete_depth", "choose_solver", "depth_jump_factor", "range_outliers", "QUALITIES", "fast_factor",
+           "CLAMP_WARNING_SHARE"]
 
 #: The values of ``complete_depth``'s ``quality``.
 QUALITIES = ("default", "fast")
@@ -50,6 +51,12 @@ FAST_WEIGHTS = DEFAULT_WEIGHTS.replace(beta_local_linear=0.0, beta_image=0.00673
                                        fill_contrast=0.0)
 #: Relative moves the fast mode's clamp does not count: the rounding of its float32 sweeps.
 FLOAT32_ROUNDING = 1e-6
+#: The share of the pixels the range clamp must move for a :class:`~sparsedepth.ClampWarning`: fewer moved pixels
+#: are the ordinary overshoot of the smoothness terms near steep depth changes, counted in ``result.clamped`` only.
+CLAMP_WARNING_SHARE = 0.01
+#: The least factor beyond the observations' 1st-99th percentile range at which a sample is an outlier
+#: (:func:`range_outliers`).
+OUTLIER_FACTOR = 2.0
 
 
 def choose_solver(weights: Weights) -> str:
@@ -196,7 +203,10 @@ def complete_depth(
     Warns
     -----
     ClampWarning
-        When the clamp moved any pixel (the count is ``result.clamped``).
+        When the clamp moved at least :data:`CLAMP_WARNING_SHARE` (1 %) of
+        the pixels (the count is ``result.clamped``), or when observed depths
+        lie so far outside the others that they widen the clamp range
+        (:func:`range_outliers`).
 
     Notes
     -----
@@ -213,17 +223,26 @@ def complete_depth(
     the observations, down to 0 (the bound ``z >= 0``) near a steep change.
     With ``clip_to_observed=True`` every value is clamped to ``[min, max]``
     of the observed depth, which never produces 0 m pixels from positive
-    observations; the number of moved pixels is ``result.clamped`` and a
-    :class:`~sparsedepth.ClampWarning` is issued when it is not 0.
+    observations; the number of moved pixels is ``result.clamped``, and a
+    :class:`~sparsedepth.ClampWarning` is issued when it reaches
+    :data:`CLAMP_WARNING_SHARE` of the pixels (a few dozen pixels of
+    overshoot near steep changes are ordinary and not warned about).
+
+    The result is certified after the clamp: ``result.gap`` bounds ``F(depth)
+    − F*`` with ``F*`` the smallest ``F`` of a depth inside
+    ``result.depth_range``, ``result.solver_gap`` is the solver's own bound
+    before the clamp, and ``converged`` needs the solver's stopping rule and
+    ``gap <= gap_tol · max(F, 1e-7 F(0))`` (``gap_tol`` 1e-2 by default,
+    for every solver; see :class:`~sparsedepth.result.CompletionResult`).
 
     An outlier sample (say 65.5 m in a 1-4 m room) is kept as an
     observation: the data term pulls its neighbourhood toward it, so a
     blob of too-large depth surrounds it and the smoothness terms ring
     around it, undershooting below the other observations.  The clamp
     cannot remove the blob (the outlier widens the range to 65.5 m) but it
-    holds the undershoot at the smallest observation, and the warning
-    counts those pixels.  Remove outliers (or leave them out of ``mask``)
-    before completing.
+    holds the undershoot at the smallest observation.  Such a sample is
+    warned about (:func:`range_outliers`).  Remove outliers (or leave them
+    out of ``mask``) before completing.
 
     With ``prior``, let ``P = s · prior + t`` be the aligned prior.  The
     objective completes the residual ``r = z − P`` from ``r_obs = z_obs −
@@ -267,6 +286,9 @@ def complete_depth(
     weights = _weights_for(weights, sparse_depth, mask)
     name, tol, max_iter, options = _check_arguments(weights, solver, tol, max_iter, options, clip_to_observed)
     want_uncertainty = _check_uncertainty_arguments(uncertainty, max_uncertainty)
+    if want_uncertainty:
+        check_uncertainty_shape(np.shape(sparse_depth), name="max_uncertainty" if max_uncertainty is not None
+                                else "uncertainty")
     settings = dict(weights=weights, solver=name, tol=tol, max_iter=max_iter, options=options,
                     l1_smoothing=l1_smoothing, clip_to_observed=clip_to_observed)
     if prior is not None:
@@ -290,8 +312,13 @@ def _weights_for(weights, sparse_depth, mask) -> Weights:
 
 
 def _complete(image, sparse_depth, mask, *, weights, solver, tol, max_iter, callback, x0, l1_smoothing,
-              options, clip_to_observed) -> CompletionResult:
+              options, clip_to_observed, bounds=None, certify_result=True) -> CompletionResult:
     """One completion with checked arguments (``solver`` a name of :data:`SOLVERS`).
+
+    The depth is clamped to ``bounds`` (user units; floats or per-pixel arrays) when given, else to the range of
+    the observations (:func:`_depth_range`); the result's ``gap`` and ``converged`` are those of the clamped depth
+    (:func:`~sparsedepth.solvers.core.solve_scaled` with the bounds).  ``certify_result=False`` skips the
+    certificate (an intermediate completion: the uncertainty's halves).
 
     With ``weights.depth_jump > 0`` (and an image-weighted smoothness term) it solves twice: the second objective's
     pair weights are relaxed where the first solution jumps (:func:`depth_jump_factor`) and its solve starts from
@@ -299,20 +326,23 @@ def _complete(image, sparse_depth, mask, *, weights, solver, tol, max_iter, call
     """
     objective, coarse, scale, depth_range = _scaled_objective(image, sparse_depth, mask, weights, l1_smoothing,
                                                               clip_to_observed)
+    box = depth_range if bounds is None else tuple(np.ravel(b) if np.ndim(b) else b for b in bounds)
     start = _starting_point(x0, coarse, objective.shape, scale)
-    out, runtime = solve_scaled(objective, start, scale=scale, solver=solver, tol=tol, max_iter=max_iter,
-                                 callback=callback, options=options)
+    jump = weights.depth_jump > 0 and (weights.beta_image > 0 or weights.beta_second_image > 0)
+    solve = dict(solver=solver, tol=tol, max_iter=max_iter, callback=callback, options=options)
+    out, runtime = solve_scaled(objective, start, scale=scale, certify_result=certify_result and not jump,
+                                bounds=None if jump else _in_units(box, scale), **solve)
     iterations = out.iterations
-    if weights.depth_jump > 0 and (weights.beta_image > 0 or weights.beta_second_image > 0):
-        first = np.clip(out.z, *depth_range)
+    if jump:
+        first = np.clip(out.z, *box)
         factor = depth_jump_factor(first.reshape(objective.shape), weights.depth_jump)
         objective, _, scale, _ = _scaled_objective(image, sparse_depth, mask, weights, l1_smoothing,
                                                    clip_to_observed, pair_factor=factor)
-        out, second = solve_scaled(objective, np.maximum(out.z, 0.0) / scale, scale=scale, solver=solver, tol=tol,
-                                   max_iter=max_iter, callback=callback, options=options)
+        out, second = solve_scaled(objective, np.maximum(out.z, 0.0) / scale, scale=scale,
+                                   certify_result=certify_result, bounds=_in_units(box, scale), **solve)
         runtime += second
         iterations += out.iterations
-    z, clamped = _clamp(out.z, depth_range, clip_to_observed)  # in the user's units
+    z, clamped = _clamp(out.z, box, clip_to_observed or bounds is not None)  # in the user's units
     scale2 = scale * scale
     terms = {key: value * scale2 for key, value in objective.term_values(z / scale).items()}
     return CompletionResult(
@@ -329,26 +359,42 @@ def _complete(image, sparse_depth, mask, *, weights, solver, tol, max_iter, call
         runtime=runtime,
         depth_range=depth_range,
         gap=out.gap,
+        solver_gap=out.solver_gap,
+        gap_proven=out.gap_proven,
     )
 
 
+def _in_units(box, scale):
+    """``box`` (user units, floats or per-pixel arrays) divided by ``scale``, flattened."""
+    return tuple(b / scale if np.ndim(b) == 0 else np.ravel(b) / scale for b in box)
+
+
 def _complete_with_prior(image, sparse_depth, mask, prior, alignment, *, x0, callback, settings):
-    """:func:`complete_depth` with ``prior``: complete the shifted residual ``z − P + c``, add ``P − c`` back, clamp."""
+    """:func:`complete_depth` with ``prior``: complete the shifted residual ``z − P + c``, add ``P − c`` back.
+
+    The residual is clamped to ``[low − P + c, high − P + c]`` per pixel, so that the depth ``z = P − c + r``
+    lies in the range ``[low, high]`` of the observations: the objective, terms and gap are those of the
+    residual of the depth returned.
+    """
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     aligned, _, _ = align_prior(prior, depth, observed, alignment=alignment)
     residual = depth[observed] - aligned[observed]
     values = depth[observed]
-    depth_range = _depth_range(values, settings["clip_to_observed"])
+    clip_to_observed = settings["clip_to_observed"]
+    depth_range = _depth_range(values, clip_to_observed)
     # c keeps every residual sample >= the median depth: positive, and of the depth's magnitude for the scaling
     shift = float(np.median(values)) + max(0.0, -float(residual.min()))
     shifted = np.zeros_like(depth)
     shifted[observed] = residual + shift
     start = None if x0 is None else _prior_start(x0, aligned, shift)
+    offset = shift - aligned  # r = z + offset
+    bounds = (depth_range[0] + offset, depth_range[1] + offset)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ClampWarning)  # the residual's clamp is not the user's result
-        result = _complete(image, shifted, observed, x0=start, callback=callback, **settings)
-    z, clamped = _clamp((result.depth + aligned - shift).ravel(), depth_range, settings["clip_to_observed"])
-    return dataclasses.replace(result, depth=z.reshape(depth.shape), clamped=clamped, depth_range=depth_range)
+        warnings.simplefilter("ignore", ClampWarning)  # the residual's clamp is the user's: warned about below
+        result = _complete(image, shifted, observed, x0=start, callback=callback, bounds=bounds, **settings)
+    z = np.clip(result.depth - offset, *depth_range)  # moves rounding only: the residual is in its bounds
+    _warn_clamped(result.clamped, z.size, depth_range, clip_to_observed)
+    return dataclasses.replace(result, depth=z, depth_range=depth_range)
 
 
 def _prior_start(x0, aligned, shift):
@@ -424,7 +470,7 @@ def _with_uncertainty(result, image, sparse_depth, mask, settings, max_uncertain
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ClampWarning)  # the halves' clamps are not the user's result
         halves = [_complete(image, np.where(half, depth, np.nan), half, x0=result.depth, callback=None,
-                            **settings).depth for half in (half_a, half_b)]
+                            certify_result=False, **settings).depth for half in (half_a, half_b)]
     sigma, calibration = estimate_uncertainty(result.depth, *halves, depth, half_a, half_b, image=image,
                                               precision=_solve_precision(settings["options"], depth[observed]))
     dense, removed = result.depth, 0
@@ -507,35 +553,85 @@ def _checked_x0(x0, shape):
 
 
 def _depth_range(observed_values, clip_to_observed):
-    """The clamp range in the user's units: ``[min, max]`` of the observations, or ``[0, inf)`` without the clamp."""
+    """The clamp range in the user's units: ``[min, max]`` of the observations, or ``[0, inf)`` without the clamp.
+
+    With the clamp, observations that widen it as outliers would are warned about (:func:`range_outliers`).
+    """
     if clip_to_observed:
-        return float(observed_values.min()), float(observed_values.max())
+        low, high = float(observed_values.min()), float(observed_values.max())
+        outliers = range_outliers(observed_values)
+        if outliers:
+            warnings.warn(
+                f"complete_depth: {outliers} observed depth value(s) lie far outside the other observations "
+                f"(the range [{low:g}, {high:g}] the depth is clamped to includes them); an outlier pulls its "
+                "neighbourhood toward it: remove it from mask if it is not a real measurement", RangeOutlierWarning,
+                stacklevel=_user_stacklevel())
+        return low, high
     return 0.0, np.inf
 
 
-def _clamp(z, depth_range, clip_to_observed, rounding=1e-9):
-    """``(clip(z, *depth_range), clamped)``, warning with a :class:`ClampWarning` when ``clamped`` is not 0.
+def range_outliers(values) -> int:
+    """The number of observed depths that widen the range as outliers.
 
-    With ``clip_to_observed``, moves of rounding size (up to ``rounding``
-    times the upper end: a flat input whose solution is the observed value
-    to 1e-15; 1e-6 for the float32 sweeps of the fast mode) are not
-    counted; without it the range is ``[0, inf)`` and the pixels at 0 are
-    counted.
+    A value is an outlier when it lies beyond the 1st-99th percentile range
+    ``[q1, q99]`` of ``values`` by more, in log-depth, than the log-width of
+    that range and than a factor of :data:`OUTLIER_FACTOR`:
+    ``log(v / q99) > max(log(q99 / q1), log 2)`` above, the same below.
+    A 65.5 m reading among 1-4 m ones is one; 100 m among 5-85 m LiDAR
+    returns is not.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    values = values[values > 0]
+    if values.size < 2:
+        return 0
+    q1, q99 = np.percentile(values, [1.0, 99.0])
+    margin = max(math.log(q99 / q1), math.log(OUTLIER_FACTOR))
+    return int(np.count_nonzero((values > q99 * math.exp(margin)) | (values < q1 * math.exp(-margin))))
+
+
+def _user_stacklevel() -> int:
+    """The ``stacklevel`` of a warning that points at the first frame outside the package (the user's call)."""
+    import sys
+
+    frame, level = sys._getframe(1), 1
+    package = __name__.rsplit(".", 1)[0]
+    while frame is not None and frame.f_globals.get("__name__", "").startswith(package):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+def _clamp(z, depth_range, clip_to_observed, rounding=1e-9):
+    """``(clip(z, *depth_range), clamped)``, warning with a :class:`ClampWarning` when many pixels moved.
+
+    ``depth_range`` holds floats or per-pixel arrays.  With
+    ``clip_to_observed``, moves of rounding size (up to ``rounding`` times
+    the upper end: a flat input whose solution is the observed value to
+    1e-15; 1e-6 for the float32 sweeps of the fast mode) are not counted;
+    without it the range is ``[0, inf)`` and the pixels at 0 are counted.
+    The warning (:func:`_warn_clamped`) needs :data:`CLAMP_WARNING_SHARE`
+    of the pixels.
     """
     low, high = depth_range
     if clip_to_observed:
-        slack = rounding * high
+        slack = rounding * np.max(np.abs(high))
         clamped = int(np.count_nonzero((z < low - slack) | (z > high + slack)))
     else:
         clamped = int(np.count_nonzero(z <= 0))
     z = np.clip(z, low, high)
-    if clamped:
-        warnings.warn(
-            f"complete_depth: {clamped} of {z.size} pixels were outside the depth range "
-            f"[{low:g}, {high:g}] and were clamped to it (result.clamped, result.depth_range)"
-            + ("" if clip_to_observed else "; clip_to_observed=False: they are held at the bound 0"),
-            ClampWarning, stacklevel=4)
+    _warn_clamped(clamped, z.size, depth_range, clip_to_observed)
     return z, clamped
+
+
+def _warn_clamped(clamped, size, depth_range, clip_to_observed):
+    """A :class:`ClampWarning` when ``clamped`` is at least :data:`CLAMP_WARNING_SHARE` of ``size`` pixels."""
+    if clamped < CLAMP_WARNING_SHARE * size:
+        return
+    low, high = (float(np.min(b)) if np.ndim(b) else float(b) for b in depth_range)
+    warnings.warn(
+        f"complete_depth: {clamped} of {size} pixels ({clamped / size:.1%}) were outside the depth range "
+        f"[{low:g}, {high:g}] and were clamped to it (result.clamped, result.depth_range)"
+        + ("" if clip_to_observed else "; clip_to_observed=False: they are held at the bound 0"),
+        ClampWarning, stacklevel=_user_stacklevel())
 
 
 def fast_factor(observed_fraction: float) -> int:

@@ -12,7 +12,8 @@ import numpy as np
 
 from .objective.weights import Weights
 
-__all__ = ["IterationRecord", "SolverState", "UncertaintyCalibration", "CompletionResult", "ClampWarning"]
+__all__ = ["IterationRecord", "SolverState", "UncertaintyCalibration", "CompletionResult", "ClampWarning",
+           "RangeOutlierWarning"]
 
 
 class ClampWarning(UserWarning):
@@ -20,6 +21,13 @@ class ClampWarning(UserWarning):
 
     ``CompletionResult.clamped`` holds the count and ``CompletionResult.depth_range``
     the range; filter it with ``warnings.filterwarnings("ignore", category=sparsedepth.ClampWarning)``.
+    """
+
+
+class RangeOutlierWarning(ClampWarning):
+    """A :class:`ClampWarning` about observed depths so far outside the others that they widen the clamp range.
+
+    See :func:`sparsedepth.completion.range_outliers` for the rule.
     """
 
 
@@ -104,7 +112,14 @@ class CompletionResult:
         Exact value of each named term at ``depth`` (they sum to ``objective``).
     iterations : int
     converged : bool
-        True when the solver's stopping rule was met (see the solver's notes).
+        True when the solver's stopping rule was met (named in
+        :attr:`message`) and :attr:`gap` is at most ``gap_tol · max(F,
+        floor)`` (solver option ``gap_tol``, default 1e-2 for every solver;
+        ``floor = 1e-7 F(0)``, the objective of the all-zero depth).  It is
+        about :attr:`depth` as returned, after the range clamp.  Where the
+        gap cannot be computed (NaN; robust edge penalties, a singular
+        quadratic part, the fast mode) it is the solver's rule alone, and
+        :attr:`message` says so.
     message : str
     clamped : int
         Number of pixels the range clamp moved: the solver's value was outside
@@ -123,19 +138,26 @@ class CompletionResult:
         ``(low, high)`` the depth was clamped to: the smallest and largest
         observed depth with ``clip_to_observed=True``, else ``(0, inf)``.
     gap : float
-        Duality gap: an upper bound on ``F(z) − F*`` in the units of
-        :attr:`objective`, for the solver's point ``z`` before the range clamp
-        (the same point when :attr:`clamped` is 0) and ``F*`` the minimum
-        over ``z >= 0`` (over all ``z`` for the γ = 0 solvers ``direct``,
-        ``cg`` and ``amg``); see :func:`sparsedepth.solvers.certificate.duality_gap`.
-        A proven bound when the quadratic part has a positive lower bound on
-        its curvature (``delta > 0``, or every pixel observed); otherwise
-        (``delta = 0``) the error term of the inexact linear solve is left
-        out and it is an estimate accurate to that solve's tolerance
-        (relative residual 1e-10).  NaN when it cannot be computed: the
-        quadratic part's matrix is singular (``delta = 0`` with no quadratic
-        smoothness term).  ``converged`` requires ``gap <= gap_tol ·
-        max(F, 1e-7 F(0))`` (solver option ``gap_tol``).
+        Duality gap of the returned :attr:`depth`: an upper bound on
+        ``F(depth) − F*`` in the units of :attr:`objective`, with ``F*`` the
+        smallest ``F`` of any depth inside :attr:`depth_range` (with
+        ``clip_to_observed=False``: of any depth ``>= 0``).  Weak duality
+        (:func:`sparsedepth.solvers.certificate.duality_gap`); proven when
+        :attr:`gap_proven`.  NaN when it cannot be computed (the quadratic
+        part's matrix is singular: ``delta = 0`` with no quadratic
+        smoothness; robust edge penalties; the fast mode).
+    solver_gap : float
+        The same bound for the solver's own point before the range clamp, over
+        the solver's own problem (``z >= 0``; any ``z`` for the γ = 0 solvers
+        ``direct``, ``cg``, ``amg``).  Equal to :attr:`gap` when the clamp
+        moved no pixel; when it moved some, the two tell apart what the solver
+        left and what the clamp added.
+    gap_proven : bool
+        True when :attr:`gap` is a proven bound: the quadratic part has a
+        positive lower bound on its curvature (``delta > 0``, or every pixel
+        observed).  False (``delta = 0``): the error term of the inexact
+        linear solve is left out and the gap is an estimate, accurate to that
+        solve's tolerance; :attr:`message` says so too.
     uncertainty : ndarray, (H, W), or None
         With ``uncertainty=True``: a standard-deviation-like estimate of each
         pixel's error, in the units of :attr:`depth`
@@ -160,6 +182,8 @@ class CompletionResult:
     runtime: float = 0.0
     depth_range: tuple = (0.0, float("inf"))
     gap: float = float("nan")
+    solver_gap: float = float("nan")
+    gap_proven: bool = True
     uncertainty: Optional[np.ndarray] = field(default=None, repr=False)
     uncertainty_calibration: Optional[UncertaintyCalibration] = None
     removed: int = 0

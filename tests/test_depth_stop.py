@@ -16,7 +16,7 @@ from sparsedepth.completion import _scaled_objective
 from sparsedepth.linalg import pcg, pcg_info
 from sparsedepth.linalg.preconditioners import make_preconditioner
 from sparsedepth.solvers import check_solver_arguments, depth_scale
-from sparsedepth.solvers.options import AmgOptions, CgOptions
+from sparsedepth.solvers.options import DEFAULT_GAP_TOL, AmgOptions, CgOptions
 from sparsedepth.solvers.quadratic import DEFAULT_DEPTH_RTOL, RemainingChange
 
 from conftest import make_problem
@@ -181,7 +181,7 @@ def test_the_larger_of_the_two_tolerances_counts(frame):
 def test_an_explicit_gap_tol_still_vetoes_converged(frame):
     image, sparse, mask, _ = frame
     res = sd.complete_depth(image, sparse, mask, options={"depth_rtol": 1e-1, "gap_tol": 1e-12})
-    assert not res.converged and "NOT converged: duality gap" in res.message
+    assert not res.converged and "NOT converged: > gap_tol 1.0e-12" in res.message
 
 
 # ----------------------------------------------------------------------------- the options
@@ -198,9 +198,9 @@ def test_depth_options_are_checked(cls):
         check_solver_arguments(solver, options={"depth_rtol": "1e-3"})
     with pytest.raises(ValueError, match="unknown option 'depth_tol'.*depth_rtol=None, depth_atol=None"):
         check_solver_arguments(solver, options={"depth_tol": 1e-3})
-    assert cls().in_depth_units(4.0).gap_tol == 1e-6
+    assert cls().in_depth_units(4.0).gap_tol == DEFAULT_GAP_TOL
     scaled = cls(depth_atol=2.0).in_depth_units(4.0)
-    assert scaled.depth_atol == 0.5 and scaled.gap_tol == math.inf
+    assert scaled.depth_atol == 0.5 and scaled.gap_tol == DEFAULT_GAP_TOL  # the depth rule keeps the gap test
     assert cls(depth_rtol=1e-3, gap_tol=1e-5).in_depth_units(4.0).gap_tol == 1e-5
 
 

@@ -10,7 +10,7 @@ import contextlib
 import warnings
 
 from ..batch.worker import one_line
-from ..result import ClampWarning
+from ..result import ClampWarning, RangeOutlierWarning
 
 __all__ = ["LIBRARY_ERRORS", "UsageError", "one_line", "warnings_as_lines"]
 
@@ -32,6 +32,6 @@ def warnings_as_lines(stream):
         yield caught
     for record in caught:
         text = one_line(record.message)
-        if issubclass(record.category, ClampWarning):
+        if issubclass(record.category, ClampWarning) and not issubclass(record.category, RangeOutlierWarning):
             text += "; --no-clip keeps them"
         print(f"warning: {text}", file=stream)

@@ -97,6 +97,9 @@ class Objective:
         self._normal = None
         self._last_values = None  # (digest of z, term values) of the last term_values call
         self._last_system = None  # (digest of z, F) of the last system_value call with A assembled
+        #: A preconditioner of :meth:`normal_equations`' ``A`` that a solve left for later solves with ``A`` (the
+        #: certificate's): the γ = 0 solvers' multigrid hierarchy; None when none is kept.
+        self.preconditioner = None
 
     # -- structure ---------------------------------------------------------
     @property
@@ -294,6 +297,7 @@ class Objective:
         """
         self._normal = None
         self._last_system = None
+        self.preconditioner = None
 
     def normal_stencil(self):
         """Stencil of the quadratic part's matrix ``A`` (see :mod:`sparsedepth.grid.stencil`).

@@ -40,6 +40,11 @@ DUAL_FIT_STEPS = 30
 RHO_REFERENCE_PIXELS = 640 * 480
 
 
+
+def target_gap(options) -> float:
+    """The relative duality gap the solver works to: the smaller of ``target_gap`` and ``gap_tol``."""
+    return min(options.target_gap, options.gap_tol)
+
 def default_rho(objective, max_weight, depth_scale):
     """ADMM penalty ``ρ = 1.5 max(α, 300 max_k c_k / s) · max(1, √(N / N₀))``.
 
@@ -148,8 +153,9 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     (:class:`~sparsedepth.solvers.certificate.Certificate`; its dual point on
     the rows with ``|(Kz)_k| <=`` :data:`TIE_BAND` is ``ρλ`` corrected by
     :data:`DUAL_FIT_STEPS` CG steps of a least-squares fit on those rows) is
-    at most ``gap_tol · max(F, 1e-7 F(0))`` (option ``gap_tol``, default
-    1e-6).  The agreement alone is a heuristic (two polishes can land on the
+    at most ``target · max(F, 1e-7 F(0))``, ``target`` the smaller of the
+    options ``target_gap`` (default 1e-6) and ``gap_tol``.  The agreement
+    alone is a heuristic (two polishes can land on the
     same wrong tied set); when the certificate
     refuses it, ADMM goes on iterating and polishing until it passes or
     ``max_iter``, and the message says so.  The best polished point is returned if it is below the
@@ -157,7 +163,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     ``polish=False``, or when the reduced model is singular (a component
     without any quadratic term), it is plain ADMM stopped by
     ``r_k, s_k <= tol``, converged when its duality gap (tied rows: ``u =
-    0``) passes ``gap_tol`` too.  Where the gap cannot be computed (NaN:
+    0``) passes the target too.  Where the gap cannot be computed (NaN:
     the quadratic part's matrix is singular) the solver's own rules decide.  The result carries the gap of the
     returned point.
 
@@ -169,7 +175,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     ``2^(−pm)`` for differences of order ``m`` in a term of power ``p``) is
     solved first, by this solver from the block means of the start,
     recursively, with ``ρ_c = ρ / 2`` (:func:`default_rho` grows with the side
-    length), ``check_rtol`` loosened by ``coarse_gap_tol / gap_tol`` (default
+    length), ``check_rtol`` loosened by ``coarse_gap_tol / target`` (default
     ``coarse_gap_tol`` 1e-4) and no certificate: a coarse run stops when two
     polishes agree.  This grid's run
     then starts from ``z = P z_c`` (bilinear,
@@ -245,7 +251,7 @@ def _coarse_start(objective, z, options, max_iter, tol):
     coarse problem: :func:`~sparsedepth.objective.coarsen.coarsen_objective`).
     The coarse problem is solved by :func:`solve_admm`'s run (itself started
     from a coarser grid when it is large enough) from the block means of
-    ``z``, with ``gap_tol = coarse_gap_tol``, ``check_rtol`` loosened in
+    ``z``, with ``target_gap = coarse_gap_tol``, ``check_rtol`` loosened in
     the same ratio and half this grid's ``ρ``; its solution is interpolated bilinearly
     (:func:`~sparsedepth.grid.resample.upsample_bilinear`) and its dual
     edge field ``σ = clip(ρλ / c, −1, 1)`` by
@@ -261,8 +267,9 @@ def _coarse_start(objective, z, options, max_iter, tol):
         return None
     shape, cshape = objective.shape, coarse.shape
     z_coarse = block_mean(np.maximum(z, 0.0).reshape(shape), COARSENING).ravel()
-    loosen = max(1.0, options.coarse_gap_tol / options.gap_tol)
-    sub_options = replace(options, gap_tol=options.coarse_gap_tol, check_rtol=options.check_rtol * loosen)
+    loosen = max(1.0, options.coarse_gap_tol / target_gap(options))
+    sub_options = replace(options, target_gap=options.coarse_gap_tol,
+                          gap_tol=max(options.gap_tol, options.coarse_gap_tol), check_rtol=options.check_rtol * loosen)
     sub_options = replace(sub_options, rho=_penalty(objective, l1, z, options) / COARSENING)
     del l1
     run = _new_run(coarse, z_coarse, sub_options, max_iter, tol)
@@ -453,8 +460,8 @@ class _AdmmRun:
         return self.certificate.gap(z, p=np.multiply(self.lam, self.rho, out=self.spare), overwrite_p=True, **kwargs)
 
     def stop_on_residuals(self, tol):
-        """Plain ADMM's stop: converged when the duality gap (tied rows: ``u = 0``) passes ``gap_tol`` too."""
-        objective, gap_tol = self.objective, self.options.gap_tol
+        """Plain ADMM's stop: converged when the duality gap (tied rows: ``u = 0``) passes the target too."""
+        objective, gap_tol = self.objective, target_gap(self.options)
         self.converged = True
         self.message = (f"primal {self.r_norm:.1e} and dual {self.s_norm:.1e} residuals <= tol {tol:.1e} "
                         f"(rho = {self.rho:.3g})")
@@ -465,7 +472,7 @@ class _AdmmRun:
         if not (np.isnan(gap) or gap <= gap_threshold(objective, objective.value(z_stop), gap_tol)):
             self.converged = False
             self.message += (f"; NOT converged: duality gap {relative(gap, objective.value(z_stop)):.1e} "
-                             f"(relative) > gap_tol {gap_tol:.1e}")
+                             f"(relative) > target {gap_tol:.1e}")
 
     def polish_and_check(self, k):
         """Polish at iteration ``k`` and schedule the next polish.
@@ -508,7 +515,7 @@ class _AdmmRun:
     def _certify_agreement(self, k, F_prev, F_pol):
         """The polishes agree: the duality gap of the best polished point decides (True: converged)."""
         objective, options, best = self.objective, self.options, self.best
-        gap_tol = options.gap_tol
+        gap_tol = target_gap(options)
         gap = self._gap(best[1], eps=TIE_BAND)
         self.certified = (best[1], gap)
         if np.isnan(gap) or gap <= gap_threshold(objective, best[0], gap_tol):
@@ -516,14 +523,14 @@ class _AdmmRun:
             self.message = (f"active-set polish at iteration {k} changed the best polished F by "
                             f"{relative(F_prev - F_pol, F_pol):.1e} (relative), |.| <= check_rtol "
                             f"{options.check_rtol:.1e} (or by {abs(F_prev - F_pol):.1e} <= floor {self.F_floor:.1e}), "
-                            f"and its duality gap {relative(gap, best[0]):.1e} (relative) <= gap_tol {gap_tol:.1e} "
+                            f"and its duality gap {relative(gap, best[0]):.1e} (relative) <= target {gap_tol:.1e} "
                             f"(rho = {self.rho:.3g})")
             if self.refused:
                 self.message += f"; the certificate had refused {self.refused} earlier agreement(s)"
             return True
         self.refused += 1
         self.message = (f"reached max_iter = {self.max_iter}; the polishes agreed {self.refused} time(s) but the "
-                        f"duality gap {relative(gap, best[0]):.1e} (relative) stayed > gap_tol {gap_tol:.1e}")
+                        f"duality gap {relative(gap, best[0]):.1e} (relative) stayed > target {gap_tol:.1e}")
         return False
 
     def adapt_rho(self, k):

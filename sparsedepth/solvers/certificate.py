@@ -49,7 +49,16 @@ class Certificate:
     nonnegative : bool
         True when the problem is ``min_{z >= 0} F`` (the L1 solvers, L-BFGS-B
         and Adam), False for the unconstrained quadratic problem of the
-        γ = 0 solvers ``direct``, ``cg`` and ``amg``.
+        γ = 0 solvers ``direct``, ``cg`` and ``amg``.  Ignored when
+        ``bounds`` is given.
+    bounds : (float or ndarray, float or ndarray), optional
+        ``(low, high)``: the problem is ``min_{low <= z <= high} F``
+        (``high`` may be ``inf``, ``low`` ``-inf``; arrays of shape (N,) are
+        per-pixel bounds); the box of a range clamp.  Default: ``(0, inf)``
+        when ``nonnegative``, else no bound.
+    preconditioner : callable or LinearOperator, optional
+        A preconditioner of ``A`` to use instead of building one; default the
+        objective's kept one (:attr:`Objective.preconditioner`), if any.
     rtol : float
         Relative residual of the PCG solve with ``A``.
     fit_steps : int
@@ -82,24 +91,34 @@ class Certificate:
         left out and the gap is an estimate (accurate to the PCG tolerance).
     """
 
-    def __init__(self, objective, *, nonnegative=True, rtol=1e-10, fit_steps=20, fit_max_iter=100,
-                 fit_correction=False, low_memory=False):
+    def __init__(self, objective, *, nonnegative=True, bounds=None, rtol=1e-10, fit_steps=20, fit_max_iter=100,
+                 fit_correction=False, low_memory=False, preconditioner=None):
         self.objective = objective
         self.low_memory = bool(low_memory)
         self.fit_correction = bool(fit_correction)
-        self.nonnegative = bool(nonnegative)
+        if bounds is None:
+            bounds = (0.0, np.inf) if nonnegative else (-np.inf, np.inf)
+        self.low, self.high = (b if np.ndim(b) == 0 else np.asarray(b, dtype=np.float64).ravel()
+                               for b in (float(bounds[0]) if np.ndim(bounds[0]) == 0 else bounds[0],
+                                         float(bounds[1]) if np.ndim(bounds[1]) == 0 else bounds[1]))
+        if not np.all(self.low <= self.high):
+            raise ValueError("bounds must have low <= high everywhere")
+        self.nonnegative = bool(np.all(self.low >= 0.0))
         self.rtol = float(rtol)
         self.fit_steps = int(fit_steps)
         self.fit_max_iter = int(fit_max_iter)
         self.l1 = StackedL1(objective) if objective.has_l1 else None
         self.curvature = curvature_lower_bound(objective)
         self.proven = self.curvature > 0
-        self._precondition = None
+        self._precondition = preconditioner
         self._K_norm_sq = None
 
     def _preconditioner(self, A):
         """The preconditioner of ``A``: kept for the next call, or (``low_memory``) a new one each time."""
         if self._precondition is not None:
+            return self._precondition
+        if not self.low_memory and self.objective.preconditioner is not None:
+            self._precondition = self.objective.preconditioner
             return self._precondition
         try:
             if self.low_memory:
@@ -267,7 +286,9 @@ class Certificate:
         return q
 
     def gap(self, z, *, p=None, eps=0.0, tied=None, overwrite_p=False):
-        """:func:`duality_gap` of ``z`` (solver units); NaN when the solve with ``A`` fails.
+        """:func:`duality_gap` of ``z`` (solver units) for the problem over the box; NaN when the solve with ``A`` fails.
+
+        ``z`` is clipped to the box first.
 
         ``p``, ``eps`` and ``tied``: see :meth:`dual_point`.  With
         ``overwrite_p`` the dual point is formed in ``p``'s memory (a float64
@@ -277,8 +298,8 @@ class Certificate:
         the edge vectors and the multigrid hierarchy are not held together.
         """
         z = np.asarray(z, dtype=np.float64).ravel()
-        if self.nonnegative and np.any(z < 0.0):
-            z = np.maximum(z, 0.0)
+        if np.any(z < self.low) or np.any(z > self.high):
+            z = np.clip(z, self.low, self.high)
         g = self._quadratic_gradient(z)
         first = 0.0
         r = g
@@ -290,11 +311,7 @@ class Certificate:
             del q
             r += g
         del g
-        if self.nonnegative:
-            mu = np.where(z <= 0.0, np.maximum(r, 0.0), 0.0)
-            r -= mu
-            first += max(dot(mu, z), 0.0)  # 0 up to rounding: mu is nonzero where z = 0 only
-            del mu
+        first += self._bound_multipliers(z, r)
         del z
         if not np.all(np.isfinite(r)):
             return float("nan")
@@ -315,6 +332,38 @@ class Certificate:
             return float("nan")
         return first + 0.25 * max(quad, 0.0)
 
+    def _bound_multipliers(self, z, r):
+        """Subtract the bounds' multipliers from ``r`` in place; returns their complementarity term (0 up to rounding).
+
+        ``μ_low = max(r, 0)`` where ``z`` is at ``low`` and ``μ_high = max(−r, 0)`` where it is at ``high``
+        (0 elsewhere): ``r − μ_low + μ_high`` is the gradient of the Lagrangian, and the term is ``μ_lowᵀ(z −
+        low) + μ_highᵀ(high − z)``.
+        """
+        term = 0.0
+        if np.any(np.isfinite(self.low)):
+            mu = np.where(z <= self.low, np.maximum(r, 0.0), 0.0)
+            r -= mu
+            term += max(dot(mu, np.where(mu > 0, z - self.low, 0.0)), 0.0)
+        if np.any(np.isfinite(self.high)):
+            mu = np.where(z >= self.high, np.maximum(-r, 0.0), 0.0)
+            r += mu
+            term += max(dot(mu, np.where(mu > 0, self.high - z, 0.0)), 0.0)
+        return term
+
+    def cheap_gap(self, z):
+        """A proven bound from one product: :meth:`gap` with ``A⁻¹`` bounded by ``1 / λ_min(A)``; ``inf`` without one.
+
+        For the quadratic objective (no L1 term): ``F(z) − F* <= (complementarity) + ¼ ‖r‖² / λ_min(A)`` with
+        ``r`` the Lagrangian's gradient (:meth:`gap`, Notes of :func:`duality_gap`) and ``λ_min(A) >=``
+        :func:`curvature_lower_bound`.  ``inf`` when the objective has L1 terms or no curvature bound.
+        """
+        if self.l1 is not None or not self.proven:
+            return float("inf")
+        z = np.clip(np.asarray(z, dtype=np.float64).ravel(), self.low, self.high)
+        r = self._quadratic_gradient(z)
+        first = self._bound_multipliers(z, r)
+        return first + 0.25 * dot(r, r) / self.curvature
+
     def _complementarity(self, z, q):
         """``Σ_k max(c_k |t_k| − q_k t_k, 0)`` with ``t = K z``, chunk by chunk."""
         t = self.l1.apply(z)
@@ -331,7 +380,7 @@ def _norm_sq(v):
     return dot(v, v)
 
 
-def duality_gap(objective, z, *, p=None, eps=0.0, nonnegative=True, rtol=1e-10, fit_steps=50):
+def duality_gap(objective, z, *, p=None, eps=0.0, nonnegative=True, bounds=None, rtol=1e-10, fit_steps=50):
     r"""A proven upper bound on ``F(z) − F*`` by weak duality.
 
     Parameters
@@ -347,6 +396,8 @@ def duality_gap(objective, z, *, p=None, eps=0.0, nonnegative=True, rtol=1e-10, 
         t_k / max(|t_k|, eps)`` (the smoothed solvers' gradient).
     nonnegative : bool
         ``F* = min_{z >= 0} F`` (True) or the unconstrained minimum (False).
+    bounds : (float or ndarray, float or ndarray), optional
+        ``F* = min_{low <= z <= high} F`` instead (see :class:`Certificate`).
     rtol : float
         Relative residual of the PCG solve with ``A``.
     fit_steps : int
@@ -371,12 +422,16 @@ def duality_gap(objective, z, *, p=None, eps=0.0, nonnegative=True, rtol=1e-10, 
 
         F(z) − F* <= Σ_k (c_k |t_k| − p_k t_k) + μᵀz + ¼ rᵀA⁻¹r.
 
-    ``μ_i = max(r_i, 0)`` where ``z_i = 0`` (0 elsewhere).  The solve is
+    ``μ_i = max(r_i, 0)`` where ``z_i = 0`` (0 elsewhere).  Over a box
+    ``low <= z <= high`` the same holds with ``μ_low = max(r, 0)`` where
+    ``z`` is at ``low``, ``μ_high = max(−r, 0)`` where it is at ``high``
+    (``L`` gains ``−μ_lowᵀ(z' − low) + μ_highᵀ(z' − high)``, at most 0 in
+    the box) and ``r = 2(Az − b) + Kᵀp − μ_low + μ_high``.  The solve is
     inexact: with ``y`` from multigrid-preconditioned CG and ``e = r − Ay``,
     ``rᵀA⁻¹r = 2yᵀr − yᵀAy + eᵀA⁻¹e`` and ``eᵀA⁻¹e <= ‖e‖² / λ_min(A)``,
     ``λ_min(A) >=`` :func:`curvature_lower_bound` (``δ`` for the prior
     ``δ‖z − z_c‖²``).  For γ = 0 (no L1 term) and ``nonnegative=False``
     this is the quadratic's own gap ``¼ rᵀA⁻¹r``.
     """
-    cert = Certificate(objective, nonnegative=nonnegative, rtol=rtol, fit_steps=fit_steps)
+    cert = Certificate(objective, nonnegative=nonnegative, bounds=bounds, rtol=rtol, fit_steps=fit_steps)
     return cert.gap(z, p=p, eps=eps)

@@ -39,7 +39,15 @@ class SolverOutput:
     history : tuple of IterationRecord
         One record per recorded iteration, the start first.
     gap : float
-        The duality gap of ``z`` (NaN when not computed).
+        The duality gap of ``z`` (NaN when not computed); after
+        :func:`~sparsedepth.solvers.core.solve_scaled` with ``bounds``, the
+        gap of ``z`` clipped to the bounds, over the box.
+    solver_gap : float
+        The gap of the solver's own point for the solver's own problem (the
+        same as ``gap`` when the bounds moved nothing).
+    gap_proven : bool
+        False when the gap is an estimate: the quadratic part has no positive
+        curvature bound (``delta = 0`` and not every pixel observed).
     """
 
     z: np.ndarray
@@ -48,6 +56,8 @@ class SolverOutput:
     message: str
     history: tuple
     gap: float = float("nan")
+    solver_gap: float = float("nan")
+    gap_proven: bool = True
 
 
 class CallbackStop(Exception):

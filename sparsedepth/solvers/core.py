@@ -24,7 +24,7 @@ from .common import CallbackStop, Recorder, SolverOutput, gap_threshold, refuse_
 from .registry import DEFAULT_MAX_ITER, DEFAULT_TOL, REGISTRY, SOLVER_OPTIONS, SOLVERS
 
 __all__ = ["solve", "solve_scaled", "check_solver_arguments", "depth_scale", "scaled_objective", "certify",
-           "start_kkt_residual", "SOLVERS", "SOLVER_OPTIONS"]
+           "start_kkt_residual", "SOLVERS", "SOLVER_OPTIONS", "QUADRATIC_CERTIFICATE_RTOL"]
 
 #: A solver that stops at its start with converged=True must pass this relative optimality test.
 START_KKT_RTOL = 1e-6
@@ -177,7 +177,7 @@ def solve(objective, x0, *, solver, tol=None, max_iter=None, callback=None, opti
 
 
 def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, options, certify_result=True,
-                 objective_values=True):
+                 objective_values=True, bounds=None):
     """:func:`solve` for an objective and start already in units of ``scale`` (checked ``tol`` and ``max_iter``).
 
     ``options`` is a dict of the solver's options or an instance of its
@@ -188,6 +188,14 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
     With ``objective_values=False`` the history's objective values are NaN
     where the solver would evaluate ``F`` only to record it (the quadratic
     solvers' CG steps and last iterate).
+
+    ``bounds = (low, high)`` (solver units; floats or per-pixel arrays) is
+    the box the caller clips the answer to: the output's ``gap`` is then a
+    bound on ``F(clip(z)) − min_{low <= z' <= high} F`` (see
+    :func:`certify`), ``solver_gap`` the solver's own, and ``converged``
+    needs the solver's stopping rule and ``gap <= gap_tol · max(F, floor)``
+    with ``F`` of the clipped point: it is about the depth the caller
+    returns.  ``z`` itself is the solver's point, unclipped.
     """
     entry = REGISTRY[solver]
     if not entry.robust:
@@ -199,24 +207,30 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
     except CallbackStop as stop:
         out = SolverOutput(stop.z, stop.iteration, False, f"stopped by callback at iteration {stop.iteration}",
                            tuple(recorder.history))
-    converged, message = out.converged, out.message
-    gap = out.gap
     robust = [t.name for t in objective.robust_terms]
-    if np.isnan(gap) and not robust and certify_result:
-        gap = certify(objective, out.z, solver, options)
+    certified = certify_result and not robust
+    solver_gap = out.gap
+    if np.isnan(solver_gap) and certified:
+        solver_gap = certify(objective, out.z, solver, options)
+    z_returned = out.z if bounds is None else np.clip(out.z, bounds[0], bounds[1])
+    moved = int(np.count_nonzero(z_returned != out.z))
+    gap = solver_gap
+    if moved and certified:
+        gap = certify(objective, z_returned, solver, options, bounds=bounds)
+    proven = curvature_lower_bound(objective) > 0
+    converged, message = out.converged, out.message
     own = converged
     if robust:
-        gap = float("nan")
+        gap = solver_gap = float("nan")
         message += (f"; no duality gap for the robust term(s) {robust} (F may be non-convex): converged is the "
                     "solver's own rule, a stationary point")
-    elif np.isnan(gap) and not certify_result:
+    elif not certify_result:
         message += "; duality gap not computed"
     elif np.isnan(gap):
         message += "; duality gap not available (the solve with the quadratic part's matrix failed)"
-    elif converged and not gap <= gap_threshold(objective, quick_value(objective, out.z), options.gap_tol):
-        converged = False
-        message += (f"; NOT converged: duality gap {relative(gap, quick_value(objective, out.z)):.1e} (relative) > "
-                    f"gap_tol {options.gap_tol:.1e}")
+    else:
+        converged, message = _gap_verdict(objective, out, z_returned, gap, solver_gap, moved, bounds, scale,
+                                          options.gap_tol, proven)
     if own and solver != "direct" and (out.iterations <= 1 or np.array_equal(out.z, np.maximum(x0, 0.0))):
         kkt = start_kkt_residual(objective, np.maximum(out.z, 0.0), entry.smoothed)
         if not kkt <= START_KKT_RTOL:
@@ -224,35 +238,86 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
             message += (f"; NOT converged: stopped after {out.iterations} iteration(s) at a point whose relative "
                         f"projected gradient {kkt:.1e} > {START_KKT_RTOL:.0e}")
     z = out.z * scale
-    return (SolverOutput(z, out.iterations, converged, message, tuple(recorder.history), gap * scale * scale),
-            recorder.elapsed())
+    s2 = scale * scale
+    return (SolverOutput(z, out.iterations, converged, message, tuple(recorder.history), gap * s2,
+                         solver_gap * s2, proven), recorder.elapsed())
 
 
-def certify(objective, z, solver, options):
+def _gap_verdict(objective, out, z_returned, gap, solver_gap, moved, bounds, scale, gap_tol, proven):
+    """``(converged, message)``: the solver's rule and the gap test of the returned point, said in the message."""
+    F = quick_value(objective, z_returned)
+    threshold = gap_threshold(objective, F, gap_tol)
+    message = out.message
+    if moved:
+        low, high = (float(np.min(b)) * scale if np.ndim(b) else float(b) * scale for b in bounds)
+        message += (f"; clipping to [{low:g}, {high:g}] moved {moved} pixel(s): duality gap of the returned depth "
+                    f"{relative(gap, F):.1e} (relative, over that range), of the solver's point "
+                    f"{relative(solver_gap, quick_value(objective, out.z)):.1e}")
+    else:
+        message += f"; duality gap {relative(gap, F):.1e} (relative)"
+    if not proven:
+        message += " (an estimate, not a proven bound: no positive curvature bound, delta = 0)"
+    if not gap <= threshold:
+        cause = ""
+        if moved and solver_gap <= gap_threshold(objective, quick_value(objective, out.z), gap_tol):
+            cause = " (the clipping, not the solver: clip_to_observed=False returns the solver's point)"
+        return False, message + f"; NOT converged: > gap_tol {gap_tol:.1e}{cause}"
+    return out.converged, message + (f" <= gap_tol {gap_tol:.1e}" if out.converged else "")
+
+
+#: Relative residual of the certificate's solve with ``A`` for an objective without L1 terms whose curvature bound
+#: makes the gap proven: the bound then includes the solve's error term ``‖e‖² / λ_min``, at most 1e-6 of the
+#: one-product bound ``¼ ‖r‖² / λ_min``.
+QUADRATIC_CERTIFICATE_RTOL = 1e-3
+
+
+def certify(objective, z, solver, options, *, bounds=None):
     """The duality gap (:mod:`sparsedepth.solvers.certificate`) of a solver's output ``z``, in solver units.
+
+    Without ``bounds``: a bound on ``F(z) − F*`` with ``F*`` the minimum of
+    the solver's problem (over all ``z`` for the γ = 0 solvers, over ``z >=
+    0`` for the others).  With ``bounds = (low, high)`` (``z`` inside
+    them): a bound on ``F(z) − min_{low <= z' <= high} F``, the smaller of
+    the certificate over the solver's problem (valid too where the box lies
+    inside its feasible set, whose minimum is no larger) and the one over the
+    box (:class:`~sparsedepth.solvers.certificate.Certificate` with
+    ``bounds``; computed only when the first one does not pass ``gap_tol``).
 
     Rows of ``K`` with ``|(Kz)_k| <= ε`` count as tied, with ``ε`` the
     smoothing :attr:`Objective.l1_smoothing` for the solvers registered with
-    ``smoothing_ties`` (L-BFGS-B, Adam, IRLS) and exact ties otherwise.  For
-    the γ = 0 solvers the one-product bound ``¼ ‖r‖² / λ_min(A)`` is returned
-    when it already meets ``gap_tol``.  NaN for an objective with robust
-    terms: the certificate covers quadratic and L1 terms only (and a robust
-    objective may be non-convex).
+    ``smoothing_ties`` (L-BFGS-B, Adam, IRLS) and exact ties otherwise.
+    Without L1 terms the one-product bound ``¼ ‖r‖² / λ_min(A)``
+    (:meth:`Certificate.cheap_gap`) is returned when it already meets
+    ``gap_tol``, else the solve with ``A`` runs to
+    :data:`QUADRATIC_CERTIFICATE_RTOL`, preconditioned by the hierarchy the
+    solve left (:attr:`Objective.preconditioner`).  NaN for an objective
+    with robust terms: the certificate covers quadratic and L1 terms only
+    (and a robust objective may be non-convex).
     """
     if objective.robust_terms:
         return float("nan")
     entry = REGISTRY[solver]
-    if entry.quadratic and not objective.has_l1:
-        # unconstrained quadratic problem: F(z) − F* = ¼ rᵀA⁻¹r <= ¼ ‖r‖² / λ_min(A), r = 2(Az − b); this costs one
-        # product, and the solve below is needed only where the cheap bound is not already within gap_tol
-        curvature = curvature_lower_bound(objective)
-        if curvature > 0:
-            A, b, _ = objective.normal_equations(form="stencil")  # the cached form
-            r = 2.0 * (A @ z - b)
-            cheap = 0.25 * float(r @ r) / curvature
-            if cheap <= gap_threshold(objective, quick_value(objective, z), options.gap_tol):
-                return cheap
     eps = float(objective.l1_smoothing) if entry.smoothing_ties else 0.0
     # ADMM without L1 terms returns one unconstrained PCG solve
     nonnegative = not entry.quadratic and not (solver == "admm" and not objective.has_l1)
-    return Certificate(objective, nonnegative=nonnegative).gap(z, eps=eps)
+    quadratic = not objective.has_l1
+    rtol = QUADRATIC_CERTIFICATE_RTOL if quadratic and curvature_lower_bound(objective) > 0 else 1e-10
+    threshold = gap_threshold(objective, quick_value(objective, z), options.gap_tol)
+    problem_low = 0.0 if nonnegative else -np.inf
+    certificates = []
+    if bounds is None or np.all(np.asarray(bounds[0]) >= problem_low):
+        certificates.append(Certificate(objective, nonnegative=nonnegative, rtol=rtol))
+    if bounds is not None:
+        low = np.maximum(bounds[0], problem_low)
+        certificates.append(Certificate(objective, bounds=(low, bounds[1]), rtol=rtol))
+    gap, shared = float("nan"), None
+    for certificate in certificates:
+        if shared is not None:
+            certificate._precondition = shared  # one hierarchy of A for both
+        cheap = certificate.cheap_gap(z)
+        value = cheap if cheap <= threshold else certificate.gap(z, eps=eps)
+        gap = value if np.isnan(gap) else min(gap, value)
+        shared = certificate._precondition
+        if gap <= threshold:
+            break
+    return gap

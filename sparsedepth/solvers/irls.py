@@ -282,7 +282,8 @@ def _solve_newton(objective, system, x0, *, max_iter, recorder, options):
     level with ``ε <= certify_below`` the duality gap of the best point so
     far (:class:`~sparsedepth.solvers.certificate.Certificate`, rows with
     ``|t| <= tie_band`` fitted as tied, ``p`` as their start) decides
-    convergence: ``gap <= gap_tol · max(F, floor)``.  The exact ``F`` of
+    convergence: ``gap <= target · max(F, floor)``, ``target`` the smaller
+    of the options ``target_gap`` (1e-4) and ``gap_tol``.  The exact ``F`` of
     the iterates may rise when ``ε`` shrinks; the point returned is the one
     with the lowest exact ``F``.
 
@@ -290,8 +291,8 @@ def _solve_newton(objective, system, x0, *, max_iter, recorder, options):
     and stall near a gap of 1e-5 ``F`` as ``ε`` shrinks: the reweighted
     systems grow ill-conditioned and the iterates never tie edges exactly.
     With option ``finish="admm"`` (the default) they therefore stop at the
-    gap ``max(gap_tol, newton_gap)`` (``newton_gap`` 1e-2 by default), and
-    when ``gap_tol`` is smaller (or the Newton phase stalled) an exact
+    gap ``max(target, newton_gap)`` (``newton_gap`` 1e-2 by default), and
+    when the target is smaller (or the Newton phase stalled) an exact
     finishing phase takes over (the gap that decides this hand-over uses the
     dual point ``p`` as it is on the tied rows, without the certificate's
     least-squares fit and projected-gradient steps): ADMM with its
@@ -322,9 +323,10 @@ def _solve_newton(objective, system, x0, *, max_iter, recorder, options):
     certify_below = 1e-5 * scale if options.certify_below is None else options.certify_below
     floor = objective_floor(objective)
     finish = options.finish == "admm"
-    newton_gap_tol = max(options.gap_tol, options.newton_gap) if finish else options.gap_tol
+    target = min(options.target_gap, options.gap_tol)
+    newton_gap_tol = max(target, options.newton_gap) if finish else target
     # a gap that only decides the hand-over to the exact finish needs no fitted dual point on the tied rows
-    hand_over = finish and newton_gap_tol > options.gap_tol
+    hand_over = finish and newton_gap_tol > target
     unfitted = {"fit_max_iter": 0, "fit_steps": 0} if hand_over else {}
     certificate = Certificate(objective, nonnegative=True, **unfitted)
     b_norm = max(2.0 * float(np.linalg.norm(b)), np.finfo(float).tiny)
@@ -372,7 +374,7 @@ def _solve_newton(objective, system, x0, *, max_iter, recorder, options):
             if gap <= threshold:
                 converged = True
                 message = (f"duality gap {relative(gap, best_F):.1e} (relative) <= "
-                           f"{'newton_gap' if newton_gap_tol > options.gap_tol else 'gap_tol'} {newton_gap_tol:.1e} "
+                           f"{'newton_gap' if newton_gap_tol > target else 'target'} {newton_gap_tol:.1e} "
                            f"at eps = {eps:.1e} after {k} Newton steps")
                 break
         if eps <= eps_min * (1 + 1e-12) and level_start_F - best_F <= floor:
@@ -387,12 +389,12 @@ def _solve_newton(objective, system, x0, *, max_iter, recorder, options):
     if best_F < F:
         recorded = k + 1
         recorder(recorded, best_z, inner=inner_total, value=best_F)
-    if finish and not (converged and newton_gap_tol <= options.gap_tol):
+    if finish and not (converged and newton_gap_tol <= target):
         from .registry import REGISTRY  # the registry imports this module: ADMM's default tol and max_iter, at call time
 
         admm = REGISTRY["admm"]
         out = finish_from(objective, best_z, p, tol=admm.tol, max_iter=admm.max_iter, recorder=recorder,
-                          options=AdmmOptions(gap_tol=options.gap_tol), first_iteration=recorded)
+                          options=AdmmOptions(gap_tol=options.gap_tol, target_gap=target), first_iteration=recorded)
         message = (f"Newton phase: {message}; finished by {out.iterations - recorded} ADMM iterations with "
                    f"active-set polishes from its point: {out.message}")
         return output(out.z, out.iterations, out.converged, message, recorder, gap=out.gap)

@@ -13,7 +13,6 @@ May import :mod:`sparsedepth._validation`; nothing else of the package.
 from __future__ import annotations
 
 import copy
-import math
 from dataclasses import dataclass, field, fields
 from typing import ClassVar
 
@@ -21,8 +20,12 @@ import numpy as np
 
 from .._validation import is_int, is_real
 
-__all__ = ["SolverOptions", "DirectOptions", "CgOptions", "AmgOptions", "IrlsOptions", "AdmmOptions", "LbfgsbOptions",
-           "AdamOptions"]
+__all__ = ["DEFAULT_GAP_TOL", "SolverOptions", "DirectOptions", "CgOptions", "AmgOptions", "IrlsOptions", "AdmmOptions",
+           "LbfgsbOptions", "AdamOptions"]
+
+#: Every solver's default ``gap_tol``: a result is ``converged`` when the duality gap of its depth is at most this
+#: fraction of its objective (with the floor of :func:`~sparsedepth.solvers.common.gap_threshold`).
+DEFAULT_GAP_TOL = 1e-2
 
 #: The preconditioner choices of the PCG solves.
 _PRECONDITIONERS = ("grid", "amg")
@@ -145,20 +148,12 @@ class DirectOptions(SolverOptions):
 
     Parameters
     ----------
-    gap_tol : float, default 1e-6
-        Converged needs the duality gap ``<= gap_tol · max(F, 1e-7 F(0))``.
+    gap_tol : float, default 1e-2 (:data:`DEFAULT_GAP_TOL`)
+        ``converged`` needs the duality gap of the returned depth ``<= gap_tol · max(F, 1e-7 F(0))``.
     """
 
     solver: ClassVar[str] = "direct"
-    gap_tol: float = _option(1e-6)
-
-
-def _resolve_gap_tol(options, scaled):
-    """``scaled`` with a ``gap_tol`` of None set: 1e-6 without a depth tolerance in ``options``, else ``inf``."""
-    if scaled.gap_tol is None:
-        depth_rule = options.depth_rtol is not None or options.depth_atol is not None
-        object.__setattr__(scaled, "gap_tol", math.inf if depth_rule else 1e-6)
-    return scaled
+    gap_tol: float = _option(DEFAULT_GAP_TOL)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -173,13 +168,9 @@ class CgOptions(SolverOptions):
     """
 
     solver: ClassVar[str] = "cg"
-    gap_tol: float | None = _option(None, kind=float)
+    gap_tol: float = _option(DEFAULT_GAP_TOL)
     depth_rtol: float | None = _option(None, kind=float, positive=True)
     depth_atol: float | None = _option(None, kind=float, positive=True, depth_unit=True)
-
-    def in_depth_units(self, scale):
-        """As :meth:`SolverOptions.in_depth_units`, with a ``gap_tol`` of None resolved (see the class)."""
-        return _resolve_gap_tol(self, super().in_depth_units(scale))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -191,14 +182,11 @@ class AmgOptions(SolverOptions):
     preconditioner : {"grid", "amg"}, default "grid"
         ``"grid"``: geometric :class:`~sparsedepth.linalg.multigrid.GridMultigrid`
         built once for ``A``; ``"amg"``: pyamg Ruge–Stüben.
-    gap_tol : float, optional
-        Converged needs the duality gap ``<= gap_tol · max(F, 1e-7 F(0))``.
-        Default 1e-6 when the solve stops on the residual (``tol``); with a
-        depth tolerance (below) no gap test: ``converged`` is the depth
-        rule's, and the gap reported is the one-product bound ``¼ ‖r‖² /
-        λ_min(A)`` (proven, loose), since
-        the exact gap would cost a second solve to a relative residual of
-        1e-10.
+    gap_tol : float, default 1e-2 (:data:`DEFAULT_GAP_TOL`)
+        ``converged`` needs the duality gap of the returned depth ``<= gap_tol · max(F, 1e-7 F(0))``.
+        The stopping rule that ended the solve (residual or depth change)
+        is named in the result's ``message``; the gap is computed after it
+        (:func:`~sparsedepth.solvers.core.certify`).
     depth_rtol : float, optional
         Stop when the estimated remaining change of the depth (root mean
         square over the pixels of ``z_k − z*``) is at most ``depth_rtol ·
@@ -215,13 +203,9 @@ class AmgOptions(SolverOptions):
 
     solver: ClassVar[str] = "amg"
     preconditioner: str = _option("grid", choices=_PRECONDITIONERS)
-    gap_tol: float | None = _option(None, kind=float)
+    gap_tol: float = _option(DEFAULT_GAP_TOL)
     depth_rtol: float | None = _option(None, kind=float, positive=True)
     depth_atol: float | None = _option(None, kind=float, positive=True, depth_unit=True)
-
-    def in_depth_units(self, scale):
-        """As :meth:`SolverOptions.in_depth_units`, with a ``gap_tol`` of None resolved (see the class)."""
-        return _resolve_gap_tol(self, super().in_depth_units(scale))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -230,8 +214,12 @@ class IrlsOptions(SolverOptions):
 
     Parameters
     ----------
-    gap_tol : float, default 1e-4
-        Converged needs the duality gap ``<= gap_tol · max(F, 1e-7 F(0))``.
+    gap_tol : float, default 1e-2 (:data:`DEFAULT_GAP_TOL`)
+        ``converged`` needs the duality gap of the returned depth ``<= gap_tol · max(F, 1e-7 F(0))``.
+    target_gap : float, default 1e-4
+        The relative duality gap the solver works to: the smaller of it and
+        ``gap_tol`` ends the finishing phase (or the Newton steps, without
+        one).
     eps_start, eps_min : float, optional
         First and last smoothing ``ε`` of the reweighting (depth units);
         default ``1e-2`` and ``1e-7`` times ``scale``.
@@ -270,11 +258,11 @@ class IrlsOptions(SolverOptions):
     finish : {"admm", "none"}, default "admm"
         The exact finishing phase of ``method="newton"``: with ``"admm"``
         the Newton steps stop once the duality gap is within the larger of
-        ``gap_tol`` and ``newton_gap`` (or when they stall), and, unless
-        that already meets ``gap_tol``, ADMM iterations with active-set
-        polishes (:func:`~sparsedepth.solvers.admm.finish_from`) continue
-        from the Newton point and dual to ``gap_tol``; ``"none"``: Newton
-        steps only.
+        the target (``target_gap``, ``gap_tol``) and ``newton_gap`` (or when
+        they stall), and, unless that already meets the target, ADMM
+        iterations with active-set polishes
+        (:func:`~sparsedepth.solvers.admm.finish_from`) continue from the
+        Newton point and dual to the target; ``"none"``: Newton steps only.
     newton_gap : float, default 1e-2
         The relative duality gap at which the Newton phase hands over to the
         finishing phase (the Newton steps gain most while ``ε`` is large;
@@ -282,7 +270,8 @@ class IrlsOptions(SolverOptions):
     """
 
     solver: ClassVar[str] = "irls"
-    gap_tol: float = _option(1e-4)
+    gap_tol: float = _option(DEFAULT_GAP_TOL)
+    target_gap: float = _option(1e-4)
     eps_start: float | None = _option(None, kind=float, positive=True, depth_unit=True)
     eps_min: float | None = _option(None, kind=float, positive=True, depth_unit=True)
     scale: float | None = _option(None, kind=float, positive=True, depth_unit=True)
@@ -332,8 +321,12 @@ class AdmmOptions(SolverOptions):
         ADMM iterations between the first two polishes.
     check_rtol : float, default 2e-7
         Stop when a polish changes the best polished ``F`` by at most this (relative).
-    gap_tol : float, default 1e-6
-        Converged needs the duality gap ``<= gap_tol · max(F, 1e-7 F(0))``.
+    gap_tol : float, default 1e-2 (:data:`DEFAULT_GAP_TOL`)
+        ``converged`` needs the duality gap of the returned depth ``<= gap_tol · max(F, 1e-7 F(0))``.
+    target_gap : float, default 1e-6
+        The relative duality gap the solver works to: a stop (polishes that
+        agree, or the residual rule) is accepted when the gap is within the
+        smaller of it and ``gap_tol``.
     restart_from_polish : bool, default False
         After a polish that lowers the best polished ``F``, ADMM goes on
         from the polished point (``z`` and ``u = K z``; ``λ`` kept).
@@ -346,7 +339,7 @@ class AdmmOptions(SolverOptions):
         With ``warm_start="coarse"``: the pixel count above which a grid is
         started from the coarser one.
     coarse_gap_tol : float, default 1e-4
-        ``gap_tol`` of the coarse solves (they only start the fine one).
+        ``target_gap`` of the coarse solves (they only start the fine one).
     """
 
     solver: ClassVar[str] = "admm"
@@ -363,7 +356,8 @@ class AdmmOptions(SolverOptions):
     polish_preconditioner: str = _option("jacobi", choices=_POLISH_PRECONDITIONERS)
     check_every: int = _option(3)
     check_rtol: float = _option(2e-7)
-    gap_tol: float = _option(1e-6)
+    gap_tol: float = _option(DEFAULT_GAP_TOL)
+    target_gap: float = _option(1e-6)
     restart_from_polish: bool = _option(False)
     warm_start: str = _option("none", kind=str, choices=("none", "coarse"))
     coarse_above: int = _option(600_000)
@@ -382,15 +376,15 @@ class LbfgsbOptions(SolverOptions):
         SciPy's projected-gradient tolerance on the scaled problem.
     maxcor : int, default 10
         Correction pairs kept.
-    gap_tol : float, default 1e-2
-        Converged needs the duality gap ``<= gap_tol · max(F, 1e-7 F(0))``.
+    gap_tol : float, default 1e-2 (:data:`DEFAULT_GAP_TOL`)
+        ``converged`` needs the duality gap of the returned depth ``<= gap_tol · max(F, 1e-7 F(0))``.
     """
 
     solver: ClassVar[str] = "lbfgsb"
     maxfun: int | None = _option(None, kind=int)
     gtol: float = _option(1e-12)
     maxcor: int = _option(10)
-    gap_tol: float = _option(1e-2)
+    gap_tol: float = _option(DEFAULT_GAP_TOL)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -418,8 +412,8 @@ class AdamOptions(SolverOptions):
         ``window`` steps before them.
     record_every : int, default 1
         Iterations between history records.
-    gap_tol : float, default 1e-1
-        Converged needs the duality gap ``<= gap_tol · max(F, 1e-7 F(0))``.
+    gap_tol : float, default 1e-2 (:data:`DEFAULT_GAP_TOL`)
+        ``converged`` needs the duality gap of the returned depth ``<= gap_tol · max(F, 1e-7 F(0))``.
     """
 
     solver: ClassVar[str] = "adam"
@@ -431,4 +425,4 @@ class AdamOptions(SolverOptions):
     beta2: float = _option(0.999)
     window: int = _option(50)
     record_every: int = _option(1)
-    gap_tol: float = _option(1e-1)
+    gap_tol: float = _option(DEFAULT_GAP_TOL)
