@@ -15,7 +15,7 @@ def _loop_shift(image, dy, dx):
     return out
 
 
-@pytest.mark.parametrize("shift", [(0, 0), (1, 0), (0, -2), (-3, 2), (2, 7), (-9, -1)])
+@pytest.mark.parametrize("shift", [(0, 0), (1, 0), (0, -2), (-3, 2), (2, 5), (-4, -1)])
 @pytest.mark.parametrize("channels", [None, 3])
 def test_shift_image_matches_an_explicit_loop(shift, channels):
     rng = np.random.default_rng(1)

@@ -278,13 +278,17 @@ def _add_input_options(parser) -> None:
                           "--calib, or --depth-scale m if it holds metres).")
     inp.add_argument("--mask", metavar="PATH",
                      help="optional mask of observed pixels: npy/npz/h5 (bool or 0/1) or an image, 1-bit PNG "
-                          "included (non-zero = observed).")
+                          "included (non-zero = observed); each pixel it marks must hold a valid --depth value, "
+                          "unless --keep-fraction/--keep-count sample within it. An inpainting mask (non-zero where "
+                          "to fill) is the opposite: invert it.")
     inp.add_argument("--truth", metavar="PATH",
                      help="optional ground-truth depth (same formats and scale as --depth) to score against, "
                           "on the pixels not observed.")
     inp.add_argument("--prior", metavar="PATH",
-                     help="optional dense depth map from elsewhere (e.g. a monocular network's prediction; depth, "
-                          "not inverse depth), same formats and scale as --depth, every pixel valid: aligned to the "
+                     help="optional dense map from elsewhere (e.g. a monocular network's prediction; depth, not "
+                          "inverse depth), in --depth's formats, divided by --depth-scale and converted by --calib "
+                          "like --depth; every stored value is a value: 0 and negatives are relative depth, "
+                          "--invalid-value/--min-depth/--max-depth do not apply, NaN/inf are refused. Aligned to the "
                           "samples (--prior-alignment) and completed around (complete_depth(prior=...)).")
     inp.add_argument("--prior-alignment", choices=list(PRIOR_ALIGNMENTS), metavar="{" + ",".join(PRIOR_ALIGNMENTS) + "}",
                      help="least-squares fit of s * prior + t to the samples: scale_shift (default; relative "

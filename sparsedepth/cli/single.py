@@ -22,6 +22,7 @@ from ..datasets import load_motorcycle
 from .._validation import check_input_file
 from ..io import KINECT_NYU, KinectDisparity, read_calib, read_depth, read_image, read_mask
 from ..io import depth_to_points, depth_writer, ply_writer, resolve_scale
+from ..io.writing import uncertainty_writer
 from ..io.depth import _READ_EXTENSIONS, _read_stored  # the stored values read_depth starts from
 from ..io.files import check_extension
 from ..priors import as_prior
@@ -29,10 +30,11 @@ from ..registration import shift_image
 from ..sampling import valid_depth_mask
 from ..visualize import colorize_depth
 from .camera import KINECT_CALIB, frame_intrinsics, intrinsics_source
+from .frame_checks import check_frame
 from .messages import UsageError, one_line, warnings_as_lines
 from .outputs import Named, commit
 from .parser import DEMO_DIR, DEMO_DOWNSAMPLE, DEMO_KEEP_FRACTION, weights_of
-from .report import build_report, matplotlib_classes, print_table, render_figure
+from .report import build_report, matplotlib_classes, print_table, render_figure, uncertainty_png_line
 
 __all__ = ["READER_FLAGS", "plan_outputs", "wants_uncertainty", "input_files", "run_one"]
 
@@ -280,10 +282,11 @@ def _array_writer(target, values, png_scale):
 
 
 def _uncertainty_writer(target, uncertainty, png_scale):
-    """The writer of the uncertainty map; a PNG stores at least one unit of its scale (0 means missing)."""
-    if target.path.suffix.lower() == ".png":
-        uncertainty = np.maximum(uncertainty, 1.0 / png_scale)
-    return _array_writer(target, uncertainty, png_scale)
+    """:func:`~sparsedepth.io.writing.uncertainty_writer` of the map; its ``ValueError`` is a one-line UsageError."""
+    try:
+        return uncertainty_writer(target.path, uncertainty, scale=png_scale)
+    except ValueError as exc:
+        raise UsageError(f"{target.label}: {one_line(exc)}") from None
 
 
 def _writers(args, planned, outcome, image, report, png_scale, intrinsics=None) -> list:
@@ -299,7 +302,8 @@ def _writers(args, planned, outcome, image, report, png_scale, intrinsics=None) 
         outdir_figure = figure_bytes
     cloud = None
     if kinds & {"--ply", "points.ply"}:
-        cloud = ply_writer(*depth_to_points(outcome.depth, intrinsics, image=image))
+        cloud = ply_writer(*depth_to_points(outcome.depth, intrinsics, image=image,
+                                            name="--intrinsics" if args.intrinsics is not None else "intrinsics"))
 
     depth_vis_bytes = None
     if kinds & set(_DEPTH_VIS_OUTPUTS):
@@ -374,6 +378,7 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
     weights, weights_given = weights_of(args)
     image, depth, mask, truth, prior, description, keep_fraction, intrinsics = _load_frame(args, mode, stderr)
     _check_observable(args, mode, depth, mask)
+    check_frame(args, mode, image, depth, mask, intrinsics)
     png_scale = args.out_scale if args.out_scale is not None else (args.depth_scale or 1000.0)
     png_scale = resolve_scale(png_scale)
     planned = plan_outputs(args, mode)
@@ -396,6 +401,9 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
         print("note: matplotlib is not installed, no figure.png (pip install 'sparsedepth[plot]')", file=stderr)
 
     print_table(outcome, description, stdout, image_shift=args.image_shift)
+    saturated = uncertainty_png_line(args, outcome, png_scale)
+    if saturated is not None:
+        print(saturated, file=stdout)
     for path in written:
         print(f"wrote {path}", file=stdout)
     return 0
