@@ -150,8 +150,10 @@ class CompletionResult:
         The same bound for the solver's own point before the range clamp, over
         the solver's own problem (``z >= 0``; any ``z`` for the γ = 0 solvers
         ``direct``, ``cg``, ``amg``).  Equal to :attr:`gap` when the clamp
-        moved no pixel; when it moved some, the two tell apart what the solver
-        left and what the clamp added.
+        moved no pixel.  When it moved some, the two tell apart what the
+        solver left and what the clamp added; for the γ = 0 solvers it is then
+        the one-product bound ``¼ ‖r‖² / λ_min`` (proven, often loose) unless
+        :attr:`gap` fails ``gap_tol``, when it is computed in full.
     gap_proven : bool
         True when :attr:`gap` is a proven bound: the quadratic part has a
         positive lower bound on its curvature (``delta > 0``, or every pixel
