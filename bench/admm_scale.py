@@ -54,7 +54,7 @@ PERF_WEIGHTS = sd.Weights.paper(alpha=1.0, beta=0.1, gamma=0.01, delta=1e-3, kap
 ISSUE_WEIGHTS = sd.Weights.paper(alpha=1.0, beta=0.5, gamma=0.2, delta=0.01, kappa=10.0)
 DOC = H.REPO / "docs" / "admm_scale.md"
 #: Options of the ``--reference`` run: a duality gap certified 100 times tighter than the default's.
-REFERENCE = {"gap_tol": 1e-8, "check_rtol": 2e-9}
+REFERENCE = {"target_gap": 1e-8, "check_rtol": 2e-9}
 
 
 def _resize(image, depth, scale):

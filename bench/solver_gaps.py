@@ -15,7 +15,7 @@ the table compares minimisers of the objective).  Frames: :data:`FRAMES`
 Per frame, in this one process (one BLAS thread), ADMM runs first with its
 defaults; its time ``t_ADMM`` is the unit.  Then:
 
-* ``irls`` with its defaults (``gap_tol = 1e-4``) and with ``gap_tol = 1e-6``;
+* ``irls`` with its defaults (``target_gap = 1e-4``) and with ``target_gap = 1e-6``;
 * ``adam`` with its defaults (a cosine schedule over 1000 steps);
 * ``lbfgsb`` stopped by a callback at ``BUDGET`` × ``t_ADMM``, the time the
   issue allows Adam;
@@ -88,7 +88,7 @@ def runs(t_admm):
     budget = BUDGET * t_admm
     return [
         ("irls", "irls", None, None, None),
-        ("irls, gap_tol 1e-6", "irls", {"gap_tol": 1e-6}, None, None),
+        ("irls, target_gap 1e-6", "irls", {"target_gap": 1e-6}, None, None),
         ("adam", "adam", None, None, None),
         (f"lbfgsb, stopped at {BUDGET:g}× ADMM", "lbfgsb", None, 100000, _Budget(budget)),
         ("admm (second run)", "admm", None, None, None),

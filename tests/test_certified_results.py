@@ -218,3 +218,22 @@ def test_a_sizeable_clamp_is_warned_about():
     with pytest.warns(sd.ClampWarning, match=r"pixels \(\d+\.\d%\) were outside the depth range"):
         result = sd.complete_depth(image, sparse, mask, weights=weights)
     assert result.clamped >= sd.completion.CLAMP_WARNING_SHARE * result.depth.size
+
+
+def test_the_json_report_carries_the_certificate_of_the_depth_written(tmp_path):
+    import json
+
+    import imageio.v3 as iio
+
+    from sparsedepth.complete import main
+
+    image, sparse, mask = _step_scene((20, 24), seed=6)
+    iio.imwrite(tmp_path / "rgb.png", (image * 255).astype(np.uint8))
+    np.save(tmp_path / "sparse.npy", np.where(mask, sparse, np.nan))
+    assert main(["--image", str(tmp_path / "rgb.png"), "--depth", str(tmp_path / "sparse.npy"),
+                 "--out", str(tmp_path / "dense.npy"), "--json", str(tmp_path / "r.json")]) == 0
+    report = json.loads((tmp_path / "r.json").read_text())
+    expected = _quiet(sd.complete_depth, iio.imread(tmp_path / "rgb.png"), np.where(mask, sparse, np.nan))
+    assert report["gap"] == pytest.approx(expected.gap, rel=1e-6)
+    assert report["solver_gap"] == pytest.approx(expected.solver_gap, rel=1e-6)
+    assert report["gap_proven"] is True and report["converged"] == expected.converged

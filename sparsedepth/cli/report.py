@@ -86,7 +86,8 @@ def build_report(args, argv, outcome, description, weights, weights_given, png_s
             observed_fraction=float(outcome.observed.mean()), **_weights_source(args, weights),
             converged=result.converged, message=result.message, iterations=result.iterations,
             objective=result.objective, terms=result.terms, clamped=result.clamped,
-            solver_runtime=result.runtime,
+            gap=_finite_or_none(result.gap), solver_gap=_finite_or_none(result.solver_gap),
+            gap_proven=bool(result.gap_proven), solver_runtime=result.runtime,
             history=[dataclasses.asdict(record) for record in result.history],
         )
     if result is not None and result.uncertainty is not None:
@@ -401,3 +402,9 @@ def render_figure(image, outcome, extension) -> bytes:
     buffer = _io.BytesIO()
     fig.savefig(buffer, format=extension.lstrip(".").lower().replace("jpg", "jpeg"), dpi=_DPI)
     return buffer.getvalue()
+
+
+def _finite_or_none(value):
+    """``value`` as a float, or None (JSON null) when it is NaN or infinite (no certificate)."""
+    value = float(value)
+    return value if math.isfinite(value) else None

@@ -15,11 +15,12 @@ two ``s`` near its median (:func:`depth_scale`) and the objective becomes
 tolerances see data of order 1 whatever the unit.  Every solver's output
 carries a duality gap (:mod:`sparsedepth.solvers.certificate`), a bound on
 ``F(z) − F*``; ``converged`` needs the solver's own rule (below) and ``gap
-<= gap_tol · max(F, 1e-7 F(0))`` (option ``gap_tol``: 1e-6 for ``direct``,
-``cg`` and ``amg`` under their residual rule and not tested under their
-depth rule, 1e-6 for ``admm``, 1e-4 for ``irls``, 1e-2 for ``lbfgsb``, 1e-1
-for ``adam``, whose smoothed objective is ~1e-4 to 1e-3 above the exact
-optimum).  Every relative stopping test on ``F`` has an absolute floor
+<= gap_tol · max(F, 1e-7 F(0))`` (option ``gap_tol``, 1e-2 for every solver:
+:data:`~sparsedepth.solvers.options.DEFAULT_GAP_TOL`).  With ``bounds``
+(:func:`solve_scaled`; the range clamp of :func:`sparsedepth.complete_depth`)
+the gap and the test are those of the clipped point over the box, and the
+solver's own gap is kept beside them.  ADMM and IRLS work to a tighter gap of
+their own (option ``target_gap``: 1e-6 and 1e-4).  Every relative stopping test on ``F`` has an absolute floor
 (:func:`~sparsedepth.solvers.common.objective_floor`), so ``F* = 0``
 converges; a solver that claims convergence at its start must pass a
 projected-gradient check.
