@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from sparsedepth import io as sio
+from sparsedepth.io import arrays as sio_arrays
+from sparsedepth.io import images as sio_images
 from sparsedepth.io import pfm as sio_pfm
-from sparsedepth.io import writing as sio_writing
 
 
 # ------------------------------------------------------------------------------------
@@ -667,17 +668,18 @@ def test_write_depth_does_not_modify_input(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "name, writer",
-    [("d.png", "_write_png_file"), ("d.npy", "_write_npy_file"), ("d.npz", "_write_npz_file"),
-     ("d.h5", "_write_hdf5_file"), ("d.pfm", "write_pfm_file")],
+    "name, module, writer",
+    [("d.png", sio_images, "write_png_file"), ("d.npy", sio_arrays, "write_npy_file"),
+     ("d.npz", sio_arrays, "write_npz_file"), ("d.h5", sio_arrays, "write_hdf5_file"),
+     ("d.pfm", sio_pfm, "write_pfm_file")],
 )
-def test_write_is_atomic(tmp_path, monkeypatch, name, writer):
+def test_write_is_atomic(tmp_path, monkeypatch, name, module, writer):
     def half_then_fail(path, *args):
         with open(path, "wb") as fh:
             fh.write(b"partial")
         raise OSError("disk full")
 
-    monkeypatch.setattr(sio_writing, writer, half_then_fail)
+    monkeypatch.setattr(module, writer, half_then_fail)
     with pytest.raises(OSError, match="disk full"):
         sio.write_depth(tmp_path / name, np.ones((2, 2)))
     assert _listing(tmp_path) == []  # neither the target nor a temporary file

@@ -3,6 +3,8 @@
 One module per responsibility:
 
 * :mod:`.files` - messages, pixel limits, decoder errors and atomic writes;
+* :mod:`.formats` - the table of file formats (extensions, what each holds, its reader and writer), from
+  which every list of extensions of the package is derived: a new format is one entry there plus its module;
 * :mod:`.stored` - the dtype/shape rules of stored arrays and their conversion to depth;
 * :mod:`.netpbm`, :mod:`.images` - grey and colour images (Netpbm, PNG, JPEG, BMP, TIFF);
 * :mod:`.pfm` - Portable Float Maps;
@@ -11,7 +13,7 @@ One module per responsibility:
 * :mod:`.nyu` - the NYU Depth V2 files;
 * :mod:`.depth` - depth scales, :func:`read_depth`, :func:`read_mask`;
 * :mod:`.pointcloud` - :func:`depth_to_points` (pinhole back-projection) and PLY files;
-* :mod:`.writing` - :func:`write_depth` and :func:`depth_writer`.
+* :mod:`.writing` - :func:`write_depth`, :func:`depth_writer` and the uncertainty writers.
 
 Conventions shared by every function:
 

@@ -7,7 +7,8 @@ objects are refused), the ``.npz`` member choice, and the HDF5 helpers that
 :func:`hdf5_dataset`, :func:`hdf5_read`, :func:`read_hdf5_array`).  HDF5 can
 make a reader open other files (external links, virtual datasets, external
 raw storage); :func:`hdf5_dataset` refuses all three before anything is read,
-so no file the user did not name is ever opened.
+so no file the user did not name is ever opened.  The depth and mask readers
+and the writers of the NumPy and HDF5 entries of :mod:`.formats` live here too.
 
 Imports NumPy, h5py, :mod:`sparsedepth._validation` and :mod:`.files` /
 :mod:`.stored` only.
@@ -27,11 +28,11 @@ from .files import (MAX_PIXELS, as_value_error, check_extension, check_max_pixel
                     option_labels, suffix)
 from .stored import as_depth, check_stored_array
 
-__all__ = ["ARRAY_EXTENSIONS", "HDF5_EXTENSIONS", "hdf5_dataset", "hdf5_read", "load_array", "open_hdf5",
+__all__ = ["hdf5_dataset", "hdf5_read", "hdf5_writer", "load_array", "npy_writer", "npz_writer", "open_hdf5",
+           "read_array_depth", "read_array_mask", "read_hdf5_depth", "read_hdf5_mask", "write_hdf5_file",
+           "write_npy_file", "write_npz_file",
            "read_depth_array", "read_hdf5_array"]
 
-ARRAY_EXTENSIONS = (".npy", ".npz")
-HDF5_EXTENSIONS = (".h5", ".hdf5")
 
 
 def _read_npy_stream(fh, where: str, max_pixels, label: str, *, allow_bool=False) -> np.ndarray:
@@ -134,7 +135,9 @@ def read_depth_array(path, *, key: str | None = None, max_pixels: int | None = M
     """
     label = option_labels(option_names)
     path = check_input_file(path, name=name)
-    check_extension(path, ARRAY_EXTENSIONS, "read depth array", name)
+    from .formats import NUMPY_EXTENSIONS  # the table refers to the readers of this module
+
+    check_extension(path, NUMPY_EXTENSIONS, "read depth array", name)
     max_pixels = check_max_pixels(max_pixels, label("max_pixels"))
     stored, source = load_array(path, key, max_pixels, file_label(path, name), label)
     return as_depth(stored, source)
@@ -265,3 +268,57 @@ def read_hdf5_array(path: Path, key: str | None, max_pixels, where: str,
         check_stored_array(dset.shape, dset.dtype, source, max_pixels, label("max_pixels"),
                             allow_bool=allow_bool)
         return np.asarray(hdf5_read(dset, source)), source
+
+
+def read_array_depth(path: Path, key, byteorder, max_pixels, name: str, option_names) -> tuple[np.ndarray, str]:
+    """The depth reader of ``.npy`` and ``.npz`` files: the stored array (``key`` in an archive) and its source."""
+    return load_array(path, key, max_pixels, file_label(path, name), option_labels(option_names))
+
+
+def read_hdf5_depth(path: Path, key, byteorder, max_pixels, name: str, option_names) -> tuple[np.ndarray, str]:
+    """The depth reader of HDF5 files: dataset ``key`` (default ``'depth'``) and its source."""
+    return read_hdf5_array(path, key, max_pixels, file_label(path, name), option_labels(option_names))
+
+
+def read_array_mask(path: Path, key, max_pixels, name: str, option_names) -> tuple[np.ndarray, str]:
+    """The mask reader of ``.npy`` and ``.npz`` files: the stored array, booleans allowed, and its source."""
+    return load_array(path, key, max_pixels, file_label(path, name), option_labels(option_names), allow_bool=True)
+
+
+def read_hdf5_mask(path: Path, key, max_pixels, name: str, option_names) -> tuple[np.ndarray, str]:
+    """The mask reader of HDF5 files: dataset ``key`` (default ``'mask'``), booleans allowed, and its source."""
+    return read_hdf5_array(path, "mask" if key is None else key, max_pixels, file_label(path, name),
+                           option_labels(option_names), allow_bool=True)
+
+
+def write_npy_file(path: Path, values: np.ndarray) -> None:
+    """Write ``values`` to ``path`` as one ``.npy`` array."""
+    with open(path, "wb") as fh:
+        np.save(fh, values)
+
+
+def write_npz_file(path: Path, values: np.ndarray) -> None:
+    """Write ``values`` to ``path`` as the array ``depth`` of a compressed ``.npz`` archive."""
+    with open(path, "wb") as fh:
+        np.savez_compressed(fh, depth=values)
+
+
+def write_hdf5_file(path: Path, values: np.ndarray) -> None:
+    """Write ``values`` to ``path`` as the gzip-compressed dataset ``depth`` of a new HDF5 file."""
+    with h5py.File(path, "w") as handle:
+        handle.create_dataset("depth", data=values, compression="gzip")
+
+
+def npy_writer(values: np.ndarray, name: str) -> Callable[[Path], None]:
+    """The writer of the ``.npy`` format: float64 ``values`` as they are (NaN where missing)."""
+    return lambda tmp: write_npy_file(tmp, values)
+
+
+def npz_writer(values: np.ndarray, name: str) -> Callable[[Path], None]:
+    """The writer of the ``.npz`` format: float64 ``values`` as the array ``depth``."""
+    return lambda tmp: write_npz_file(tmp, values)
+
+
+def hdf5_writer(values: np.ndarray, name: str) -> Callable[[Path], None]:
+    """The writer of the HDF5 format: float64 ``values`` as the dataset ``depth``."""
+    return lambda tmp: write_hdf5_file(tmp, values)

@@ -14,12 +14,12 @@ Conventions shared by every depth reader:
   metres.  Sensor codes for "no measurement" (Kinect v1 2047, RealSense
   65535) are removed with ``invalid_values``.
 
-:func:`read_depth` chooses the format's reader from the extension
-(:mod:`.images`, :mod:`.pfm`, :mod:`.arrays`) and applies the scale, the
-calibration (:mod:`.calibration`) and the valid range.
+:func:`read_depth` chooses the format's reader from the extension (the
+table of :mod:`.formats`) and applies the scale, the calibration
+(:mod:`.calibration`) and the valid range.
 
-Imports NumPy, :mod:`sparsedepth._validation` and the format modules of
-:mod:`sparsedepth.io` only.
+Imports NumPy, :mod:`sparsedepth._validation`, :mod:`.formats` and the format
+modules of :mod:`sparsedepth.io` only.
 """
 
 from __future__ import annotations
@@ -34,12 +34,11 @@ from typing import Callable, Mapping
 import numpy as np
 
 from .._validation import argument_label, check_input_file, check_positive_finite, is_real
-from .arrays import ARRAY_EXTENSIONS, HDF5_EXTENSIONS, load_array, read_hdf5_array
 from .calibration import KinectDisparity, StereoCalibration, read_calib
-from .files import MAX_PIXELS, check_extension, check_max_pixels, file_label, option_labels
-from .images import IMAGE_EXTENSIONS, TIFF_EXTENSIONS, read_image, read_single_channel, read_tiff
+from .files import MAX_PIXELS, check_extension, check_max_pixels, option_labels
+from .formats import DEPTH_EXTENSIONS, KEYED_EXTENSIONS, MASK_EXTENSIONS, extensions_of, format_of
+from .images import read_grey_depth, read_image, read_single_channel
 from .netpbm import check_byteorder
-from .pfm import read_pfm
 from .stored import as_depth, is_real_dtype
 
 __all__ = ["DEPTH_IMAGE_EXTENSIONS", "DEPTH_SCALES", "read_depth", "read_depth_png", "read_mask", "resolve_scale"]
@@ -57,10 +56,12 @@ DEPTH_SCALES: Mapping[str, float] = MappingProxyType(
     }
 )
 
-DEPTH_IMAGE_EXTENSIONS = (".png", ".pgm", ".pnm")
-_READ_EXTENSIONS = DEPTH_IMAGE_EXTENSIONS + TIFF_EXTENSIONS + (".pfm",) + ARRAY_EXTENSIONS + HDF5_EXTENSIONS
+#: What :func:`read_depth_png` reads: the formats whose depth is a grey image (PNG, PGM).
+DEPTH_IMAGE_EXTENSIONS = extensions_of(lambda f: f.read_depth is read_grey_depth)
+#: What :func:`read_depth` reads (:data:`sparsedepth.io.formats.DEPTH_EXTENSIONS`).
+_READ_EXTENSIONS = DEPTH_EXTENSIONS
 #: Formats whose arrays have names, chosen with ``key``.
-_KEYED_EXTENSIONS = (".npz",) + HDF5_EXTENSIONS
+_KEYED_EXTENSIONS = KEYED_EXTENSIONS
 #: Stored values that sensors use for "no measurement" (warned about when frequent).
 _SENSOR_INVALID_CODES = {2047: "Kinect v1", 65535: "16-bit sensors such as RealSense"}
 
@@ -302,26 +303,8 @@ def _resolve_calib(calib, label: Callable[[str], str], option_names):
 
 def _read_stored(path: Path, ext: str, key, byteorder, max_pixels, name: str,
                  option_names) -> tuple[np.ndarray, str]:
-    """The stored 2-D samples of a depth file, chosen by extension, and the description of their source."""
-    label = option_labels(option_names)
-    where = file_label(path, name)
-    source = where
-    if ext in DEPTH_IMAGE_EXTENSIONS:
-        stored = read_single_channel(path, byteorder, max_pixels, name, option_names)
-    elif ext in TIFF_EXTENSIONS:
-        stored = read_tiff(path, max_pixels, where, label("max_pixels"))
-        if stored.ndim == 3 and stored.shape[2] == 1:
-            stored = stored[:, :, 0]
-        if stored.ndim != 2:
-            raise ValueError(f"{where} has shape {stored.shape}; a depth TIFF must be single-channel.")
-    elif ext == ".pfm":
-        stored = read_pfm(path, max_pixels=max_pixels, name=name, option_names=option_names)
-        if stored.ndim != 2:
-            raise ValueError(f"{where} is a colour PFM (shape {stored.shape}); depth must be grey ('Pf').")
-    elif ext in ARRAY_EXTENSIONS:
-        stored, source = load_array(path, key, max_pixels, where, label)
-    else:
-        stored, source = read_hdf5_array(path, key, max_pixels, where, label)
+    """The stored 2-D samples of a depth file, read by its format's reader, and the description of their source."""
+    stored, source = format_of(ext).read_depth(path, key, byteorder, max_pixels, name, option_names)
     if not is_real_dtype(stored.dtype):
         raise ValueError(f"{source}: expected integer or float depth, got dtype {stored.dtype}.")
     return stored, source
@@ -382,19 +365,15 @@ def read_mask(path, *, key: str | None = None, max_pixels: int | None = MAX_PIXE
     """
     label = option_labels(option_names)
     path = check_input_file(path, name=name)
-    where = file_label(path, name)
-    ext = check_extension(path, ARRAY_EXTENSIONS + HDF5_EXTENSIONS + IMAGE_EXTENSIONS, "read mask", name)
+    ext = check_extension(path, MASK_EXTENSIONS, "read mask", name)
     max_pixels = check_max_pixels(max_pixels, label("max_pixels"))
     if key is not None and ext not in _KEYED_EXTENSIONS:
         raise ValueError(f"{label('key')} only applies to .npz and HDF5 files, not '{ext}'.")
-    if ext in IMAGE_EXTENSIONS:
+    fmt = format_of(ext)
+    if fmt.holds_image:
         image = read_image(path, max_pixels=max_pixels, name=name, option_names=option_names)
         return image != 0 if image.ndim == 2 else np.any(image != 0, axis=2)
-    if ext in ARRAY_EXTENSIONS:
-        array, source = load_array(path, key, max_pixels, where, label, allow_bool=True)
-    else:
-        array, source = read_hdf5_array(path, "mask" if key is None else key, max_pixels, where, label,
-                                         allow_bool=True)
+    array, source = fmt.read_mask(path, key, max_pixels, name, option_names)
     if array.size == 0:
         raise ValueError(f"{source}: the mask is empty (shape {array.shape}).")
     if array.dtype != bool:

@@ -1,12 +1,17 @@
 """Images: PNG, JPEG, BMP and TIFF through Pillow, imageio and tifffile, Netpbm through :mod:`.netpbm`.
 
 What lives here: :func:`read_image` (grey or colour samples as stored, 8 or
-16 bit), the TIFF reader that keeps 16-bit and float32 samples, and
-:func:`read_single_channel`, the stored samples of a grey depth image.  Every
-size is checked against the pixel limit from the header before decoding.
+16 bit), the image readers of the formats of :mod:`.formats` (Pillow,
+Netpbm, TIFF), the TIFF reader that keeps 16-bit and float32 samples, the
+depth readers of grey images and TIFFs (:func:`read_grey_depth`,
+:func:`read_tiff_depth`) and the PNG and TIFF writers (:func:`png_writer`,
+:func:`tiff_writer`).  Every size is checked against the pixel limit from the
+header before decoding.
 
 Imports NumPy, Pillow, imageio, tifffile, :mod:`sparsedepth._validation` and
-:mod:`.files` / :mod:`.netpbm` only.
+:mod:`.files` / :mod:`.netpbm` only (:func:`read_image` looks its format up
+in :mod:`.formats` when called, since that table refers to this module's
+readers).
 """
 
 from __future__ import annotations
@@ -14,7 +19,7 @@ from __future__ import annotations
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator, Mapping
+from typing import Callable, Iterator, Mapping
 
 import imageio.v3 as iio
 import numpy as np
@@ -24,12 +29,13 @@ from PIL import Image
 from .._validation import check_input_file
 from .files import (MAX_PIXELS, as_value_error, check_extension, check_max_pixels, check_pixels, decode_error,
                     file_label, option_labels, suffix)
-from .netpbm import NETPBM_EXTENSIONS, check_byteorder, read_netpbm
+from .netpbm import check_byteorder, read_netpbm
 
-__all__ = ["IMAGE_EXTENSIONS", "TIFF_EXTENSIONS", "read_image", "read_single_channel", "read_tiff"]
+__all__ = ["png_writer", "read_grey_depth", "read_image", "read_netpbm_image", "read_pillow_image",
+           "read_single_channel", "read_tiff", "read_tiff_depth", "read_tiff_image", "tiff_writer",
+           "write_png_file", "write_tiff_file"]
 
-IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".pnm", ".bmp", ".tif", ".tiff")
-TIFF_EXTENSIONS = (".tif", ".tiff")
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 def _normalise_image(image: np.ndarray, where: str) -> np.ndarray:
@@ -125,6 +131,26 @@ def read_tiff(path: Path, max_pixels: int | None, where: str, label: str) -> np.
             return np.asarray(page.asarray())
 
 
+def read_pillow_image(path: Path, byteorder, max_pixels: int | None, where: str,
+                      label: Callable[[str], str]) -> np.ndarray:
+    """The image reader of PNG, JPEG and BMP (Pillow); ``byteorder`` does not apply."""
+    return _read_pillow(path, max_pixels, where, label("max_pixels"))
+
+
+def read_netpbm_image(path: Path, byteorder, max_pixels: int | None, where: str,
+                      label: Callable[[str], str]) -> np.ndarray:
+    """The image reader of Netpbm files (:mod:`.netpbm`)."""
+    return read_netpbm(path, byteorder, max_pixels, where, label)
+
+
+def read_tiff_image(path: Path, byteorder, max_pixels: int | None, where: str,
+                    label: Callable[[str], str]) -> np.ndarray:
+    """The image reader of TIFFs: Pillow, after refusing a stack of full-size pages."""
+    with _tiff_of_one_image(path, where):  # Pillow decodes the first page whatever follows it
+        pass
+    return _read_pillow(path, max_pixels, where, label("max_pixels"))
+
+
 def read_image(path, *, byteorder: str | None = None, max_pixels: int | None = MAX_PIXELS,
                name: str = "path", option_names: Mapping[str, str] | None = None) -> np.ndarray:
     """Read a grey or colour image as stored (8 or 16 bit).
@@ -189,14 +215,10 @@ def read_image(path, *, byteorder: str | None = None, max_pixels: int | None = M
     where = file_label(path, name)
     byteorder = check_byteorder(byteorder, label("byteorder"))
     max_pixels = check_max_pixels(max_pixels, label("max_pixels"))
+    from .formats import IMAGE_EXTENSIONS, format_of  # the table refers to the readers of this module
+
     ext = check_extension(path, IMAGE_EXTENSIONS, "read image", name)
-    if ext in NETPBM_EXTENSIONS:
-        image = read_netpbm(path, byteorder, max_pixels, where, label)
-    else:
-        if ext in TIFF_EXTENSIONS:
-            with _tiff_of_one_image(path, where):  # Pillow decodes the first page whatever follows it
-                pass
-        image = _read_pillow(path, max_pixels, where, label("max_pixels"))
+    image = format_of(ext).read_image(path, byteorder, max_pixels, where, label)
     return _normalise_image(image, where)
 
 
@@ -210,3 +232,47 @@ def read_single_channel(path: Path, byteorder, max_pixels, name: str, option_nam
             "(8- or 16-bit grey)."
         )
     return stored
+
+
+def read_grey_depth(path: Path, key, byteorder, max_pixels, name: str, option_names) -> tuple[np.ndarray, str]:
+    """The depth reader of grey images (PNG, PGM): the stored samples and their source."""
+    return read_single_channel(path, byteorder, max_pixels, name, option_names), file_label(path, name)
+
+
+def read_tiff_depth(path: Path, key, byteorder, max_pixels, name: str, option_names) -> tuple[np.ndarray, str]:
+    """The depth reader of TIFFs: the samples of the one single-channel image (16-bit or float32) and their source."""
+    where = file_label(path, name)
+    stored = read_tiff(path, max_pixels, where, option_labels(option_names)("max_pixels"))
+    if stored.ndim == 3 and stored.shape[2] == 1:
+        stored = stored[:, :, 0]
+    if stored.ndim != 2:
+        raise ValueError(f"{where} has shape {stored.shape}; a depth TIFF must be single-channel.")
+    return stored, where
+
+
+def write_png_file(path: Path, stored: np.ndarray) -> None:
+    """Write uint16 samples to ``path`` as a 16-bit grey PNG."""
+    iio.imwrite(path, stored, plugin="pillow", extension=".png")
+
+
+def png_writer(stored: np.ndarray, name: str) -> Callable[[Path], None]:
+    """The writer of the PNG format: ``stored`` is the uint16 map (:mod:`.writing` quantises it)."""
+    return lambda tmp: write_png_file(tmp, stored)
+
+
+def write_tiff_file(path: Path, values: np.ndarray) -> None:
+    """Write float32 samples to ``path`` as one uncompressed ``minisblack`` TIFF page."""
+    tifffile.imwrite(path, values, photometric="minisblack", metadata=None)
+
+
+def tiff_writer(values: np.ndarray, name: str) -> Callable[[Path], None]:
+    """The writer of the TIFF format: float64 ``values`` (NaN where missing) stored as float32.
+
+    Raises ``ValueError`` naming ``name`` if a finite value exceeds the float32 range.
+    """
+    finite = values[np.isfinite(values)]
+    if finite.size and finite.max() > _FLOAT32_MAX:
+        raise ValueError(f"`{name}` up to {finite.max():g} exceeds the float32 range of a TIFF; "
+                         "use .npy, .npz or .h5 (float64).")
+    single = values.astype(np.float32)
+    return lambda tmp: write_tiff_file(tmp, single)

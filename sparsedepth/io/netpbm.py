@@ -16,9 +16,7 @@ import numpy as np
 
 from .files import check_pixels, read_bytes
 
-__all__ = ["NETPBM_EXTENSIONS", "check_byteorder", "read_netpbm"]
-
-NETPBM_EXTENSIONS = (".ppm", ".pgm", ".pnm")
+__all__ = ["check_byteorder", "read_netpbm"]
 
 _WHITESPACE = b" \t\r\n\v\f"
 _UINT16_MAX = np.iinfo(np.uint16).max

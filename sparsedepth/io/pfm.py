@@ -1,8 +1,8 @@
 """Portable Float Map (PFM) files: grey ``Pf`` or colour ``PF`` float32 rasters stored bottom-to-top.
 
-What lives here: :func:`read_pfm`, :func:`write_pfm` and the pieces that
-:func:`sparsedepth.io.write_depth` reuses to store depth as PFM
-(:func:`check_pfm_values`, :func:`write_pfm_file`).
+What lives here: :func:`read_pfm`, :func:`write_pfm` and the depth reader and
+writer of the PFM entry of :mod:`.formats` (:func:`read_pfm_depth`,
+:func:`pfm_writer`, built on :func:`check_pfm_values` and :func:`write_pfm_file`).
 
 Imports NumPy, :mod:`sparsedepth._validation` and :mod:`.files` /
 :mod:`.stored` only.
@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -21,7 +21,7 @@ from .._validation import check_input_file
 from .files import MAX_PIXELS, atomic_target, check_max_pixels, check_pixels, file_label, option_labels
 from .stored import check_real_array
 
-__all__ = ["check_pfm_values", "read_pfm", "write_pfm", "write_pfm_file"]
+__all__ = ["check_pfm_values", "pfm_writer", "read_pfm", "read_pfm_depth", "write_pfm", "write_pfm_file"]
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 _PFM_HEADER = re.compile(rb"\A(PF|Pf)\s+(\d+)\s+(\d+)\s+(\S+)\s")
@@ -115,6 +115,24 @@ def read_pfm(path, *, max_pixels: int | None = MAX_PIXELS, name: str = "path",
     values = np.frombuffer(data, dtype=dtype, count=count)
     shape = (height, width, 3) if channels == 3 else (height, width)
     return np.ascontiguousarray(values.reshape(shape)[::-1], dtype=np.float32)
+
+
+def read_pfm_depth(path: Path, key, byteorder, max_pixels, name: str, option_names) -> tuple[np.ndarray, str]:
+    """The depth reader of PFM files: the grey ``Pf`` samples and their source (a colour ``PF`` is refused)."""
+    stored = read_pfm(path, max_pixels=max_pixels, name=name, option_names=option_names)
+    where = file_label(path, name)
+    if stored.ndim != 2:
+        raise ValueError(f"{where} is a colour PFM (shape {stored.shape}); depth must be grey ('Pf').")
+    return stored, where
+
+
+def pfm_writer(values: np.ndarray, name: str) -> Callable[[Path], None]:
+    """The writer of the PFM format: float64 ``values``, NaN where missing, stored little-endian with ``inf`` there.
+
+    Raises ``ValueError`` naming ``name`` if a finite value exceeds the float32 range.
+    """
+    pfm = check_pfm_values(np.where(np.isnan(values), np.inf, values), name)
+    return lambda tmp: write_pfm_file(tmp, pfm, "little")
 
 
 def write_pfm_file(path: Path, values: np.ndarray, byteorder: str) -> None:

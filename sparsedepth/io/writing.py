@@ -3,10 +3,12 @@
 
 Every write is atomic (see :func:`sparsedepth.io.files.atomic_target`).
 :func:`depth_writer` makes every check and encodes the data before anything is
-written, so that a caller can check several outputs before writing any.
+written, so that a caller can check several outputs before writing any.  The
+formats written, and the writer of each, are those of :mod:`.formats`; this
+module prepares the values (quantised for an integer format, NaN where
+missing for a float one).
 
-Imports NumPy, imageio, tifffile, h5py and the format modules of :mod:`sparsedepth.io`
-only.
+Imports NumPy, :mod:`.formats` and the format modules of :mod:`sparsedepth.io` only.
 """
 
 from __future__ import annotations
@@ -14,45 +16,21 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-import h5py
-import imageio.v3 as iio
 import numpy as np
-import tifffile
 
-from .arrays import ARRAY_EXTENSIONS, HDF5_EXTENSIONS
 from .depth import resolve_scale
 from .files import atomic_target, check_extension
-from .images import TIFF_EXTENSIONS
-from .pfm import check_pfm_values, write_pfm_file
+from .formats import WRITE_EXTENSIONS, FileFormat, format_of
 from .stored import check_real_array
 
 __all__ = ["depth_writer", "write_depth", "uncertainty_writer", "write_uncertainty", "png_saturated"]
 
-_EXTENSIONS = (".png", ".pfm") + TIFF_EXTENSIONS + ARRAY_EXTENSIONS + HDF5_EXTENSIONS
 _UINT16_MAX = np.iinfo(np.uint16).max
 
 
-def _write_png_file(path: Path, stored: np.ndarray) -> None:
-    iio.imwrite(path, stored, plugin="pillow", extension=".png")
-
-
-def _write_npy_file(path: Path, depth: np.ndarray) -> None:
-    with open(path, "wb") as fh:
-        np.save(fh, depth)
-
-
-def _write_npz_file(path: Path, depth: np.ndarray) -> None:
-    with open(path, "wb") as fh:
-        np.savez_compressed(fh, depth=depth)
-
-
-def _write_hdf5_file(path: Path, depth: np.ndarray) -> None:
-    with h5py.File(path, "w") as handle:
-        handle.create_dataset("depth", data=depth, compression="gzip")
-
-
-def _write_tiff_file(path: Path, depth: np.ndarray) -> None:
-    tifffile.imwrite(path, depth, photometric="minisblack", metadata=None)
+def _format(path, what: str) -> FileFormat:
+    """The format of ``path``'s extension; ``ValueError`` listing :data:`~sparsedepth.io.formats.WRITE_EXTENSIONS`."""
+    return format_of(check_extension(Path(path), WRITE_EXTENSIONS, what))
 
 
 def _quantise_png(depth: np.ndarray, scale: float) -> np.ndarray:
@@ -78,15 +56,6 @@ def _quantise_png(depth: np.ndarray, scale: float) -> np.ndarray:
         )
     stored[valid] = values.astype(np.uint16)
     return stored
-
-
-def _as_float32(depth: np.ndarray, name: str = "depth") -> np.ndarray:
-    """``depth`` as float32 (NaN kept); ``ValueError`` if a value exceeds the float32 range."""
-    finite = depth[np.isfinite(depth)]
-    if finite.size and finite.max() > np.finfo(np.float32).max:
-        raise ValueError(f"`{name}` up to {finite.max():g} exceeds the float32 range of a TIFF; "
-                         "use .npy, .npz or .h5 (float64).")
-    return depth.astype(np.float32)
 
 
 def write_depth(path, depth, *, scale=1000.0) -> None:
@@ -150,14 +119,13 @@ def depth_writer(path, depth, *, scale=1000.0) -> Callable[[Path], None]:
     writes the encoded data to the file it is given, in the format of
     ``path``'s extension.
     """
-    ext = check_extension(Path(path), _EXTENSIONS, "write depth")
+    fmt = _format(path, "write depth")
     scale = resolve_scale(scale)
     values = _checked_map(depth, "depth")
     values[values == 0] = np.nan
-    if ext == ".png":
-        stored = _quantise_png(values, scale)
-        return lambda tmp: _write_png_file(tmp, stored)
-    return _float_writer(ext, values, "depth")
+    if fmt.integer:
+        return fmt.write(_quantise_png(values, scale), "depth")
+    return fmt.write(values, "depth")
 
 
 def _checked_map(array, name: str) -> np.ndarray:
@@ -174,24 +142,6 @@ def _checked_map(array, name: str) -> np.ndarray:
             f"`{name}` has negative values (min {np.nanmin(values):g}); use NaN for invalid pixels."
         )
     return values
-
-
-def _float_writer(ext: str, values: np.ndarray, name: str) -> Callable[[Path], None]:
-    """The writer of ``values`` (NaN where missing) in a float format."""
-    writer: Callable[[Path], None]
-    if ext == ".npy":
-        writer = lambda tmp: _write_npy_file(tmp, values)  # noqa: E731
-    elif ext == ".npz":
-        writer = lambda tmp: _write_npz_file(tmp, values)  # noqa: E731
-    elif ext in HDF5_EXTENSIONS:
-        writer = lambda tmp: _write_hdf5_file(tmp, values)  # noqa: E731
-    elif ext in TIFF_EXTENSIONS:
-        single = _as_float32(values, name)
-        writer = lambda tmp: _write_tiff_file(tmp, single)  # noqa: E731
-    else:  # .pfm
-        pfm = check_pfm_values(np.where(np.isnan(values), np.inf, values), name)
-        writer = lambda tmp: write_pfm_file(tmp, pfm, "little")  # noqa: E731
-    return writer
 
 
 def png_saturated(sigma, scale) -> int:
@@ -258,14 +208,14 @@ def uncertainty_writer(path, sigma, *, scale=1000.0) -> Callable[[Path], None]:
     data.  It cannot fail on the values: a PNG saturates (see
     :func:`write_uncertainty`).
     """
-    ext = check_extension(Path(path), _EXTENSIONS, "write uncertainty")
+    fmt = _format(path, "write uncertainty")
     scale = resolve_scale(scale)
     values = _checked_map(sigma, "sigma")
-    if ext == ".png":
+    if fmt.integer:
         valid = ~np.isnan(values)
         stored = np.zeros(values.shape, dtype=np.uint16)
         stored[valid] = np.clip(np.rint(values[valid] * scale), 1, _UINT16_MAX).astype(np.uint16)
-        return lambda tmp: _write_png_file(tmp, stored)
-    if ext in TIFF_EXTENSIONS or ext == ".pfm":
+        return fmt.write(stored, "sigma")
+    if fmt.float32:
         values = np.minimum(values, np.finfo(np.float32).max)  # NaN stays NaN
-    return _float_writer(ext, values, "sigma")
+    return fmt.write(values, "sigma")
