@@ -21,12 +21,15 @@ from pathlib import Path
 
 from .._validation import check_folder, check_index
 from ..io import NYUDepthV2Labeled
+from ..io.formats import DISCOVERED_DEPTH_EXTENSIONS, DISCOVERED_IMAGE_EXTENSIONS
 
 __all__ = ["FileFrame", "NYUFrame", "NYUH5Frame", "find_frames", "find_frame_pairs", "nyu_h5_frames", "nyu_frames",
            "absolute_frame"]
 
-_DEPTH_EXTENSIONS = (".png", ".pgm", ".pnm", ".pfm", ".npy", ".npz", ".h5", ".hdf5")
-_IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".pnm", ".bmp", ".tif", ".tiff")
+#: The files a batch discovers (the table of :mod:`sparsedepth.io.formats`): every depth format that
+#: :func:`~sparsedepth.io.read_depth` reads, and every image format.
+_DEPTH_EXTENSIONS = DISCOVERED_DEPTH_EXTENSIONS
+_IMAGE_EXTENSIONS = DISCOVERED_IMAGE_EXTENSIONS
 
 
 @dataclass(frozen=True)
@@ -112,9 +115,11 @@ def find_frames(folder, *, image_prefix: str = "rgb_", depth_prefix: str = "dept
     ``<depth_prefix><id>.<depth ext>`` (and, optionally,
     ``<truth_prefix><id>.<depth ext>``): by default ``rgb_0001.png`` goes
     with ``depth_0001.png`` (the KITTI/Metric3D demo layout; use
-    ``depth_prefix="sync_depth_"`` for the BTS NYU layout).  Image extensions:
-    png, jpg, jpeg, ppm, pgm, pnm, bmp, tif, tiff; depth: png, pgm, pnm, pfm,
-    npy, npz, h5, hdf5.  Frames are sorted by id.  For an image folder and a
+    ``depth_prefix="sync_depth_"`` for the BTS NYU layout).  Images are the
+    files of every image format, depth (and truth) files those of every
+    depth format (:data:`sparsedepth.io.formats.DISCOVERED_IMAGE_EXTENSIONS`
+    and :data:`~sparsedepth.io.formats.DISCOVERED_DEPTH_EXTENSIONS`: whatever
+    :func:`~sparsedepth.io.write_depth` writes is found).  Frames are sorted by id.  For an image folder and a
     depth folder holding the same file names see :func:`find_frame_pairs`;
     for a folder of NYU ``.h5`` files see :func:`nyu_h5_frames`.
 

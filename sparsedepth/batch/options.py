@@ -21,6 +21,7 @@ from .._validation import is_int, is_real
 from ..holes import FILL_METHODS
 from ..io import MAX_PIXELS
 from ..io import resolve_scale
+from ..io.formats import OUT_EXTENSIONS
 from ..objective import DensitySchedule, Weights
 from ..completion import QUALITIES
 from ..registration import check_image_shift
@@ -74,8 +75,9 @@ class BatchOptions:
         An existing folder: each frame's output depth is written there as
         ``<name><out_format>`` (atomically).
     out_format : str
-        ``".npy"``, ``".npz"``, ``".h5"``, ``".hdf5"``, ``".pfm"`` or
-        ``".png"`` (16-bit, stored value = depth x ``out_scale``).
+        An extension of :data:`sparsedepth.io.formats.OUT_EXTENSIONS`:
+        ``".npy"``, ``".npz"``, ``".h5"``, ``".hdf5"``, ``".pfm"``, ``".tif"``,
+        ``".tiff"`` or ``".png"`` (16-bit, stored value = depth x ``out_scale``).
     out_scale : float > 0 or str
         PNG output scale.
     byteorder, invalid_values, min_depth, max_depth, max_pixels
@@ -177,9 +179,9 @@ class BatchOptions:
                 raise _option_error("depth_scale", str(exc), type(exc)) from None
         if not is_int(self.downsample) or self.downsample < 1:
             raise _option_error("downsample", f"downsample must be an integer >= 1, got {self.downsample!r}")
-        if self.out_format not in (".npy", ".npz", ".h5", ".hdf5", ".pfm", ".png", ".tif", ".tiff"):
+        if self.out_format not in OUT_EXTENSIONS:
             raise _option_error("out_format", f"unknown out_format {self.out_format!r}; "
-                                "use .npy, .npz, .h5, .hdf5, .pfm, .png, .tif or .tiff")
+                                f"use {', '.join(OUT_EXTENSIONS[:-1])} or {OUT_EXTENSIONS[-1]}")
         try:
             resolve_scale(self.out_scale, "out_scale")
         except (TypeError, ValueError) as exc:

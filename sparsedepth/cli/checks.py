@@ -14,6 +14,7 @@ import os
 from pathlib import Path
 
 from ..io import MAX_PIXELS
+from ..io.formats import OUT_EXTENSIONS
 from ..objective import DEFAULT_WEIGHTS, Weights
 from ..solvers.registry import REGISTRY
 from .camera import KINECT_CALIB, intrinsics_source, missing_intrinsics_message
@@ -26,7 +27,7 @@ from .single import input_files, plan_outputs
 __all__ = ["check_options", "check_frame", "cluster_address"]
 
 
-_OUT_EXTENSIONS = (".png", ".tif", ".tiff", ".npy", ".npz", ".h5", ".hdf5", ".pfm")
+_OUT_EXTENSIONS = OUT_EXTENSIONS  # --out and --uncertainty: the table of sparsedepth.io.formats
 
 
 _FIGURE_EXTENSIONS = (".png", ".pdf", ".svg", ".jpg", ".jpeg")

@@ -21,6 +21,7 @@ from ..completion import FAST_WEIGHTS
 from ..holes import FILL_METHODS
 from ..io import DEPTH_SCALES, MAX_PIXELS
 from ..io import resolve_scale
+from ..io.formats import DEPTH_EXTENSIONS, FORMATS, IMAGE_EXTENSIONS, OUT_FORMATS
 from ..objective import DEFAULT_WEIGHTS, EDGE_PENALTIES, Weights
 from ..objective import weights as weights_module
 from ..objective.weights import DENSITY_FIELDS, MODEL_FIELDS
@@ -130,6 +131,15 @@ def _join_signed_pairs(args) -> list:
             joined.append(args[i])
             i += 1
     return joined
+
+
+def _listed(extensions) -> str:
+    """``png, pgm, ...``: extensions for a help text, without their dots."""
+    return ", ".join(ext[1:] for ext in extensions)
+
+
+#: The formats of --out with what each stores (the table of sparsedepth.io.formats).
+_OUT_HELP = "; ".join(f"{'/'.join(f.extensions)} ({f.stores})" for f in FORMATS if f.out)
 
 
 def _int_at_least(lowest, expected):
@@ -271,11 +281,11 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_input_options(parser) -> None:
     """--image, --depth and the options of reading the files of one frame or a batch."""
     inp = parser.add_argument_group("input (one frame)")
-    inp.add_argument("--image", metavar="PATH", help="RGB (or grey) image: png, jpg, ppm, pgm, bmp, tif.")
+    inp.add_argument("--image", metavar="PATH", help=f"RGB (or grey) image: {_listed(IMAGE_EXTENSIONS)}.")
     inp.add_argument("--depth", metavar="PATH",
                      help="sparse or raw depth (0/NaN/inf = unknown), or a dense map with --keep-*: "
-                          "png/pgm/tif, npy, npz, h5 (integer data need --depth-scale), pfm (disparity: needs "
-                          "--calib, or --depth-scale m if it holds metres).")
+                          f"{_listed(DEPTH_EXTENSIONS)} (integer data need --depth-scale; a pfm, Middlebury "
+                          "disparity, needs --calib, or --depth-scale m if it holds metres).")
     inp.add_argument("--mask", metavar="PATH",
                      help="optional mask of observed pixels: npy/npz/h5 (bool or 0/1) or an image, 1-bit PNG "
                           "included (non-zero = observed); each pixel it marks must hold a valid --depth value, "
@@ -396,8 +406,7 @@ def _add_output_options(parser) -> None:
     """--out, --uncertainty, --max-uncertainty, --json, --figure, --depth-vis, --outdir and -q."""
     out = parser.add_argument_group("output")
     out.add_argument("--out", metavar="PATH",
-                     help="dense depth: .png (16-bit, in the input's scale or --out-scale), .tif (float32 metres), "
-                          ".npy, .npz, .h5 or .pfm.")
+                     help=f"dense depth: {_OUT_HELP}; a PNG's scale is the input's or --out-scale.")
     out.add_argument("--out-scale", type=_scale, metavar="SCALE",
                      help="scale of a PNG output (default: --depth-scale if given, else mm = 1000).")
     out.add_argument("--uncertainty", metavar="PATH",
@@ -456,7 +465,7 @@ def _add_batch_options(parser) -> None:
     bat.add_argument("--workers", type=_positive_int, metavar="N",
                      help=f"worker processes (default {default_workers()} here: half the CPUs, at least 1, "
                           "at most 8).")
-    bat.add_argument("--out-format", choices=["npy", "npz", "h5", "pfm", "png", "tif"], default="npy",
+    bat.add_argument("--out-format", choices=list(OUT_FORMATS), default="npy",
                      help="format of the per-frame outputs in --outdir (default npy).")
     bat.add_argument("--batch-depths", metavar="DIR",
                      help="with --batch DIR: the depth folder, files named like the images (KITTI layout).")

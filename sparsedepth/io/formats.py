@@ -129,7 +129,7 @@ class FileFormat:
 FORMATS: tuple[FileFormat, ...] = (
     FileFormat("png", (".png",), read_image=read_pillow_image, read_depth=read_grey_depth, write=png_writer,
                integer=True, discovered=True, out=True,
-               stores="16-bit integers, depth x scale (the input's scale or --out-scale)"),
+               stores="16-bit integers, depth x scale"),
     FileFormat("pgm", (".pgm", ".pnm"), read_image=read_netpbm_image, read_depth=read_grey_depth,
                discovered=True),
     FileFormat("ppm", (".ppm",), read_image=read_netpbm_image),
