@@ -48,7 +48,7 @@ def _expected_completion(folder, name="sparse.png", scale=1000):
 
 # ----------------------------------------------------------------------------- help
 def test_help_lists_every_option_and_an_example(capsys):
-    assert main(["--help"]) == 0
+    assert main(["--help-all"]) == 0
     out = capsys.readouterr().out
     assert "examples:" in out and "python -m sparsedepth.complete --image" in out
     for f in dataclasses.fields(sd.Weights):  # weight options follow the Weights dataclass

@@ -72,7 +72,7 @@ def test_malformed_shift_is_one_line_naming_the_flag(tmp_path, capsys, value):
 
 
 def test_help_describes_the_option(capsys):
-    assert main(["--help"]) == 0
+    assert main(["--help-all"]) == 0
     text = " ".join(capsys.readouterr().out.split())
     assert "--image-shift DY,DX|auto" in text and "after --downsample" in text and "estimate_image_shift" in text
 

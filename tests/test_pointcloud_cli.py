@@ -199,7 +199,7 @@ def test_ply_is_one_of_the_outputs_written_all_or_nothing(scene_files, capsys):
 
 
 def test_help_lists_the_camera_options(capsys):
-    assert main(["--help"]) == 0
+    assert main(["--help-all"]) == 0
     out = capsys.readouterr().out
     for option in ("--ply", "--intrinsics", "--camera", "points.ply"):
         assert option in out
