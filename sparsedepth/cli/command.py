@@ -15,6 +15,9 @@ or the CSV could not be written (e.g. a full disk); 130 interrupted by SIGINT
 stops its worker processes, removes their temporary files and keeps the rows
 of the finished frames: the same command again resumes it.
 
+``--help`` prints the common options of each task, ``--help-all`` every
+option (:mod:`~sparsedepth.cli.parser`).
+
 Files: no output may be an input or another output, and every output is
 checked to be creatable before the work starts.  One frame's outputs are
 written all or nothing (see :func:`sparsedepth.cli.outputs.commit`).
@@ -52,7 +55,7 @@ def main(argv=None) -> int:
     stdout, stderr = sys.stdout, sys.stderr
     try:
         args = parser.parse_args(argv)
-    except SystemExit as exc:  # --help (0) or a parse error (2, one line already printed)
+    except SystemExit as exc:  # --help, --help-all, --version (0) or a parse error (2, one line already printed)
         return 0 if exc.code is None else int(exc.code)
     try:
         mode = check_options(args)

@@ -2,7 +2,8 @@
 
 Each argument group has its own small function; the types of the option
 values are checked while parsing (an error is one line on stderr, exit
-code 2).  Imports the standard library, :mod:`sparsedepth.io` (scales, pixel
+code 2).  ``--help`` prints the common options of each task (:data:`COMMON_OPTIONS`,
+at most 80 lines at 80 columns), ``--help-all`` every option with its full help.  Imports the standard library, :mod:`sparsedepth.io` (scales, pixel
 limit), the solver and fill-method names, :class:`~sparsedepth.Weights`,
 :func:`~sparsedepth.batch.default_workers`, ``sparsedepth.__version__`` and
 the camera presets of :mod:`.camera`.
@@ -11,10 +12,13 @@ the camera presets of :mod:`.camera`.
 from __future__ import annotations
 
 import argparse
+import copy
 import dataclasses
 import math
 import re
+import shutil
 import sys
+import textwrap
 
 from ..batch import default_workers
 from ..completion import FAST_WEIGHTS
@@ -29,7 +33,8 @@ from ..priors import PRIOR_ALIGNMENTS
 from ..solvers import SOLVERS
 from .camera import CAMERA_PRESETS, parse_intrinsics
 
-__all__ = ["PROG", "DEMO_DIR", "DEMO_KEEP_FRACTION", "DEMO_DOWNSAMPLE", "EPILOG", "build_parser", "weights_of"]
+__all__ = ["PROG", "DEMO_DIR", "DEMO_KEEP_FRACTION", "DEMO_DOWNSAMPLE", "COMMON_OPTIONS", "EPILOG", "build_parser",
+           "common_help", "weights_of"]
 
 PROG = "python -m sparsedepth.complete"
 
@@ -99,6 +104,94 @@ with other settings, or the CSV could not be written; 130 SIGINT (Ctrl-C);
 143 SIGTERM.  A stopped batch ends its workers, removes their temporary files
 and keeps the finished rows: rerun the same command to resume.
 """
+
+
+#: The options ``--help`` shows, by task, each with a one-line summary; ``--help-all`` shows them all, in full.
+COMMON_OPTIONS = (
+    ("complete one frame (no --image/--depth: the demo)", (
+        ("--image", "RGB (or grey) image."),
+        ("--depth", "sparse or raw depth (0/NaN/inf = unknown), or a dense map with --keep-fraction."),
+        ("--depth-scale", "divisor of stored integer depth: nyu or mm (1000), kitti (256), tum (5000), m (1), or "
+                          "a number."),
+        ("--keep-fraction", "simulate sparse input: keep this fraction of the valid depth, score on the rest."),
+        ("--truth", "ground-truth depth to score against."),
+        ("--solver", "solver (default auto)."),
+        ("--fast", "real-time mode: about 10x faster, somewhat less accurate."),
+    )),
+    ("fill holes", (
+        ("--fill-holes", "fill the holes of raw depth (every valid pixel observed)."),
+        ("--fill-method", "colorization (NYU toolbox, default) or complete."),
+    )),
+    ("batch", (
+        ("--batch", "folder of frames rgb_<id>.<ext> + depth_<id>.<ext> (or of NYU .h5 files)."),
+        ("--batch-depths", "with --batch DIR: the depth folder, files named like the images (KITTI)."),
+        ("--nyu-mat", "NYU Depth V2 labeled .mat."),
+        ("--csv", "per-frame metrics; an existing CSV of the same command resumes the run."),
+        ("--workers", "worker processes."),
+    )),
+    ("outputs", (
+        ("--out", f"dense depth ({', '.join(OUT_FORMATS)})."),
+        ("--json", "metrics, settings and solver history."),
+        ("--figure", "image, input, result and errors (needs matplotlib)."),
+        ("--ply", "coloured point cloud (needs --intrinsics, --camera or --calib)."),
+        ("--outdir", "a folder for every output (a batch: one depth file per frame)."),
+        ("-q", "no progress on stderr."),
+    )),
+)
+
+_COMMON_TAIL = """\
+example:
+  {prog} --image rgb.png --depth sparse.png \\
+      --depth-scale kitti --out dense.png
+exit codes: 0 ok; 1 batch with failed frames; 2 bad option or input (one line on
+stderr, no output written); 130 SIGINT; 143 SIGTERM.
+--help-all lists the {others} other options (weights, formats, camera, cluster, ...).
+"""
+
+
+class _HelpAll(argparse.Action):
+    """``--help-all``: print every option with its full help (argparse's help), then exit 0."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings=option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        parser.print_help()
+        parser.exit()
+
+
+class _CommonHelp(_HelpAll):
+    """``-h`` / ``--help``: print :func:`common_help`, then exit 0."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        sys.stdout.write(common_help(parser))
+        parser.exit()
+
+
+def common_help(parser) -> str:
+    """The text of ``--help``: usage, description, :data:`COMMON_OPTIONS` by task, an example, the exit codes.
+
+    Formatted at the terminal's width, but never narrower than 80 columns (so at most 80 lines).
+    """
+    width = max(shutil.get_terminal_size().columns, 80) - 2
+    formatter = parser.formatter_class(prog=parser.prog, width=width)
+    formatter.add_usage("%(prog)s [options]", None, [])
+    formatter.add_text(textwrap.fill(parser.description, width))
+    actions = {flag: action for action in parser._actions for flag in action.option_strings}
+    for title, options in COMMON_OPTIONS:
+        formatter.start_section(title)
+        for flag, summary in options:
+            shown = copy.copy(actions[flag])
+            shown.help = summary
+            formatter.add_argument(shown)
+        formatter.end_section()
+    help_flags = ("--help", "--help-all", "--version")
+    formatter.start_section("help")
+    formatter.add_arguments([actions[flag] for flag in help_flags])
+    formatter.end_section()
+    shown = {flag for _, options in COMMON_OPTIONS for flag, _ in options} | set(help_flags)
+    others = sum(1 for action in parser._actions if action.option_strings and not shown & set(action.option_strings))
+    return formatter.format_help() + "\n" + _COMMON_TAIL.format(prog=parser.prog, others=others)
 
 
 #: Options whose value may start with a minus sign followed by a comma list (``--image-shift -1,2``), which argparse
@@ -263,8 +356,13 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
+        add_help=False,
     )
     from .. import __version__
+
+    parser.add_argument("-h", "--help", action=_CommonHelp,
+                        help="print the common options of each task and exit (--help-all: every option).")
+    parser.add_argument("--help-all", action=_HelpAll, help="print every option with its full help and exit.")
 
     parser.add_argument("--version", action="version", version=f"sparsedepth {__version__}",
                         help="print 'sparsedepth <version>' and exit.")
@@ -336,9 +434,9 @@ def _add_camera_options(parser) -> None:
     which.add_argument("--intrinsics", type=parse_intrinsics, metavar="FX,FY,CX,CY",
                        help="pinhole intrinsics of --image in pixels (pixel centres at integer coordinates, "
                             "column u, row v from 0); scaled by --downsample.")
+    presets = "; ".join(f"{name}: {preset.what}" for name, preset in CAMERA_PRESETS.items())
     which.add_argument("--camera", choices=sorted(CAMERA_PRESETS),
-                       help="intrinsics preset: nyu (NYU Depth V2 RGB camera, 640x480 frames) or kitti (KITTI "
-                            "image_02, P2 of the 1242x375 frames in the shared data); other image sizes are refused.")
+                       help=f"intrinsics preset. {presets}. Other image sizes are refused.")
 
 
 def _add_simulation_options(parser) -> None:
