@@ -515,13 +515,13 @@ def test_signal_stops_workers_keeps_rows_and_rerun_completes(tmp_path, signum, c
     frames, out = tmp_path / "frames", tmp_path / "out"
     frames.mkdir()
     out.mkdir()
-    n = 8
+    n = 4  # two rounds of the two workers: the signal lands in the second, the rerun completes it
     for i in range(n):
         _write_frame(frames, f"{i:02d}", seed=i, shape=(60, 80))
     csv_path = tmp_path / "m.csv"
-    # Adam with tol 0 runs all its iterations: each frame takes a while (about 0.3 s here), so the signal lands mid-batch
+    # Adam with tol 0 runs all its iterations: each frame takes a while (about 0.5 s here), so the signal lands mid-batch
     argv = [sys.executable, "-m", "sparsedepth.complete", "--batch", str(frames), "--depth-scale", "mm",
-            "--keep-fraction", "0.05", "--solver", "adam", "--tol", "0", "--max-iter", "100", "--csv", str(csv_path),
+            "--keep-fraction", "0.05", "--solver", "adam", "--tol", "0", "--max-iter", "50", "--csv", str(csv_path),
             "--outdir", str(out), "--workers", "2", "-q"]
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     log = tmp_path / "stderr.txt"
