@@ -121,16 +121,14 @@ def weight_candidates():
 
 def weights_table(frames_, seeds=(0,)):
     """Markdown: each candidate's mean ratio on ``frames_`` at 1/5/10 % and its time relative to the first."""
-    from sparsedepth.completion import _complete_fast  # the fast mode with exactly the weights given
-    from sparsedepth.objective.objective import DEFAULT_L1_SMOOTHING
+    from sparsedepth.modes.fast import complete_fast  # the fast mode with exactly the weights given
 
     candidates = weight_candidates()
     ratios = {label: [] for label, _ in candidates}
     seconds = {label: 0.0 for label, _ in candidates}
     for frame, _, _, sparse, mask, nearest, nearest_rmse in _inputs(frames_, FRACTIONS, seeds):
         for label, weights in candidates:  # interleaved: the same load for each
-            run = _quiet(lambda: _complete_fast(frame.image, sparse, mask, weights=weights, l1_smoothing=DEFAULT_L1_SMOOTHING,
-                                                clip_to_observed=True, x0=None).depth)
+            run = _quiet(lambda: complete_fast(frame.image, sparse, mask, weights=weights).depth)
             start = time.perf_counter()
             dense = run()
             seconds[label] += time.perf_counter() - start

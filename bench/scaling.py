@@ -65,7 +65,7 @@ MODES = {"default": {}, "default, stencil form at every size": {}, "fast": {"qua
 STENCIL_MODE = "default, stencil form at every size"
 #: the parts of the default mode, timed by wrapping these functions where complete_depth looks them up
 PARTS = (("sparsedepth.objective.objective", "geodesic_fill", "geodesic fill"),
-         ("sparsedepth.completion", "build_objective", "objective"),
+         ("sparsedepth.problem", "build_objective", "objective"),
          ("sparsedepth.objective.objective.Objective", "normal_equations", "normal equations"),
          ("sparsedepth.solvers.quadratic", "default_hierarchy", "multigrid set-up"),
          ("sparsedepth.solvers.quadratic", "pcg", "CG"),

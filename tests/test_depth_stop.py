@@ -12,7 +12,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import sparsedepth as sd
-from sparsedepth.completion import _scaled_objective
+from sparsedepth.problem import CompletionProblem
 from sparsedepth.linalg import pcg, pcg_info
 from sparsedepth.linalg.preconditioners import make_preconditioner
 from sparsedepth.solvers import check_solver_arguments, depth_scale
@@ -33,7 +33,8 @@ def _exact(image, sparse, mask, weights=None):
     """The unclamped minimiser in the user's units, by a direct sparse solve (independent of CG); ``weights=None``:
     the library's default weights for the mask's observed fraction, as ``complete_depth`` picks them."""
     weights = sd.resolve_weights(weights, sd.observed_fraction(np.asarray(mask)))
-    obj, _, scale, _ = _scaled_objective(image, sparse, mask, weights, 1e-6, False)
+    problem = CompletionProblem(image, sparse, mask, weights=weights, l1_smoothing=1e-6, clip_to_observed=False)
+    obj, scale = problem.objective, problem.scale
     A, b, _ = obj.normal_equations()
     return spla.spsolve(sp.csc_matrix(A), b).reshape(obj.shape) * scale, scale
 
@@ -101,7 +102,9 @@ def test_pcg_stop_hook_sees_every_step_and_ends_the_solve():
 @pytest.mark.parametrize("tol", [1e-3, 1e-5])
 def test_estimate_approximates_the_true_remaining_change(shape, seed, preconditioner, tol):
     image, sparse, mask, _ = make_problem(shape, fraction=0.05, seed=seed)
-    obj, coarse, _, _ = _scaled_objective(image, sparse, mask, sd.DEFAULT_WEIGHTS, 1e-6, False)
+    problem = CompletionProblem(image, sparse, mask, weights=sd.DEFAULT_WEIGHTS, l1_smoothing=1e-6,
+                                clip_to_observed=False)
+    obj, coarse = problem.objective, problem.fill
     A, b, _ = obj.normal_equations()
     z_star = spla.spsolve(sp.csc_matrix(A), b)
     rule = RemainingChange(b.size, tol)

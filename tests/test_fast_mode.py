@@ -11,7 +11,7 @@ from scipy.sparse.linalg import spsolve
 
 import sparsedepth as sd
 from conftest import make_scene
-from sparsedepth.completion import fast_factor
+from sparsedepth.modes.fast import fast_factor
 from sparsedepth.complete import main
 from sparsedepth.grid.diagonals import stencil_to_dia
 from sparsedepth.grid.resample import (block_mean, block_sample_mean, coarse_shape, edge_aware_sweeps,
@@ -161,23 +161,26 @@ def test_stencil_to_dia_is_the_matrix_and_multiplies_as_csr_does(offsets, shape)
 
 @pytest.mark.parametrize("weights", ["FAST_WEIGHTS", "DEFAULT_WEIGHTS"])  # (the second: a local-linear term, CSR)
 def test_the_fast_coarse_solve_meets_its_residual_in_double_precision_and_ends_near_the_cg_solver(weights):
-    from sparsedepth.completion import FAST_COARSE_RTOL, _coarse_cg
+    from sparsedepth.modes.fast import FAST_COARSE_RTOL
     from sparsedepth.solvers import depth_scale, scaled_objective
+    from sparsedepth.solvers.common import Recorder
     from sparsedepth.solvers.core import solve_scaled
+    from sparsedepth.solvers.quadratic import single_precision_cg
     image, depth = make_scene(shape=(30, 36))
     sparse, mask = sd.sample_depth(depth, fraction=0.05, seed=2)
     objective, coarse, _ = sd.build_objective(image, sparse, mask, weights=getattr(sd, weights))
     scale = depth_scale(sparse[mask])
     scaled = scaled_objective(objective, scale)
     start = coarse.ravel() / scale
-    ours = _coarse_cg(scaled, start, scale=scale, tol=FAST_COARSE_RTOL, max_iter=500)
+    ours = single_precision_cg(scaled, start, tol=FAST_COARSE_RTOL, max_iter=500,
+                           recorder=Recorder(scaled, None, scale, values=False))
     A, b, _ = scaled_objective(objective, scale).normal_equations()  # float64 CSR, assembled independently
-    relative_residual = np.linalg.norm(b - A @ (ours.z / scale)) / np.linalg.norm(b)
+    relative_residual = np.linalg.norm(b - A @ ours.z) / np.linalg.norm(b)
     assert ours.converged and relative_residual <= 1.01 * FAST_COARSE_RTOL
     assert ours.iterations >= 2 and len(ours.history) == ours.iterations + 1
     cg, _ = solve_scaled(scaled_objective(objective, scale), start, scale=scale, solver="cg", tol=FAST_COARSE_RTOL,
                          max_iter=500, callback=None, options=None, certify_result=False, objective_values=False)
-    np.testing.assert_allclose(ours.z, cg.z, rtol=1e-3)  # float32 products: the same path to about 1e-5 here
+    np.testing.assert_allclose(ours.z * scale, cg.z, rtol=1e-3)  # float32 products: the same path to about 1e-5 here
 
 
 # ----------------------------------------------------------------------------- complete_depth(quality="fast")

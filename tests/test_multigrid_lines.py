@@ -7,7 +7,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import sparsedepth as sd
-from sparsedepth.completion import _scaled_objective
+from sparsedepth.problem import CompletionProblem
 from sparsedepth.grid.stencil import SymmetricStencil
 from sparsedepth.linalg import pcg
 from sparsedepth.linalg.multigrid import GridMultigrid, solve_spd
@@ -243,7 +243,9 @@ def test_line_options_checked():
 @pytest.mark.parametrize("form", ["csr", "stencil"])
 def test_default_hierarchy_is_a_symmetric_preconditioner_reaching_spsolve(form):
     image, sparse, mask, _ = make_problem((61, 83), fraction=0.05, seed=4)
-    obj, coarse, _, _ = _scaled_objective(image, sparse, mask, sd.DEFAULT_WEIGHTS, 1e-6, False)
+    problem = CompletionProblem(image, sparse, mask, weights=sd.DEFAULT_WEIGHTS, l1_smoothing=1e-6,
+                                clip_to_observed=False)
+    obj, coarse = problem.objective, problem.fill
     A, b, _ = obj.normal_equations(form=form)
     mg = default_hierarchy(A, obj.shape)
     rng = np.random.default_rng(0)

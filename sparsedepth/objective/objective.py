@@ -50,6 +50,7 @@ __all__ = [
     "RobustTerm",
     "Objective",
     "build_objective",
+    "sample_fill",
     "edge_weights",
     "pair_edge_weights",
     "second_order_edge_weights",
@@ -421,10 +422,7 @@ def build_objective(
     img = smoothed_image(image, weights.edge_sigma)
     check_same_shape(img.shape[:2], depth.shape, "image", "sparse_depth")
     shape = depth.shape
-    if weights.fill_contrast > 0:
-        coarse = geodesic_fill(img, depth, observed, contrast=weights.fill_contrast)
-    else:
-        coarse = nearest_fill(depth, observed)
+    coarse = _fill(img, depth, observed, weights)
     w = edge_weights(img, weights.kappa).ravel() if weights.gamma > 0 else None
     # with the local-linear term, the blurred image is kept once, as the channel planes that term reads, and the
     # pair weights are computed from them when read (PairEdgeWeights: the numbers of pair_edge_weights)
@@ -467,6 +465,23 @@ def build_objective(
             f"smoothness weight (beta, gamma, beta_image, beta_second or a local-linear weight); got {weights}"
         )
     return Objective(shape, terms, l1_smoothing=l1_smoothing), coarse, observed
+
+
+def sample_fill(image, depth, observed, weights):
+    """``z_c`` of :func:`build_objective` for these observations: the geodesic or Euclidean nearest-sample fill.
+
+    With ``weights.fill_contrast > 0`` the geodesic fill on the image blurred by ``weights.edge_sigma``
+    (:func:`~sparsedepth.grid.geodesic.geodesic_fill`), else the Euclidean nearest fill.  ``depth`` (H, W) holds
+    the observations where ``observed`` is True; ``weights`` are resolved :class:`Weights`.
+    """
+    return _fill(smoothed_image(image, weights.edge_sigma), depth, observed, weights)
+
+
+def _fill(blurred, depth, observed, weights):
+    """:func:`sample_fill` on the image already blurred."""
+    if weights.fill_contrast > 0:
+        return geodesic_fill(blurred, depth, observed, contrast=weights.fill_contrast)
+    return nearest_fill(depth, observed)
 
 
 def _edge_term(weights, G, w):

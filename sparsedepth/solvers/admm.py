@@ -27,7 +27,7 @@ from .active_set import polish_active_set
 from .certificate import Certificate
 from .common import Recorder, gap_threshold, objective_floor, output, refuse_robust, relative
 
-__all__ = ["solve_admm", "finish_from", "default_rho", "combine", "RHO_REFERENCE_PIXELS"]
+__all__ = ["solve_admm", "finish_from", "default_rho", "combine", "RHO_REFERENCE_PIXELS", "ADMM_TOL", "ADMM_MAX_ITER"]
 
 
 #: Rows with ``|(Kz)_k|`` at most this (solver units: the depth divided by its scale, about 1) count as tied in
@@ -39,6 +39,8 @@ DUAL_FIT_STEPS = 30
 #: The pixel count at which :func:`default_rho` was tuned (a 640x480 frame); ρ grows with the side length above it.
 RHO_REFERENCE_PIXELS = 640 * 480
 
+#: ``tol`` and ``max_iter`` of ``solver="admm"`` when not given (its entry of the solver registry).
+ADMM_TOL, ADMM_MAX_ITER = 1.5e-3, 1000
 
 
 def target_gap(options) -> float:

@@ -13,7 +13,7 @@ from ..linalg.krylov import dot, pcg
 from ..linalg.multigrid import GridMultigrid
 from ..linalg.preconditioners import make_preconditioner
 from ..objective.l1 import StackedL1
-from .admm import finish_from
+from .admm import ADMM_MAX_ITER, ADMM_TOL, finish_from
 from .certificate import Certificate, curvature_lower_bound
 from .common import gap_threshold, objective_floor, output, relative
 from .options import AdmmOptions
@@ -390,10 +390,7 @@ def _solve_newton(objective, system, x0, *, max_iter, recorder, options):
         recorded = k + 1
         recorder(recorded, best_z, inner=inner_total, value=best_F)
     if finish and not (converged and newton_gap_tol <= target):
-        from .registry import REGISTRY  # the registry imports this module: ADMM's default tol and max_iter, at call time
-
-        admm = REGISTRY["admm"]
-        out = finish_from(objective, best_z, p, tol=admm.tol, max_iter=admm.max_iter, recorder=recorder,
+        out = finish_from(objective, best_z, p, tol=ADMM_TOL, max_iter=ADMM_MAX_ITER, recorder=recorder,
                           options=AdmmOptions(gap_tol=options.gap_tol, target_gap=target), first_iteration=recorded)
         message = (f"Newton phase: {message}; finished by {out.iterations - recorded} ADMM iterations with "
                    f"active-set polishes from its point: {out.message}")

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from .adam import solve_adam
-from .admm import solve_admm
+from .admm import ADMM_MAX_ITER, ADMM_TOL, solve_admm
 from .irls import solve_irls
 from .lbfgsb import solve_lbfgsb
 from .options import (AdamOptions, AdmmOptions, AmgOptions, CgOptions, DirectOptions, IrlsOptions, LbfgsbOptions,
@@ -74,7 +74,7 @@ REGISTRY = {
     "cg": SolverEntry(solve_cg, CgOptions, 1e-8, 5000, quadratic=True),
     "amg": SolverEntry(solve_amg, AmgOptions, 1e-8, 500, quadratic=True),
     "irls": SolverEntry(solve_irls, IrlsOptions, 1e-7, 200, smoothing_ties=True, robust=True),
-    "admm": SolverEntry(solve_admm, AdmmOptions, 1.5e-3, 1000),
+    "admm": SolverEntry(solve_admm, AdmmOptions, ADMM_TOL, ADMM_MAX_ITER),
     "lbfgsb": SolverEntry(solve_lbfgsb, LbfgsbOptions, 1e-12, 15000, smoothed=True, smoothing_ties=True,
                           robust=True),
     "adam": SolverEntry(solve_adam, AdamOptions, 1e-7, 20000, smoothed=True, smoothing_ties=True,
