@@ -1,94 +1,51 @@
-"""sparsedepth: dense depth from an image and a few depth samples.
+"""sparsedepth: dense depth from an image and a few depth samples, by regularised optimisation.
 
-Depth completion and hole filling by regularised optimisation with sparse
-linear algebra (scipy.sparse, pyamg).  The main entry point is
-:func:`complete_depth`; :func:`fill_holes` fills raw sensor depth;
-``python -m sparsedepth.complete`` is the command line.
+Turn an RGB image plus a few percent of depth pixels into a dense depth map, or fill the holes of a raw depth
+sensor, with no training and on a CPU.  ``python -m sparsedepth.complete`` is the command line; the guides and the
+API reference are in the documentation (``docs/``, built by ``mkdocs build``).
 
-The map of the package, from the bottom layer up (each part may import only
-the parts listed before it, NumPy, SciPy, pyamg, scikit-image and h5py;
-``docs/architecture.md`` follows one frame through it):
+The user's API
+--------------
+Complete and fill
+    :func:`complete_depth` (``quality="fast"``, ``prior=``, ``uncertainty=``), :func:`fill_holes`,
+    :class:`CompletionProblem` (set up once, solve many times), :class:`CompletionResult`, :class:`ClampWarning`.
+Model
+    :class:`Weights`, :data:`DEFAULT_WEIGHTS`, :data:`FAST_WEIGHTS`, :class:`DensitySchedule`,
+    :data:`DEFAULT_SCHEDULE`, :func:`default_weights`, :data:`SOLVERS`, :data:`SOLVER_OPTIONS`.
+Inputs and outputs
+    :func:`read_image`, :func:`read_depth`, :func:`write_depth`, :func:`depth_to_points`, :func:`write_ply`,
+    :func:`read_ply`, :func:`colorize_depth`, :func:`shift_image`, :func:`estimate_image_shift`,
+    :func:`align_prior`.
+Data, sampling and scores
+    :func:`load_motorcycle`, :func:`list_shared_frames`, :func:`load_shared_frame`, :func:`sample_depth`,
+    :func:`sample_mask`, :func:`valid_depth_mask`, :func:`depth_metrics`, :class:`DepthMetrics`, and the
+    baselines :func:`nearest_fill`, :func:`linear_fill`, :func:`biharmonic_fill`, :func:`colorization_baseline`.
+Subpackages
+    :mod:`~sparsedepth.io` (files), :mod:`~sparsedepth.datasets` (real frames), :mod:`~sparsedepth.batch` (whole
+    datasets, Dask clusters), :mod:`~sparsedepth.holes` (hole filling).
 
-``_validation``
-    Every input check, one rule per concept (numbers, grid shapes, images,
-    depth and masks, sparse grid operators, weights, paths).  Imports nothing
-    of the package.
-``result``
-    :class:`CompletionResult`, :class:`IterationRecord`, :class:`SolverState`,
-    :class:`UncertaintyCalibration`, :class:`ClampWarning`: the types every solver and :func:`complete_depth`
-    return.
-``grid/``
-    The pixel grid: stencils (``stencil``), finite-difference operators
-    (``operators``), the image gradient and edge weights (``edges``), the
-    windowed local-linear affinities (``affinity``: the matting Laplacian), the
-    image-aware nearest-sample fill (``geodesic``).
-``io/``
-    Files: images, depth formats and their units, calibration, NumPy/HDF5
-    arrays, NYU Depth V2 files, point clouds (pinhole back-projection, PLY),
-    atomic writes.  Imports ``_validation`` only.
-``linalg/``
-    Sparse SPD solves: every Krylov loop (``krylov``: CG, warm-started CG
-    steps, GMRES), preconditioners by name, and the geometric multigrid
-    (``multigrid/``).  Imports ``grid``.
-``sampling``, ``metrics``, ``baselines``
-    Sparse input from dense depth, error metrics, and the fills a user would
-    otherwise reach for (nearest, linear, biharmonic, colorization;
-    ``colorization_baseline`` imports ``holes.colorization`` when called).
-``priors``
-    A dense depth map the user brings (``complete_depth(..., prior=)``):
-    checks and the least-squares scale/shift alignment to the samples.
-``registration``
-    Image-to-depth registration: :func:`shift_image` and the cross-validated
-    :func:`estimate_image_shift`, :func:`pool_image_shifts` (imports ``grid``).
-``visualize``
-    :func:`colorize_depth`: a depth map as an RGB picture (NumPy only).
-``objective/``
-    The objective as a sum of named terms (``terms``, ``objective``), their
-    :class:`Weights` (``weights``), and the stacked L1 operator (``l1``).
-    Imports ``grid`` and the nearest fill of ``baselines``.
-``solvers/``
-    One module per solver family (``quadratic``, ``irls``, ``admm`` with
-    ``active_set``, ``lbfgsb``, ``adam``), one ``registry``, one options
-    dataclass per solver (``options``), the duality-gap ``certificate``, and
-    the front door ``core`` (checks, depth scaling, :func:`solve`).  Imports
-    ``objective``, ``linalg``, ``grid``, ``result``.
-``uncertainty``
-    The per-pixel error estimate of a completion and its calibration on
-    held-out observations (never solves; imports ``result``).
-``completion``
-    :func:`complete_depth`: checks, objective, scaled solve, clamp, and the
-    uncertainty map from two half-sample solves.
-``holes/``
-    :func:`fill_holes`: the NYU toolbox colorization fill (``affinity``,
-    ``ordering``, ``schur``, ``colorization``) and the completion objective
-    with every valid raw pixel observed (``fill``).  Imports ``completion``,
-    ``linalg``, ``grid``.
-``datasets``
-    Real frames: the shipped samples, the shared data folder, NYU files.
-    Imports ``io``.
-``batch/``
-    Whole datasets: frame discovery (``frames``), one frame (``evaluate``,
-    ``worker``), options, the resumable CSV (``csvlog``), the worker pool
-    (``pool``), :func:`~sparsedepth.batch.run_batch` (``run``) and Dask
-    clusters (``distributed``, the only module that imports Dask, when
-    called).  Imports everything above except ``cli``.
-``cli/``
-    The command line: the parser, option checks, one frame, batches, output
-    planning (all or nothing), reports.  Imported only by ``complete``, the
-    ``python -m sparsedepth.complete`` entry point.
+Where things live
+-----------------
+From the bottom layer up: ``_validation`` (every input check), ``result``, ``grid/`` (stencils, operators, edge
+weights, affinities, the geodesic fill), ``io/`` (formats in one table: ``io.formats``), ``linalg/`` (Krylov
+loops, preconditioners, multigrid), ``sampling``, ``metrics``, ``baselines``, ``priors``, ``registration``,
+``visualize``, ``objective/`` (the objective as a sum of named terms and their :class:`Weights`), ``solvers/`` (one
+registry, one options class per solver, the duality-gap certificate), ``uncertainty`` (the error map's
+calibration), ``problem`` (:class:`CompletionProblem`), ``modes/`` (fast, prior, uncertainty), ``completion``
+(:func:`complete_depth`), ``holes/``, ``datasets``, ``batch/``, ``cli/``.  Each folder's ``__init__`` says what it
+holds and what it may import; ``docs/architecture.md`` follows one frame through them and says which files a new
+term, solver or file format touches.
 
-Where a change goes: a new solver is a module in ``solvers/`` plus a line in
-``solvers/registry.py`` and an options class in ``solvers/options.py``; a new
-term is a :class:`QuadraticTerm`/:class:`AbsTerm`/:class:`RobustTerm` built in
-``objective/objective.py`` with its weight in ``objective/weights.py``; a new
-file format is a module in ``io/`` dispatched from ``io/depth.py`` or
-``io/images.py``; a new command-line flag is an argument group in
-``cli/parser.py`` and its use in ``cli/single.py`` or ``cli/batch_mode.py``.
+Other names of earlier versions (``build_objective``, ``Objective`` and the term classes, ``observed_fraction``,
+``resolve_weights``, ``choose_solver``, ``geodesic_fill``, ``pool_image_shifts``, ``ImageShift``,
+``PRIOR_ALIGNMENTS``, the robust penalties, the record types, the embedded-frame loaders, ``DEPTH_SCALES``,
+``FILL_METHODS``) are still attributes of the package; their home is the subpackage that defines them.
 """
 
 from . import datasets, io
 from .baselines import biharmonic_fill, colorization_baseline, linear_fill, nearest_fill
 from .completion import FAST_WEIGHTS, choose_solver, complete_depth
+from .problem import CompletionProblem
 from .grid.geodesic import geodesic_fill
 from .priors import PRIOR_ALIGNMENTS, align_prior
 from .registration import ImageShift, estimate_image_shift, pool_image_shifts, shift_image
@@ -114,69 +71,20 @@ from .io import DEPTH_SCALES, depth_to_points, read_depth, read_image, read_ply,
 __version__ = "0.1.0"
 
 __all__ = [
-    "complete_depth",
-    "choose_solver",
-    "Weights",
-    "DEFAULT_WEIGHTS",
-    "DensitySchedule",
-    "DEFAULT_SCHEDULE",
-    "default_weights",
-    "observed_fraction",
-    "resolve_weights",
-    "FAST_WEIGHTS",
-    "CompletionResult",
-    "ClampWarning",
-    "UncertaintyCalibration",
-    "IterationRecord",
-    "SolverState",
-    "Objective",
-    "QuadraticTerm",
-    "AbsTerm",
-    "RobustTerm",
-    "RobustPenalty",
-    "robust_penalty",
-    "PENALTIES",
-    "build_objective",
-    "edge_weights",
-    "nearest_fill",
-    "geodesic_fill",
-    "align_prior",
-    "PRIOR_ALIGNMENTS",
-    "shift_image",
-    "estimate_image_shift",
-    "pool_image_shifts",
-    "ImageShift",
-    "linear_fill",
-    "biharmonic_fill",
-    "colorization_baseline",
-    "depth_metrics",
-    "DepthMetrics",
-    "sample_depth",
-    "sample_mask",
-    "valid_depth_mask",
-    "SOLVERS",
+    # complete and fill
+    "complete_depth", "fill_holes", "CompletionProblem", "CompletionResult", "ClampWarning",
+    # model
+    "Weights", "DEFAULT_WEIGHTS", "FAST_WEIGHTS", "DensitySchedule", "DEFAULT_SCHEDULE", "default_weights", "SOLVERS",
     "SOLVER_OPTIONS",
-    "Frame",
-    "load_motorcycle",
-    "load_embedded_frame",
-    "list_embedded_frames",
-    "list_shared_frames",
-    "load_shared_frame",
-    "shared_data_dir",
-    "read_image",
-    "read_depth",
-    "write_depth",
-    "depth_to_points",
-    "write_ply",
-    "read_ply",
-    "DEPTH_SCALES",
-    "io",
-    "datasets",
+    # inputs and outputs
+    "read_image", "read_depth", "write_depth", "depth_to_points", "write_ply", "read_ply", "colorize_depth",
+    "shift_image", "estimate_image_shift", "align_prior",
+    # data, sampling and scores
+    "load_motorcycle", "list_shared_frames", "load_shared_frame", "sample_depth", "sample_mask", "valid_depth_mask",
+    "depth_metrics", "DepthMetrics", "nearest_fill", "linear_fill", "biharmonic_fill", "colorization_baseline",
+    # subpackages
+    "io", "datasets", "batch", "holes",
 ]
 from . import batch, holes  # noqa: E402
 from .holes.fill import FILL_METHODS, fill_holes  # noqa: E402
-
-__all__ += ["fill_holes", "FILL_METHODS", "holes", "batch"]
 from .visualize import colorize_depth  # noqa: E402
-
-__all__ += ["colorize_depth"]
