@@ -38,7 +38,7 @@ import numpy as np  # noqa: E402
 import sparsedepth as sd  # noqa: E402
 from sparsedepth.linalg import pcg_info  # noqa: E402
 from sparsedepth.linalg.multigrid import GridMultigrid  # noqa: E402
-from sparsedepth.solvers import depth_scale, scaled_objective  # noqa: E402
+from sparsedepth.solvers import depth_unit, scaled_objective  # noqa: E402
 from sparsedepth.solvers.quadratic import DEFAULT_DEPTH_RTOL, RemainingChange, system_form  # noqa: E402
 
 from . import frames as frame_list  # noqa: E402
@@ -97,7 +97,7 @@ def measure(frame, weights, turn):
     """Per interpolation: ``(seconds, iterations at the depth rule, at 1e-8)``, the solutions' RMS difference and
     the points of the normal stencil."""
     sparse, mask = H.sample(frame, fraction=FRACTION, seed=SEED)
-    scale = depth_scale(sparse[mask])
+    scale = depth_unit(sparse[mask])
     objective, coarse, _ = sd.build_objective(frame.image, sparse, mask,
                                               weights=sd.resolve_weights(weights, sd.observed_fraction(mask)))
     scaled = scaled_objective(objective, scale)

@@ -40,7 +40,7 @@ import numpy as np  # noqa: E402
 import sparsedepth as sd  # noqa: E402
 from sparsedepth.linalg import pcg_info  # noqa: E402
 from sparsedepth.objective.weights import LOCAL_LINEAR_FIELDS  # noqa: E402
-from sparsedepth.solvers import depth_scale, scaled_objective  # noqa: E402
+from sparsedepth.solvers import depth_unit, scaled_objective  # noqa: E402
 from sparsedepth.solvers.quadratic import (DEFAULT_DEPTH_RTOL, RemainingChange, default_hierarchy,  # noqa: E402
                                            system_form)
 
@@ -75,7 +75,7 @@ def stopping_row(frame) -> dict:
     """One frame of the stopping-rule section (see the module docstring)."""
     sparse, mask = H.sample(frame, fraction=FRACTION, seed=SEED)
     observed = sparse[mask]
-    scale = depth_scale(observed)
+    scale = depth_unit(observed)
     objective, coarse, _ = sd.build_objective(frame.image, sparse, mask)
     scaled = scaled_objective(objective, scale)
     A, b, _ = scaled.normal_equations(form=system_form(scaled))
@@ -148,7 +148,7 @@ TERMS_HEADER = ["frame"] + [f"{name}: CG its depth / 1e-8" for name in TERM_VARI
 def terms_row(frame) -> dict:
     """One frame of the iteration-count section: the default solve of each :data:`TERM_VARIANTS` objective."""
     sparse, mask = H.sample(frame, fraction=FRACTION, seed=SEED)
-    scale = depth_scale(sparse[mask])
+    scale = depth_unit(sparse[mask])
     base = sd.resolve_weights(None, sd.observed_fraction(mask))
     row = {"frame": frame.name}
     for name, zeroed in TERM_VARIANTS.items():

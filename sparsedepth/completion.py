@@ -172,7 +172,7 @@ def complete_depth(
     -----
     The solve runs in normalised units: depth, ``x0``, ``γ``, ``edge_scale``
     and ``l1_smoothing`` are divided by ``s``, the power of two nearest the
-    median observed depth (:func:`sparsedepth.solvers.depth_scale`); the
+    median observed depth (:func:`sparsedepth.solvers.depth_unit`); the
     quadratic weights are unchanged, so the objective is ``F / s²``.  The
     result (depth, objective, terms, history, callback states) is in the
     units of ``sparse_depth``, and the answer does not depend on the unit

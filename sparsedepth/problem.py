@@ -24,7 +24,7 @@ from .objective.objective import (DEFAULT_L1_SMOOTHING, AbsTerm, Objective, Quad
                                   build_objective, sample_fill)
 from .objective.weights import Weights, check_weights, observed_fraction, resolve_weights
 from .result import ClampWarning, CompletionResult, RangeOutlierWarning
-from .solvers import SOLVERS, check_solver_arguments, depth_scale, solve_scaled
+from .solvers import SOLVERS, check_solver_arguments, depth_unit, solve_scaled
 from .solvers.quadratic import DEFAULT_DEPTH_RTOL
 
 __all__ = ["CompletionProblem", "choose_solver", "range_outliers", "depth_jump_factor", "CLAMP_WARNING_SHARE",
@@ -78,7 +78,7 @@ class CompletionProblem:
     weights : Weights
         The weights solved with.
     scale : float
-        The depth unit of the solve, :func:`~sparsedepth.solvers.depth_scale`
+        The depth unit of the solve, :func:`~sparsedepth.solvers.depth_unit`
         of the observations (a power of two).
     objective : Objective
         The objective in that unit: ``F_s(z / s) = F(z) / s²``.
@@ -113,7 +113,7 @@ class CompletionProblem:
         self.shape = depth.shape
         values = depth[observed]
         self.depth_range = _depth_range(values, self.clip_to_observed)
-        self.scale = depth_scale(values)
+        self.scale = depth_unit(values)
         self.bounds = self.depth_range if bounds is None else tuple(b if np.ndim(b) == 0 else np.ravel(b)
                                                                      for b in bounds)
         self._has_bounds = bounds is not None

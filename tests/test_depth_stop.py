@@ -15,7 +15,7 @@ import sparsedepth as sd
 from sparsedepth.problem import CompletionProblem
 from sparsedepth.linalg import pcg, pcg_info
 from sparsedepth.linalg.preconditioners import make_preconditioner
-from sparsedepth.solvers import check_solver_arguments, depth_scale
+from sparsedepth.solvers import check_solver_arguments, depth_unit
 from sparsedepth.solvers.options import DEFAULT_GAP_TOL, AmgOptions, CgOptions
 from sparsedepth.solvers.quadratic import DEFAULT_DEPTH_RTOL, RemainingChange
 
@@ -127,7 +127,7 @@ def test_default_solve_stops_on_the_depth_rule_within_its_tolerance(frame):
     res = sd.complete_depth(image, sparse, mask, clip_to_observed=False)
     assert res.solver == "amg" and res.converged
     z_star, scale = _exact(image, sparse, mask)
-    assert scale == depth_scale(sparse[mask])
+    assert scale == depth_unit(sparse[mask])
     tol = DEFAULT_DEPTH_RTOL * scale
     assert _rms(res.depth - z_star) <= K * tol
     match = re.search(r"estimated remaining change (\S+) \(RMS, depth units\) <= depth tolerance (\S+)", res.message)

@@ -162,14 +162,14 @@ def test_stencil_to_dia_is_the_matrix_and_multiplies_as_csr_does(offsets, shape)
 @pytest.mark.parametrize("weights", ["FAST_WEIGHTS", "DEFAULT_WEIGHTS"])  # (the second: a local-linear term, CSR)
 def test_the_fast_coarse_solve_meets_its_residual_in_double_precision_and_ends_near_the_cg_solver(weights):
     from sparsedepth.modes.fast import FAST_COARSE_RTOL
-    from sparsedepth.solvers import depth_scale, scaled_objective
+    from sparsedepth.solvers import depth_unit, scaled_objective
     from sparsedepth.solvers.common import Recorder
     from sparsedepth.solvers.core import solve_scaled
     from sparsedepth.solvers.quadratic import single_precision_cg
     image, depth = make_scene(shape=(30, 36))
     sparse, mask = sd.sample_depth(depth, fraction=0.05, seed=2)
     objective, coarse, _ = sd.build_objective(image, sparse, mask, weights=getattr(sd, weights))
-    scale = depth_scale(sparse[mask])
+    scale = depth_unit(sparse[mask])
     scaled = scaled_objective(objective, scale)
     start = coarse.ravel() / scale
     ours = single_precision_cg(scaled, start, tol=FAST_COARSE_RTOL, max_iter=500,
@@ -368,12 +368,12 @@ def test_cli_batch_fast_refuses_tol_naming_the_flag(tmp_path, capsys):
 
 @pytest.mark.parametrize("solver", ["cg", "amg"])
 def test_solve_without_objective_values_takes_the_same_steps_and_records_nan(solver):
-    from sparsedepth.solvers import depth_scale, scaled_objective
+    from sparsedepth.solvers import depth_unit, scaled_objective
     from sparsedepth.solvers.core import solve_scaled
     image, depth = make_scene(shape=(30, 36))
     sparse, mask = sd.sample_depth(depth, fraction=0.1, seed=1)
     objective, coarse, _ = sd.build_objective(image, sparse, mask)
-    scale = depth_scale(sparse[mask])
+    scale = depth_unit(sparse[mask])
     scaled = scaled_objective(objective, scale)
     runs = [solve_scaled(scaled, coarse.ravel() / scale, scale=scale, solver=solver, tol=1e-6, max_iter=None,
                          callback=None, options=None, certify_result=False, objective_values=values)[0]

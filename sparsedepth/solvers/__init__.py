@@ -10,7 +10,7 @@ their options are one frozen dataclass per solver
 (:mod:`~sparsedepth.solvers.options`; defaults: :data:`SOLVER_OPTIONS`).
 
 :func:`solve` works in normalised units: the depth is divided by a power of
-two ``s`` near its median (:func:`depth_scale`) and the objective becomes
+two ``s`` near its median (:func:`depth_unit`) and the objective becomes
 ``F / s²`` (:func:`scaled_objective`), so every solver, its defaults and its
 tolerances see data of order 1 whatever the unit.  Every solver's output
 carries a duality gap (:mod:`sparsedepth.solvers.certificate`), a bound on
@@ -63,12 +63,12 @@ or :mod:`sparsedepth.completion`.
 
 from .certificate import Certificate, curvature_lower_bound, duality_gap
 from .common import SolverOutput
-from .core import check_solver_arguments, depth_scale, scaled_objective, solve, solve_scaled
+from .core import check_solver_arguments, depth_unit, scaled_objective, solve, solve_scaled
 from .options import (AdamOptions, AdmmOptions, AmgOptions, CgOptions, DirectOptions, IrlsOptions, LbfgsbOptions,
                       SolverOptions)
 from .registry import DEFAULT_MAX_ITER, DEFAULT_TOL, REGISTRY, SOLVER_OPTIONS, SOLVERS
 
 __all__ = ["SolverOutput", "SOLVERS", "SOLVER_OPTIONS", "DEFAULT_TOL", "DEFAULT_MAX_ITER", "REGISTRY", "solve",
-           "solve_scaled", "depth_scale", "scaled_objective", "check_solver_arguments", "Certificate",
+           "solve_scaled", "depth_unit", "scaled_objective", "check_solver_arguments", "Certificate",
            "duality_gap", "curvature_lower_bound", "SolverOptions", "DirectOptions", "CgOptions", "AmgOptions",
            "IrlsOptions", "AdmmOptions", "LbfgsbOptions", "AdamOptions"]

@@ -47,7 +47,7 @@ def target_gap(options) -> float:
     """The relative duality gap the solver works to: the smaller of ``target_gap`` and ``gap_tol``."""
     return min(options.target_gap, options.gap_tol)
 
-def default_rho(objective, max_weight, depth_scale):
+def default_rho(objective, max_weight, depth_unit):
     """ADMM penalty ``ρ = 1.5 max(α, 300 max_k c_k / s) · max(1, √(N / N₀))``.
 
     ``α`` is the weight of the ``data`` term (1 without one), ``c`` the L1
@@ -71,7 +71,7 @@ def default_rho(objective, max_weight, depth_scale):
         if term.name == "data":
             alpha = float(term.weight)
     grid = max(1.0, float(np.sqrt(objective.size / RHO_REFERENCE_PIXELS)))
-    return 1.5 * max(alpha, 300.0 * float(max_weight) / depth_scale) * grid
+    return 1.5 * max(alpha, 300.0 * float(max_weight) / depth_unit) * grid
 
 
 def _penalty(objective, l1, z, options):

@@ -1,7 +1,7 @@
 """The front door of the solvers: argument checks, depth scaling, one solve, its certificate.
 
 :func:`check_solver_arguments` checks and completes ``tol``, ``max_iter`` and
-``options``; :func:`solve` divides the depth by :func:`depth_scale`, runs the
+``options``; :func:`solve` divides the depth by :func:`depth_unit`, runs the
 named solver of :data:`~sparsedepth.solvers.registry.REGISTRY` on
 :func:`scaled_objective` and checks its claim of convergence against the
 duality gap (:func:`certify`; not for objectives with robust terms, which
@@ -23,7 +23,7 @@ from .certificate import Certificate, curvature_lower_bound
 from .common import CallbackStop, Recorder, SolverOutput, gap_threshold, refuse_robust, relative, quick_value
 from .registry import DEFAULT_MAX_ITER, DEFAULT_TOL, REGISTRY, SOLVER_OPTIONS, SOLVERS
 
-__all__ = ["solve", "solve_scaled", "check_solver_arguments", "depth_scale", "scaled_objective", "certify",
+__all__ = ["solve", "solve_scaled", "check_solver_arguments", "depth_unit", "scaled_objective", "certify",
            "start_kkt_residual", "SOLVERS", "SOLVER_OPTIONS", "QUADRATIC_CERTIFICATE_RTOL"]
 
 #: A solver that stops at its start with converged=True must pass this relative optimality test.
@@ -83,7 +83,7 @@ def check_solver_arguments(solver, tol=None, max_iter=None, options=None):
     return tol, max_iter, REGISTRY[solver].options.from_mapping(options).as_dict()
 
 
-def depth_scale(values) -> float:
+def depth_unit(values) -> float:
     """The power of two nearest (in log) to the median of the positive finite ``values``; 1 without any.
 
     :func:`solve` divides depth by it: a power of two makes the division and
@@ -97,6 +97,9 @@ def depth_scale(values) -> float:
         return 1.0
     return float(2.0 ** int(np.round(np.log2(float(np.median(v))))))
 
+
+#: The former name of :func:`depth_unit`, kept for code that imports it (``--depth-scale`` is the file's unit).
+depth_scale = depth_unit
 
 def scaled_objective(objective, scale):
     """The objective in depth units of ``scale``: ``F_s(z / s) = F(z) / s²``.
@@ -149,7 +152,7 @@ def start_kkt_residual(objective, z, smoothed):
 def solve(objective, x0, *, solver, tol=None, max_iter=None, callback=None, options=None):
     """Run one named solver in normalised units; returns ``(SolverOutput, runtime_seconds)``.
 
-    The depth is divided by ``s = depth_scale(x0)`` (a power of two near the
+    The depth is divided by ``s = depth_unit(x0)`` (a power of two near the
     median positive starting value): the solver minimises
     :func:`scaled_objective` from ``x0 / s`` and sees data of order 1 whatever
     the unit, so micrometres and kilometres give the same answer.  The
@@ -171,7 +174,7 @@ def solve(objective, x0, *, solver, tol=None, max_iter=None, callback=None, opti
     """
     tol, max_iter, options = check_solver_arguments(solver, tol, max_iter, options)
     x0 = np.asarray(x0, dtype=np.float64).ravel()
-    scale = depth_scale(x0)
+    scale = depth_unit(x0)
     return solve_scaled(scaled_objective(objective, scale), x0 / scale, scale=scale, solver=solver, tol=tol,
                         max_iter=max_iter, callback=callback, options=options)
 

@@ -191,7 +191,7 @@ class AmgOptions(SolverOptions):
         Stop when the estimated remaining change of the depth (root mean
         square over the pixels of ``z_k − z*``) is at most ``depth_rtol ·
         s``, ``s`` the depth scale of the solve (the power of two nearest the
-        median observed depth, :func:`~sparsedepth.solvers.depth_scale`).
+        median observed depth, :func:`~sparsedepth.solvers.depth_unit`).
         :func:`sparsedepth.complete_depth` sets it to
         :data:`~sparsedepth.solvers.quadratic.DEFAULT_DEPTH_RTOL` (3e-4)
         when neither ``tol`` nor a depth tolerance is given.
