@@ -149,12 +149,12 @@ class Weights:
 
     Notes
     -----
-    The defaults are the weights chosen by the weight search of
-    ``bench/tune.py`` on RMSE and MAE together; on the tuning frames they
-    complete with a lower hidden-pixel error than the reference paper's
-    objective (the numbers are in ``docs/tuning.md``, the reported frames'
-    in ``docs/results.md``).  The default ``gamma`` is 0: the
-    edge-aware L1 term does not lower the error measurably there and costs a
+    The defaults are the weights chosen on the tuning frames (``bench/frames.py``
+    ``TUNE_FRAMES``, never the frames of the reported tables) by the weight
+    search of ``python -m bench.tune`` on RMSE and MAE together
+    (``docs/tuning.md`` has its scores and the reference paper's objective
+    beside them; ``docs/results.md`` the report frames').  The default
+    ``gamma`` is 0, the search's choice: the edge-aware L1 term costs a
     non-smooth solve; set ``gamma > 0`` (in units of depth: it scales linearly
     with depth, unlike the quadratic terms) to use it.  With ``gamma = 0``
     multiplying every weight by one number leaves the solution unchanged
@@ -162,8 +162,8 @@ class Weights:
     default ``edge_sigma = 1`` and ``fill_contrast = 20`` (blurred-image edge
     weights, geodesic ``z_c``), and the local-linear term
     (``beta_local_linear = 0.01``, ``local_linear_eps = 1e-5``, with
-    ``beta_image`` and ``beta_second_image`` at 0.3 times the values of the
-    weight search) were chosen on the tuning frames by
+    ``beta_image`` and ``beta_second_image`` the weight search's values times
+    a factor chosen with it) were chosen on the tuning frames by
     ``python -m bench.accuracy``; ``docs/accuracy.md`` has their scores on the
     report frames and leave-one-dataset-out.
 
@@ -175,28 +175,27 @@ class Weights:
     (``python -m bench.density``, ``docs/density.md``).
     """
 
-    # Defaults: the weight set chosen by ``python bench/tune.py`` (docs/tuning.md), rounded to
-    # three significant digits: tuned on bench/frames.py TUNE_FRAMES at 1/5/10 % observed, never on
-    # the frames the reported tables use.
+    # Defaults: the weight set chosen by ``python -m bench.tune`` (docs/tuning.md) on bench/frames.py
+    # TUNE_FRAMES at 1/5/10 % observed, never on the frames the reported tables use.
     alpha: float = 1.0
     beta: float = 0.0
     gamma: float = 0.0
     delta: float = 0.000131
     kappa: float = 25.0
-    # beta_image and beta_second_image: bench.tune's 0.00673 and 0.039 times 0.3, the factor chosen with the
-    # local-linear term by ``python -m bench.accuracy`` on TUNE_FRAMES (docs/accuracy.md)
+    # beta_image and beta_second_image: bench.tune's values times the factor chosen with the local-linear term
+    # by ``python -m bench.accuracy`` on TUNE_FRAMES (docs/accuracy.md)
     beta_image: float = 0.002019
     beta_second: float = 0.000286
     beta_second_image: float = 0.0117
     edge_penalty: str = "l1"
     edge_scale: float = DEFAULT_EDGE_SCALE
     # edge_sigma and fill_contrast: the grid point of ``python -m bench.accuracy`` best on TUNE_FRAMES
-    # (docs/accuracy.md), which also wins on every dataset of REPORT_FRAMES and leave-one-dataset-out
+    # (docs/accuracy.md has its scores on REPORT_FRAMES and leave-one-dataset-out)
     edge_sigma: float = 1.0
     fill_contrast: float = 20.0
     depth_jump: float = 0.0
-    # beta_local_linear and local_linear_eps: the grid point of ``python -m bench.accuracy`` best on TUNE_FRAMES,
-    # which also wins on REPORT_FRAMES and leave-one-dataset-out (docs/accuracy.md)
+    # beta_local_linear and local_linear_eps: the grid point of ``python -m bench.accuracy`` best on TUNE_FRAMES
+    # (docs/accuracy.md has its scores on REPORT_FRAMES and leave-one-dataset-out)
     beta_local_linear: float = 0.01
     local_linear_eps: float = 1e-5
     beta_local_linear_cross: float = 0.0
@@ -249,9 +248,9 @@ class Weights:
         Those are ``edge_penalty`` and ``edge_scale`` for the L1 edge term (it
         has no scale), each local-linear weight at 0 (its term is absent),
         ``local_linear_eps`` while all three are 0, and every
-        :data:`MODEL_FIELDS` entry at 0 (switched off); reports and batch fingerprints list only what is used, so an
-        objective without a modelling option reads as it did before those
-        fields existed.
+        :data:`MODEL_FIELDS` entry at 0 (switched off); reports and batch fingerprints list only what is used, so a
+        field that does not act on the objective neither appears in them nor
+        changes them.
         """
         items = asdict(self)
         if used_only and self.edge_penalty == "l1":
@@ -421,10 +420,9 @@ def _between(a: float, b: float, t: float) -> float:
 
 
 #: The schedule the library uses when no weights are given (:func:`default_weights`): the anchors chosen on the
-#: tuning frames by ``python -m bench.density --local-linear-windows`` (docs/density.md; the 1 / 5 / 10 % anchors
-#: by one descent, then the 0.3 % anchor with those fixed), every value the starting weights' times a power of 2.
-#: The local-linear term sums its fit over cross-shaped and 2x2 windows (a 13-point normal stencil), not 3x3
-#: windows; the other fields are :data:`DEFAULT_WEIGHTS`'.
+#: tuning frames by ``python -m bench.density --local-linear-windows`` (docs/density.md has the search and its
+#: scores).  The local-linear term sums its fit over cross-shaped and 2x2 windows (a 13-point normal stencil),
+#: not 3x3 windows; the other fields are :data:`DEFAULT_WEIGHTS`'.
 DEFAULT_SCHEDULE = DensitySchedule((
     (0.003, dict(delta=1.6375e-05, kappa=25.0, beta_image=0.000252375, beta_second=3.575e-05, beta_second_image=0.0936,
                  beta_local_linear=0.0, local_linear_eps=1.25e-06, beta_local_linear_cross=0.0025,
