@@ -17,8 +17,9 @@ def dot(x, y):
     Notes
     -----
     ``einsum`` runs its own single-threaded loop instead of BLAS ``ddot``:
-    multithreaded OpenBLAS on a busy 2-core machine makes one 600k-long dot
-    product cost about 8 ms instead of 0.1 ms, more than a V-cycle.
+    a multithreaded OpenBLAS on a busy machine can make one dot product of a
+    frame's length cost more than a V-cycle, by an amount that depends on
+    the other users' load.
     """
     return float(np.einsum("i,i->", x, y))
 
@@ -305,10 +306,10 @@ def _combine(c, V):
 # Gram-Schmidt is repeated only when ||v - V h|| < _REORTHOGONALISE ||v||.
 # One classical pass loses about eps / ratio of orthogonality.  The
 # preconditioned Schur complement of the colorization fill is close to the
-# identity, so the ratio is 0.08-0.15 on NYU frames: the usual 0.7
-# (Daniel-Gragg-Kaufman-Stewart) would repeat every pass, doubling the vector
-# work, to avoid a loss of 1e-15.  The residual is recomputed from x at the
-# end of every cycle anyway.
+# identity, so the ratio is small: the usual 0.7
+# (Daniel-Gragg-Kaufman-Stewart) would repeat nearly every pass, doubling the
+# vector work, to avoid a loss of order eps / ratio.  The residual is
+# recomputed from x at the end of every cycle anyway.
 _REORTHOGONALISE = 0.01
 
 

@@ -1,8 +1,8 @@
 r"""Gauss--Seidel sweeps and products of a symmetric stencil, a band of image rows at a time.
 
 pyamg's Gauss--Seidel kernel needs a CSR matrix.  Instead of holding the
-whole CSR form of a level (12 bytes per non-zero in float64, 1.25 GB for an
-8-megapixel 13-point system), :class:`BandedStencil` writes the CSR values of
+whole CSR form of a level (12 bytes per non-zero in float64),
+:class:`BandedStencil` writes the CSR values of
 a few image rows at a time into a small buffer (one slice per offset of the stencil's
 images) and runs the kernel on that band.  The vectors are copied into a grid padded by the stencil radius
 ``R`` on every side, so that every band has the same column indices
@@ -38,8 +38,8 @@ class FullStencil:
     The form of a large coarse level whose coefficients are not exactly
     symmetric once rounded to its precision (so that
     :class:`~sparsedepth.grid.stencil.SymmetricStencil` cannot hold it): the
-    values of its CSR form without the index arrays (a 25-point float32 level
-    of 2 megapixels: 200 MB instead of 400 MB), swept and multiplied band by
+    values of its CSR form without the index arrays (in float32, half the
+    bytes of the CSR form), swept and multiplied band by
     band by :class:`BandedStencil`.
 
     Parameters

@@ -89,7 +89,7 @@ class GridMultigrid:
         stencils: symmetric ones, or all the images of a level whose float32
         coefficients are not exactly symmetric
         (:class:`~sparsedepth.linalg.multigrid.bands.FullStencil`), swept
-        band by band like the fine level (8 MP: about 1.2 GB less than the CSR forms).
+        band by band like the fine level, without the CSR forms' index arrays.
     shape : tuple of int
         Grid shape ``(H, W)`` with ``H * W == N``.
     interpolation : {"bilinear", "operator", "auto"}, default "bilinear"
@@ -133,8 +133,8 @@ class GridMultigrid:
         Upper bound on the number of levels.
     coarse_precision : {"auto", "double", "single"}, default "auto"
         Storage and smoothing precision of the coarse levels (level 1 on).
-        ``"single"`` halves the coarse operators' values (8 MP, 13-point:
-        ~200 MB) and perturbs the preconditioner by float32 rounding only;
+        ``"single"`` halves the bytes of the coarse operators' values and
+        perturbs the preconditioner by float32 rounding only;
         ``"auto"`` takes it when the fine level is smoothed in single
         precision or the fine grid has at least ``2**21`` pixels.
     fine_precision : {"auto", "double", "single"}, default "auto"
@@ -334,7 +334,7 @@ class GridMultigrid:
             symmetric = (SymmetricStencil.from_stencil(coarse.offsets, S, dtype=self.coarse_dtype, copy=False)
                          if banded else None)
             if symmetric is not None:
-                # symmetric once stored: half the images, no index arrays (8 MP: 100 MB instead of 400 MB)
+                # symmetric once stored: half the images, no index arrays
                 coarse.A = symmetric
                 source = StencilSource(coarse.offsets, coarse.shape, symmetric=symmetric)
                 del S

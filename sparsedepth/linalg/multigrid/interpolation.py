@@ -111,7 +111,7 @@ def operator_weights(offsets, source, shape, pad=1):
     Works on the parity classes that need each quantity (the collapsed
     stencils only on the pixels between two coarse points), so the
     temporaries stay a fraction of ``H W``: besides the weights (4 per
-    pixel), about one ``H W`` image (8 MP: ~70 MB instead of ~1.5 GB).  The
+    pixel), about one ``H W`` image.  The
     weights are stored per parity class, zero-padded by ``pad`` (the
     padding the Galerkin product of a radius-1 stencil reads), so that
     they are held once during the set-up.

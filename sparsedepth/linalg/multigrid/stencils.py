@@ -141,7 +141,7 @@ def _stencil_of(A, shape, radius=None):
     of each offset (one ``(H, W)`` work image; the 5-point, then the 3x3, then
     the 5x5 offsets, stopping as soon as every non-zero is accounted for), the
     second fills ``S`` for the offsets present, so memory is ``(#present + 1) H W`` floats, never the
-    full ``(2r+1)² H W`` (1.6 GB for a 13-point operator on 8 MP).
+    full ``(2r+1)² H W``.
     Completeness is exact: a pixel and a diagonal determine at most one
     in-grid offset, so the operator is captured iff the non-zero counts add
     up to the number of stored non-zeros of ``A``.
@@ -193,8 +193,8 @@ class StencilSource:
     Either an array ``(K, H, W)`` (coarse levels, or a fine operator whose
     stencil had to be extracted diagonal by diagonal) or a CSR matrix in the
     full in-grid pattern of :func:`~sparsedepth.grid.stencil.stencil_to_csr`, read
-    class by class so that the fine stencil is never held whole (8 MP,
-    13-point: 210 MB per class instead of 830 MB).  Grids below
+    class by class so that the fine stencil is never held whole (a quarter
+    of its pixels at a time).  Grids below
     ``_KEEP_STENCIL_PIXELS`` read it whole once (:meth:`read_whole`).
     """
 
@@ -229,8 +229,8 @@ class StencilSource:
         """:meth:`parity_class` for reading offset by offset: ``S[k]`` and ``S.shape`` as of that array.
 
         A symmetric source hands out each image on request (:meth:`SymmetricStencil.class_image`: a view of
-        the stored images for the offsets ``>= (0, 0)``), so the class is never held whole (8 MP, 25-point: one
-        15 MB image at a time instead of 380 MB); other sources give the array.
+        the stored images for the offsets ``>= (0, 0)``), so the class is never held whole (one offset's image
+        at a time instead of all of them); other sources give the array.
         """
         if self.array is None and self.symmetric is not None and self.csr_offsets == self.offsets:
             return _ClassImages(self.symmetric, py, px)

@@ -53,11 +53,11 @@ class SeparableProlongation:
 
     ``P @ x`` is :math:`\operatorname{vec}(P_y X P_x^\top)` and ``P.T @ r`` is
     :math:`\operatorname{vec}(P_y^\top R P_x)`: no ``N``-row matrix is stored
-    (8 MP: ~300 MB saved over a CSR ``P``).  ``P @ x`` (and the V-cycle's
+    (no CSR ``P`` with its index arrays).  ``P @ x`` (and the V-cycle's
     ``out += P @ x``) interpolates rows, then columns, by array slicing (a
-    sparse product would need a transposed intermediate, 8x slower on a
-    640x480 grid); ``P.T @ r`` uses the 1-D interpolation matrices of
-    :func:`linear_weights_1d` (a few hundred rows).
+    sparse product would need a transposed intermediate); ``P.T @ r`` uses
+    the 1-D interpolation matrices of :func:`linear_weights_1d` (a few
+    hundred rows).
     """
 
     def __init__(self, shape):
