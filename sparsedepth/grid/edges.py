@@ -147,7 +147,7 @@ class PairEdgeWeights:
     The weights of the horizontal pairs (rows ``0 .. H W − 1``) or of the
     vertical ones (the next ``H W``) are computed on request from the planes,
     which the caller keeps anyway (the local-linear term's image), so the
-    ``2 H W`` weights are not held (8 MP: 120 MB).  A slice within one block
+    ``2 H W`` weights are not held.  A slice within one block
     is that block's part; ``np.asarray(weights)`` and any other index give
     the whole array.  The numbers are those of :func:`pair_edge_weights` of
     the ``(H, W, C)`` image, times ``factor`` when given.
@@ -296,7 +296,7 @@ class SecondOrderEdgeWeights:
     A term's rows are read a block at a time (``weights[b*H*W:(b+1)*H*W]``, or
     a part of one block): such a slice is computed from the pair weights on
     request, so nothing but the pair weights (which the first-order image term
-    keeps anyway) is held (8 MP: 190 MB less).  ``np.asarray(weights)`` and any
+    keeps anyway) is held.  ``np.asarray(weights)`` and any
     other index give the whole array of :func:`second_order_edge_weights`; the
     numbers are the same either way.
 

@@ -278,8 +278,8 @@ class SymmetricStencil:
     ``p`` is that of ``−o`` at the neighbour ``p + o``:
     ``A[p, p+o] = A[p+o, p]``.  Only the centre and the offsets after it
     (lexicographically) are stored: 7 images instead of 13 for the
-    13-point normal equations of the completion objective (448 MB instead of
-    1.25 GB of float64 CSR at 8 megapixels).
+    13-point normal equations of the completion objective (56 bytes per
+    pixel instead of 160 in float64 CSR).
 
     Parameters
     ----------
