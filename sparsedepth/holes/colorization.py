@@ -117,7 +117,8 @@ def colorization_fill(image, depth, *, mask=None, alpha=1.0, rtol=1e-8, window_r
     window_radius : int, optional
         Window radius; the toolbox uses 1 (3x3 window).
     maxiter : int, optional
-        Maximum number of Krylov iterations (typically 4-10 are needed).
+        Maximum number of Krylov (GMRES) iterations; the iteration stops
+        earlier once ``rtol`` is met (see Notes).
 
     Returns
     -------
@@ -187,9 +188,8 @@ def colorization_fill(image, depth, *, mask=None, alpha=1.0, rtol=1e-8, window_r
     <= rtol``.
 
     In flat, JPEG-quantised image regions the weights split the unknown
-    pixels into clusters joined by links of relative weight ~1e-4, on which
-    algebraic and geometric multigrid preconditioners converge slowly (tens
-    to hundreds of GMRES iterations on NYU frames).  The exact elimination
+    pixels into clusters joined by very weak links, on which algebraic and
+    geometric multigrid preconditioners converge slowly.  The exact elimination
     removes that difficulty, leaving a known block whose Jacobi iteration
     contracts by ``1/(1 + alpha)`` per step; eliminating the coupled known
     pixels too and preconditioning with the strip's Schur complement bring
@@ -206,8 +206,8 @@ def colorization_fill(image, depth, *, mask=None, alpha=1.0, rtol=1e-8, window_r
     *Not used: mixed precision.*  With ``A_EE`` factored in float32 the
     Schur complement is no longer applied exactly: the error caused by the
     residual ``r_E`` of the eliminated rows must then be bounded by
-    ``||A_EE^{-1}||_inf ||r_E||_inf`` (``||A_EE^{-1}||_inf`` reaches 1e5 on
-    NYU frames, and certifying it costs one more solve), which costs more
+    ``||A_EE^{-1}||_inf ||r_E||_inf`` (``||A_EE^{-1}||_inf`` can be large,
+    and certifying it costs one more solve), which costs more
     iterations than the cheaper factorisation saves.
 
     References
