@@ -86,9 +86,9 @@ def linear_fill(sparse_depth, mask=None) -> np.ndarray:
     fill, :func:`nearest_fill`.  With fewer than three observed pixels, or all
     of them on one line, there is no triangle and the whole result is the
     nearest-neighbour fill.  The cost is dominated by locating every pixel in
-    the triangulation; it is typically well under a second for a 640x480
-    frame, but Qhull's point location on integer-grid points is erratic and
-    can take several seconds.
+    the triangulation, and Qhull's point location on integer-grid points is
+    erratic (``python -m bench.baselines`` times it beside the other fills:
+    ``docs/results.md``).
 
     Examples
     --------
@@ -142,11 +142,11 @@ def biharmonic_fill(sparse_depth, mask=None) -> np.ndarray:
     with ``z`` fixed at the observed ones, with scikit-image's
     discretisation: its stencil is truncated at the image border, so an
     affine plane is reproduced exactly where the two outermost rows and
-    columns are observed, and is bent (by a few % of its range) otherwise.
+    columns are observed, and is bent otherwise.
     One sparse system over all the unobserved pixels is assembled and solved
-    directly, which is slow on large frames (seconds to tens of seconds at
-    640x480, growing faster than the pixel count); subsample the frame where
-    that matters.
+    directly, whose time grows faster than the pixel count
+    (``python -m bench.baselines`` times it: ``docs/results.md``); subsample
+    the frame where that matters.
 
     References
     ----------

@@ -205,7 +205,8 @@ def estimate_image_shift(image, sparse_depth, mask=None, *, max_shift: int = 2, 
     depth.  Cost: ``folds (2 max_shift + 1)²`` fills of ``O(N log N)``.
 
     The estimate rests on the samples next to depth edges: with few samples
-    (about 1 % of the pixels or fewer) it is noisy, so a sensor's shift is
+    it is noisy (``python -m bench.registration`` compares per-input and
+    pooled estimates: ``docs/registration.md``), so a sensor's shift is
     better estimated once over several of its frames (:func:`pool_image_shifts`
     sums the ``errors`` of each, weighted by ``samples``, and takes the
     smallest) and then given to every frame.

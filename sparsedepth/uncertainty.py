@@ -28,14 +28,15 @@ MIN_OBSERVED = 16
 
 #: Coverage the calibration aims at on the held-out samples: |error| <= 1 sigma and <= 2 sigma.  Below a
 #: Gaussian's 0.68 at 1 sigma because the map of the full completion covers more at 1 sigma than the held-out
-#: fit (the extrapolation term, the mapping of the full cue); chosen on the tuning frames.
+#: fit (the extrapolation term, the mapping of the full cue); chosen on the tuning frames (``bench/frames.py``
+#: ``TUNE_FRAMES``; ``python -m bench.uncertainty`` reports the coverage on the report frames: docs/uncertainty.md).
 TARGET_COVERAGE = (0.62, 0.95)
 #: How far each coverage may stray from its target before the other is preferred (the loss weights).
 _COVERAGE_TOLERANCE = (0.08, 0.04)
 #: A calibration loss this small is good enough to prefer a smaller offset (see :func:`fit_calibration`).
 _GOOD_LOSS = 0.5
 #: Depth fraction per unit of RGB distance (channels in [0, 1]) of the colour-novelty cue, and how many nearest
-#: samples it compares with; chosen on the tuning frames.
+#: samples it compares with; chosen on the tuning frames (docs/uncertainty.md scores them on the report frames).
 NOVELTY_WEIGHT = 0.8
 NOVELTY_NEIGHBOURS = 8
 _NOVELTY_CHUNK = 1 << 16
