@@ -36,10 +36,11 @@ calibration), ``problem`` (:class:`CompletionProblem`), ``modes/`` (fast, prior,
 holds and what it may import; ``docs/architecture.md`` follows one frame through them and says which files a new
 term, solver or file format touches.
 
-Other names of earlier versions (``build_objective``, ``Objective`` and the term classes, ``observed_fraction``,
+Other names (``build_objective``, ``Objective`` and the term classes, ``observed_fraction``,
 ``resolve_weights``, ``choose_solver``, ``geodesic_fill``, ``pool_image_shifts``, ``ImageShift``,
 ``PRIOR_ALIGNMENTS``, the robust penalties, the record types, the embedded-frame loaders, ``DEPTH_SCALES``,
-``FILL_METHODS``) are still attributes of the package; their home is the subpackage that defines them.
+``FILL_METHODS``) are attributes of the package too, outside ``__all__``; their home is the subpackage that defines
+them.
 """
 
 from . import datasets, io

@@ -147,7 +147,7 @@ def fingerprint(frames, options) -> dict:
     settings = dataclasses.asdict(options)
     # the L1 edge term has no scale: its penalty fields are left out, so settings files that do not name them match
     settings["weights"] = weights_settings(options.weights)
-    if settings["quality"] == "default":  # batches of the default solve match settings files from before the field
+    if settings["quality"] == "default":  # batches of the default solve match settings files that do not name it
         del settings["quality"]
     if settings["image_shift"] is None:  # matches settings files that do not name the field
         del settings["image_shift"]
