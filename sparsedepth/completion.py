@@ -20,7 +20,7 @@ from .objective.weights import DensitySchedule, Weights
 from .problem import CLAMP_WARNING_SHARE, CompletionProblem, choose_solver, depth_jump_factor, range_outliers
 from .result import CompletionResult
 
-__all__ = ["complete_depth", "check_modes", "choose_solver", "depth_jump_factor", "range_outliers", "QUALITIES",
+__all__ = ["complete_depth", "check_modes", "argument_conflict", "ARGUMENT_RULES", "choose_solver", "depth_jump_factor", "range_outliers", "QUALITIES",
            "fast_factor", "FAST_WEIGHTS", "FAST_COARSE_RTOL", "CLAMP_WARNING_SHARE"]
 
 #: The values of ``complete_depth``'s ``quality``.
@@ -254,19 +254,45 @@ def complete_depth(
     return problem.solve(**settings)
 
 
+#: Which arguments go together, the one table every front end reads: ``(argument, why, the arguments it
+#: excludes)``, the first rule that a call breaks deciding the message.  ``"quality"`` stands for
+#: ``quality="fast"``, ``"colorization"`` for the colorization hole fill (:func:`sparsedepth.fill_holes`), and an
+#: argument counts as given when it is not at its default.
+ARGUMENT_RULES = (
+    ("colorization", "is not the completion solver and takes no",
+     ("weights", "solver", "tol", "max_iter", "options", "quality", "uncertainty", "max_uncertainty", "prior")),
+    ("prior", "cannot be combined with", ("quality", "uncertainty", "max_uncertainty")),
+    ("quality", "picks its own solve and takes no",
+     ("solver", "tol", "max_iter", "callback", "options", "uncertainty", "max_uncertainty")),
+)
+
+
+def argument_conflict(given) -> tuple[str, str, list[str]] | None:
+    """The first rule of :data:`ARGUMENT_RULES` that the set ``given`` of argument names breaks, or None.
+
+    Returns ``(argument, why, excluded)``, ``excluded`` the given arguments the rule refuses, in its order; a
+    front end words it with its own names (``--fast picks its own solve and takes no --tol``).
+    """
+    given = set(given)
+    for argument, why, excludes in ARGUMENT_RULES:
+        if argument in given:
+            excluded = [name for name in excludes if name in given]
+            if excluded:
+                return argument, why, excluded
+    return None
+
+
 def check_modes(*, quality="default", solver="auto", tol=None, max_iter=None, callback=None, options=None,
                 uncertainty=False, max_uncertainty=None, prior=None) -> str:
     """Which mode a call of :func:`complete_depth` asks for: ``"fast"``, ``"prior"``, ``"uncertainty"`` or ``"default"``.
 
-    The one place that decides which arguments go together: ``quality="fast"`` picks its own solve and takes no
-    solver, tolerance, iteration budget, callback, options, prior or uncertainty; a prior is not combined with the
-    uncertainty; ``max_uncertainty`` implies the uncertainty.  The command line and the batch call it with the
-    arguments they will pass.
+    Which arguments go together is :data:`ARGUMENT_RULES` (:func:`argument_conflict`); ``max_uncertainty``
+    implies the uncertainty.
 
     Raises
     ------
     ValueError
-        An unknown ``quality``, an argument the mode does not take, or a negative or non-finite
+        An unknown ``quality``, arguments :data:`ARGUMENT_RULES` refuses together, or a negative or non-finite
         ``max_uncertainty``.
     TypeError
         ``uncertainty`` not a bool.
@@ -277,20 +303,25 @@ def check_modes(*, quality="default", solver="auto", tol=None, max_iter=None, ca
         raise TypeError(f"uncertainty must be True or False; got {type(uncertainty).__name__}")
     if max_uncertainty is not None:
         check_nonnegative_real(max_uncertainty, name="max_uncertainty")
-    wants_uncertainty = bool(uncertainty) or max_uncertainty is not None
+    given = [name for name, value in (("quality", quality == "fast"), ("solver", solver != "auto"),
+                                      ("tol", tol is not None), ("max_iter", max_iter is not None),
+                                      ("callback", callback is not None), ("options", options is not None),
+                                      ("uncertainty", bool(uncertainty)),
+                                      ("max_uncertainty", max_uncertainty is not None),
+                                      ("prior", prior is not None)) if value]
+    conflict = argument_conflict(given)
+    if conflict is not None:
+        argument, why, excluded = conflict
+        label, names = _named(argument), [_named(name) for name in excluded]
+        raise ValueError(f"{label} {why} {', '.join(names)}: leave {'it' if len(names) == 1 else 'them'} at the "
+                         "default" + (" or use quality='default'" if argument == "quality" else ""))
     if quality == "fast":
-        arguments = dict(solver=solver, tol=tol, max_iter=max_iter, callback=callback, options=options,
-                         uncertainty=uncertainty, max_uncertainty=max_uncertainty, prior=prior)
-        given = [name for name, value in arguments.items()
-                 if not (value is None or (name == "solver" and value == "auto")
-                         or (name == "uncertainty" and value is False))]
-        if given:
-            raise ValueError(f"quality='fast' picks its own solve and takes no {', '.join(given)}; leave "
-                             f"{'it' if len(given) == 1 else 'them'} at the default or use quality='default'")
         return "fast"
     if prior is not None:
-        if wants_uncertainty:
-            raise ValueError("prior= cannot be combined with uncertainty= or max_uncertainty= (the half-sample "
-                             "estimate does not model the prior); leave one of them out")
         return "prior"
-    return "uncertainty" if wants_uncertainty else "default"
+    return "uncertainty" if bool(uncertainty) or max_uncertainty is not None else "default"
+
+
+def _named(argument) -> str:
+    """An argument of :data:`ARGUMENT_RULES` as :func:`complete_depth` spells it."""
+    return "quality='fast'" if argument == "quality" else argument

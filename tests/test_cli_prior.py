@@ -56,7 +56,8 @@ def test_cli_prior_from_the_truth_up_to_scale_and_shift_beats_the_run_without_it
 @pytest.mark.parametrize("extra, words", [
     (["--fast"], "--prior cannot be combined with --fast"),
     (["--uncertainty", "u.npy"], "--prior cannot be combined with --uncertainty"),
-    (["--fill-holes", "--fill-method", "colorization"], "not colorization"),
+    (["--fill-holes", "--fill-method", "colorization"], "--fill-method colorization is not the completion solver and "
+                                                        "takes no --prior"),
     (["--out", "prior.npy"], "--prior"),
 ])
 def test_cli_prior_refuses_what_it_cannot_do_with_one_line_and_exit_2(prior_files, capsys, extra, words):

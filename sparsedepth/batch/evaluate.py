@@ -20,7 +20,7 @@ import numpy as np
 
 from .._validation import check_same_shape
 from ..baselines import nearest_fill
-from ..completion import complete_depth
+from ..completion import argument_conflict, complete_depth
 from ..holes import FILL_METHODS, fill_holes
 from ..holes.fill import hole_fill_weights
 from ..metrics import DepthMetrics, depth_metrics
@@ -273,12 +273,14 @@ def evaluate_frame(
     """
     _check_task(task, fill_method, keep_fraction, keep_count)
     image_shift = check_image_shift(image_shift)
-    if task == "fill" and fill_method == "colorization" and (uncertainty or max_uncertainty is not None):
-        raise ValueError("uncertainty and max_uncertainty estimate the completion solver's error; the colorization "
-                         "fill has none: use fill_method='complete'")
-    if task == "fill" and fill_method == "colorization" and prior is not None:
-        raise ValueError("prior is completed around by the solver; the colorization fill does not take it: use "
-                         "fill_method='complete'")
+    if task == "fill" and fill_method == "colorization":
+        given = ["colorization"] + [name for name, value in (
+            ("uncertainty", bool(uncertainty)), ("max_uncertainty", max_uncertainty is not None),
+            ("prior", prior is not None), ("quality", quality == "fast")) if value]
+        conflict = argument_conflict(given)
+        if conflict is not None:
+            raise ValueError(f"the colorization fill {conflict[1]} {', '.join(conflict[2])}: use "
+                             "fill_method='complete'")
     values, valid, observed, sparse = frame_observations(image, depth, mask=mask, keep_fraction=keep_fraction,
                                                          keep_count=keep_count, seed=seed)
     if truth is not None:

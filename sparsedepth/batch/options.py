@@ -23,7 +23,7 @@ from ..io import MAX_PIXELS
 from ..io import resolve_scale
 from ..io.formats import OUT_EXTENSIONS
 from ..objective import DensitySchedule, Weights
-from ..completion import QUALITIES
+from ..completion import QUALITIES, argument_conflict
 from ..registration import check_image_shift
 from ..solvers import SOLVERS
 from .evaluate import TASKS
@@ -222,18 +222,22 @@ class BatchOptions:
         object.__setattr__(self, "image_shift", shift)  # frozen: a list or NumPy pair is kept as a tuple of ints
 
     def _check_quality(self):
-        """``quality`` is a known mode; the fast mode takes no solver settings and no colorization fill."""
+        """``quality`` is a known mode, and the options go together by the library's one table of rules."""
         if not isinstance(self.quality, str) or self.quality not in QUALITIES:
             raise _option_error("quality", f"quality must be one of {list(QUALITIES)}, got {self.quality!r}")
-        if self.quality != "fast":
-            return
-        if self.task == "fill" and self.fill_method == "colorization":
-            raise _option_error("quality", "quality='fast' is a mode of the completion solver: use it with "
-                                "task='complete' or fill_method='complete', not the colorization fill")
-        given = [name for name, value in (("solver", self.solver != "auto"), ("tol", self.tol is not None),
-                                          ("max_iter", self.max_iter is not None)) if value]
-        if given:
-            raise _option_error("quality", f"quality='fast' picks its own solve and takes no {', '.join(given)}")
+        colorization = self.task == "fill" and self.fill_method == "colorization"
+        given = [name for name, value in (("colorization", colorization), ("quality", self.quality == "fast"),
+                                          ("weights", self.weights is not None), ("solver", self.solver != "auto"),
+                                          ("tol", self.tol is not None), ("max_iter", self.max_iter is not None))
+                 if value]
+        conflict = argument_conflict(given)
+        if conflict is not None:
+            argument, why, excluded = conflict
+            named = {"colorization": "the colorization fill (task='fill', fill_method='colorization')",
+                     "quality": "quality='fast'"}
+            raise _option_error(excluded[0] if argument == "colorization" else argument,
+                                f"{named.get(argument, argument)} {why} "
+                                f"{', '.join(named.get(name, name) for name in excluded)}")
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ..io import MAX_PIXELS
 from ..io.formats import OUT_EXTENSIONS
+from ..completion import argument_conflict
 from ..objective import DEFAULT_WEIGHTS, Weights
 from ..solvers.registry import REGISTRY
 from .camera import KINECT_CALIB, intrinsics_source, missing_intrinsics_message
@@ -61,22 +62,11 @@ def _check_combinations(args) -> str:
     if args.fill_holes and (args.keep_fraction is not None or args.keep_count is not None):
         raise UsageError("--keep-fraction/--keep-count simulate sparse input; they do not apply to --fill-holes")
     colorization = args.fill_holes and args.fill_method == "colorization"
-    if colorization:
-        weight_options = [f"--{f.name.replace('_', '-')}" for f in dataclasses.fields(Weights)
-                          if getattr(args, f"w_{f.name}") is not None]
-        solver_options = [name for name, value in (("--solver", args.solver), ("--tol", args.tol),
-                                                   ("--max-iter", args.max_iter)) if value is not None]
-        if weight_options or solver_options:
-            raise UsageError(f"{', '.join(weight_options + solver_options)} apply to --fill-method complete, "
-                              "not colorization")
-    if colorization and (args.uncertainty is not None or args.max_uncertainty is not None):
-        raise UsageError("--uncertainty and --max-uncertainty estimate the error of the completion solver: they "
-                          "apply to completion and --fill-method complete, not the colorization fill")
+    _check_argument_rules(args, colorization)
     _check_camera_options(args, mode)
     _check_image_shift(args)
     _check_edge_penalty(args)
-    _check_prior(args, mode, colorization)
-    _check_fast(args, colorization)
+    _check_prior(args, mode)
     if mode == "batch":
         if args.uncertainty is not None or args.max_uncertainty is not None:
             raise UsageError("--uncertainty and --max-uncertainty are for one frame, not a batch")
@@ -131,36 +121,35 @@ def _check_image_shift(args) -> None:
                           "a registration shift is a few pixels, e.g. --image-shift 0,-2")
 
 
-def _check_prior(args, mode, colorization) -> None:
-    """--prior: one frame of the user's files, completed by the solver's default mode, without the uncertainty."""
+def _check_argument_rules(args, colorization) -> None:
+    """The library's rules of which arguments go together (:data:`~sparsedepth.completion.ARGUMENT_RULES`), in flags."""
+    weight_flags = [f"--{f.name.replace('_', '-')}" for f in dataclasses.fields(Weights)
+                    if getattr(args, f"w_{f.name}") is not None]
+    flags = {"colorization": ["--fill-method colorization"], "weights": weight_flags,
+             "solver": ["--solver"] if args.solver not in (None, "auto") else [],
+             "tol": ["--tol"] if args.tol is not None else [],
+             "max_iter": ["--max-iter"] if args.max_iter is not None else [],
+             "quality": ["--fast"] if args.fast else [],
+             "uncertainty": ["--uncertainty"] if args.uncertainty is not None else [],
+             "max_uncertainty": ["--max-uncertainty"] if args.max_uncertainty is not None else [],
+             "prior": ["--prior"] if args.prior is not None else []}
+    if not colorization:
+        flags["colorization"] = []
+    conflict = argument_conflict(name for name, given in flags.items() if given)
+    if conflict is not None:
+        argument, why, excluded = conflict
+        named = [flag for name in excluded for flag in flags[name]]
+        raise UsageError(f"{flags[argument][0]} {why} {', '.join(named)}")
+
+
+def _check_prior(args, mode) -> None:
+    """--prior: one frame of the user's files (the rules of which options go with it: :func:`_check_argument_rules`)."""
     if args.prior is None:
         if args.prior_alignment is not None:
             raise UsageError("--prior-alignment aligns --prior: give --prior PATH too")
         return
     if mode != "files":
         raise UsageError("--prior needs --image and --depth (one frame): it must match that frame's pixels")
-    if colorization:
-        raise UsageError("--prior is completed around by the solver: it applies to completion and "
-                          "--fill-method complete, not colorization")
-    given = [flag for flag, value in (("--fast", args.fast), ("--uncertainty", args.uncertainty is not None),
-                                      ("--max-uncertainty", args.max_uncertainty is not None)) if value]
-    if given:
-        raise UsageError(f"--prior cannot be combined with {', '.join(given)}")
-
-
-def _check_fast(args, colorization) -> None:
-    """--fast: the completion solver's real-time mode, with no solver or uncertainty options."""
-    if not args.fast:
-        return
-    if colorization:
-        raise UsageError("--fast is a mode of the completion solver: it applies to --fill-method complete, not "
-                          "colorization")
-    given = [flag for flag, value in (("--solver", args.solver not in (None, "auto")), ("--tol", args.tol is not None),
-                                      ("--max-iter", args.max_iter is not None),
-                                      ("--uncertainty", args.uncertainty is not None),
-                                      ("--max-uncertainty", args.max_uncertainty is not None)) if value]
-    if given:
-        raise UsageError(f"--fast picks its own solve and takes no {', '.join(given)}")
 
 
 def _check_edge_penalty(args) -> None:
