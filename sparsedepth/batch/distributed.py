@@ -476,9 +476,9 @@ def _warn_malloc_trim(client) -> None:
     if values:
         warnings.warn(
             f"Dask workers run with MALLOC_TRIM_THRESHOLD_={', '.join(sorted(values))} (the Dask nanny's default), "
-            "which pins glibc's mmap threshold and made frames about 2x slower in bench/batch_scale.py; start "
-            "workers with 'dask worker --no-nanny' or without it in distributed.nanny.pre-spawn-environ "
-            "(docs/cluster.md)",
+            "which pins glibc's mmap threshold and slows frames down (python -m bench.batch_scale --malloc-trim, "
+            "docs/batch_scale_malloc_trim.md); start workers with 'dask worker --no-nanny' or without it in "
+            "distributed.nanny.pre-spawn-environ (docs/cluster.md)",
             RuntimeWarning,
             stacklevel=3,
         )

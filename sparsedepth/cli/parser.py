@@ -116,7 +116,7 @@ COMMON_OPTIONS = (
         ("--keep-fraction", "simulate sparse input: keep this fraction of the valid depth, score on the rest."),
         ("--truth", "ground-truth depth to score against."),
         ("--solver", "solver (default auto)."),
-        ("--fast", "real-time mode: about 10x faster, somewhat less accurate."),
+        ("--fast", "real-time mode: a solve on a coarser grid, less accurate (docs/fast_mode.md)."),
     )),
     ("fill holes", (
         ("--fill-holes", "fill the holes of raw depth (every valid pixel observed)."),
@@ -475,7 +475,8 @@ def _add_method_options(parser) -> None:
         )
     method.add_argument("--fast", action="store_true",
                         help="real-time mode: solve on a 2-4x coarser grid, upsample, refine by a few edge-aware "
-                             "sweeps (about 10x faster, somewhat less accurate; python -m bench.fast_mode).")
+                             "sweeps (its speed and accuracy beside the default's: docs/fast_mode.md, "
+                             "python -m bench.fast_mode).")
     method.add_argument("--tol", type=_nonnegative, metavar="TOL", help="solver tolerance (meaning per solver).")
     method.add_argument("--max-iter", type=_positive_int, metavar="N", help="maximum solver iterations.")
     method.add_argument("--no-clip", dest="clip_to_observed", action="store_false",

@@ -27,7 +27,7 @@ __all__ = ["complete_fast", "fast_factor", "FAST_WEIGHTS", "FAST_COARSE_RTOL", "
 #: thousand pixels) stopped at this relative residual.
 FAST_COARSE_RTOL = 1e-4
 #: The edge-aware sweeps on the full grid: ``λ``, ``κ`` and the number of sweeps
-#: (:func:`~sparsedepth.grid.resample.edge_aware_sweeps`), chosen on the tuning frames (``bench/fast_mode.py``).
+#: (:func:`~sparsedepth.grid.resample.edge_aware_sweeps`), chosen on the tuning frames (``python -m bench.fast_mode``).
 FAST_SMOOTHNESS, FAST_KAPPA, FAST_SWEEPS = 16.0, 30.0, 3
 #: The weights ``quality="fast"`` solves with when given no weights: the image-weighted first- and second-order
 #: terms of the 13-point model without the local-linear terms, which do not carry over to a grid 2-4x coarser (its

@@ -36,7 +36,7 @@ TIE_BAND = 1e-4
 #: CG steps of the least-squares correction of ``ρλ`` on the tied rows in the duality gap of a polished point.
 DUAL_FIT_STEPS = 30
 
-#: The pixel count at which :func:`default_rho` was tuned (a 640x480 frame); ρ grows with the side length above it.
+#: The reference pixel count of :func:`default_rho` (a 640x480 frame); ρ grows with the side length above it.
 RHO_REFERENCE_PIXELS = 640 * 480
 
 #: ``tol`` and ``max_iter`` of ``solver="admm"`` when not given (its entry of the solver registry).
@@ -56,11 +56,11 @@ def default_rho(objective, max_weight, depth_unit):
     :data:`RHO_REFERENCE_PIXELS`.  ρ has the units of the quadratic weights;
     ``c/s`` has them too, and ``c_k / ρ`` is the shrinkage threshold in depth
     units.  With over-relaxation 1.9 and the polishes of :func:`solve_admm`,
-    on real 640x480 frames, ``ρ = 1.5α`` reaches the optimum fastest for
-    small L1 weights (smaller ρ stalls after a fast start, larger ρ is
-    slower), while a large L1 weight relative to the depth scale stalls
-    unless ρ grows with it: hence ρ grows with ``c/s``, but not below
-    ``1.5α``.  The same scene sampled on a finer grid has depth differences
+    ``ρ = 1.5α`` is the choice for small L1 weights (a smaller ρ stalls
+    after a fast start, a larger one is slower), while a large L1 weight
+    relative to the depth scale needs ρ to grow with it: hence ρ grows with
+    ``c/s``, but not below ``1.5α`` (``python -m bench.admm_scale``,
+    ``docs/admm_scale.md``, times it).  The same scene sampled on a finer grid has depth differences
     between neighbours smaller in proportion to the pixel spacing, ``1/√N``,
     so the shrinkage threshold ``c/ρ`` shrinks with them: ρ grows as the side
     length from ``N₀`` pixels on (iterations and times on frames resized 2x

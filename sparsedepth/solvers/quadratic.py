@@ -75,10 +75,9 @@ class RemainingChange:
     largest ratio ``s_j / s_{j−1}`` over the last ``window`` steps (the
     largest, so a transient fast step does not end the solve).  It is an
     estimate, not a bound: a later phase of slower convergence is not
-    foreseen.  At the default stop on the report frames at full size
-    (multigrid-preconditioned CG) it is 0.93 to 1.38 times the true
-    remaining change (``python -m bench.speed``, ``docs/speed.md``).
-    Each call costs one dot product.
+    foreseen.  ``python -m bench.speed`` (``docs/speed.md``) compares it
+    with the true remaining change at the default stop.  Each call costs
+    one dot product.
     """
 
     def __init__(self, size, tol, *, window=3, max_rate=0.95):
@@ -111,9 +110,9 @@ def system_form(objective):
     """``"stencil"`` (:class:`~sparsedepth.grid.stencil.SymmetricStencil`) from :data:`STENCIL_FORM_PIXELS` pixels on, else ``"csr"``.
 
     The symmetric stencil keeps half the coefficient images and no index
-    arrays (an 8-megapixel default system: 448 MB instead of 1.28 GB), but
-    its product takes about twice the CSR product's time at 640x480
-    (``bench/scaling.py`` measures both).
+    arrays (56 bytes per pixel instead of 160 for the 13-point system), but
+    its product is slower than the CSR product (``python -m bench.scaling``,
+    ``docs/scaling.md``, measures both).
     """
     return "stencil" if objective.size >= STENCIL_FORM_PIXELS else "csr"
 
