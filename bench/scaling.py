@@ -10,7 +10,7 @@ What is measured
 ----------------
 * *Modes.*  ``default``: ``sd.complete_depth(image, sparse, mask)``, whose
   γ = 0 solve keeps ``A`` as CSR below
-  :data:`~sparsedepth.solvers.quadratic.STENCIL_FORM_PIXELS` pixels and as a
+  :attr:`~sparsedepth.limits.MemoryLimits.stencil_form_pixels` and as a
   :class:`~sparsedepth.grid.stencil.SymmetricStencil` from there on;
   ``default, stencil form at every size``: the same call with the stencil
   form at every size (see :func:`_stencil_form`); ``fast``:
@@ -77,20 +77,16 @@ def _stencil_form(on=True):
     """The γ = 0 solve keeps ``A`` in symmetric stencil form at every size while this is active.
 
     :func:`sparsedepth.solvers.quadratic.system_form` takes it from
-    :data:`~sparsedepth.solvers.quadratic.STENCIL_FORM_PIXELS` pixels on (the
-    ``default`` mode); this mode lowers that threshold to one pixel.
+    :attr:`~sparsedepth.limits.MemoryLimits.stencil_form_pixels` on (the
+    ``default`` mode); this mode lowers that limit to one pixel.
     """
     if not on:
         yield
         return
-    from sparsedepth.solvers import quadratic
+    from sparsedepth.limits import limited
 
-    original = quadratic.STENCIL_FORM_PIXELS
-    quadratic.STENCIL_FORM_PIXELS = 1
-    try:
+    with limited(stencil_form_pixels=1):
         yield
-    finally:
-        quadratic.STENCIL_FORM_PIXELS = original
 
 
 def _complete(problem, mode):

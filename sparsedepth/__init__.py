@@ -26,7 +26,8 @@ Subpackages
 
 Where things live
 -----------------
-From the bottom layer up: ``_validation`` (every input check), ``result``, ``grid/`` (stencils, operators, edge
+From the bottom layer up: ``_validation`` (every input check), ``limits`` (the sizes at which large frames are
+stored more leanly: one settings object), ``result``, ``grid/`` (stencils, operators, edge
 weights, affinities, the geodesic fill), ``io/`` (formats in one table: ``io.formats``), ``linalg/`` (Krylov
 loops, preconditioners, multigrid), ``sampling``, ``metrics``, ``baselines``, ``priors``, ``registration``,
 ``visualize``, ``objective/`` (the objective as a sum of named terms and their :class:`Weights`), ``solvers/`` (one

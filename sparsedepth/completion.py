@@ -20,8 +20,8 @@ from .objective.weights import DensitySchedule, Weights
 from .problem import CLAMP_WARNING_SHARE, CompletionProblem, choose_solver, depth_jump_factor, range_outliers
 from .result import CompletionResult
 
-__all__ = ["complete_depth", "check_modes", "argument_conflict", "ARGUMENT_RULES", "choose_solver", "depth_jump_factor", "range_outliers", "QUALITIES",
-           "fast_factor", "FAST_WEIGHTS", "FAST_COARSE_RTOL", "CLAMP_WARNING_SHARE"]
+__all__ = ["complete_depth", "check_modes", "argument_conflict", "ARGUMENT_RULES", "choose_solver", "depth_jump_factor",
+           "range_outliers", "QUALITIES", "fast_factor", "FAST_WEIGHTS", "FAST_COARSE_RTOL", "CLAMP_WARNING_SHARE"]
 
 #: The values of ``complete_depth``'s ``quality``.
 QUALITIES = ("default", "fast")

@@ -63,3 +63,14 @@ def forward_difference_1d(n):
     main = -np.ones(n)
     main[-1] = 0.0
     return sp.diags([main, np.ones(n - 1)], [0, 1], shape=(n, n), format="csr")
+
+
+@pytest.fixture
+def set_limits():
+    """``set_limits(**changes)``: :func:`sparsedepth.limits.limited` for the rest of the test (cumulative)."""
+    import contextlib
+
+    from sparsedepth.limits import limited
+
+    with contextlib.ExitStack() as stack:
+        yield lambda **changes: stack.enter_context(limited(**changes))

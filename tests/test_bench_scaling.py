@@ -25,10 +25,11 @@ def test_stencil_form_switch_is_restored():
     image = rng.integers(0, 256, (12, 14, 3)).astype(np.uint8)
     mask = rng.random((12, 14)) < 0.2
     sparse = np.where(mask, 1.0 + rng.random((12, 14)), 0.0)
+    from sparsedepth.limits import memory_limits
     from sparsedepth.solvers import quadratic
 
-    original = quadratic.STENCIL_FORM_PIXELS
+    original = memory_limits()
     obj, _, _ = sd.build_objective(image, sparse, mask, weights=sd.DEFAULT_WEIGHTS.replace(gamma=0))
     with scaling._stencil_form():
         assert isinstance(obj.normal_equations(form=quadratic.system_form(obj))[0], SymmetricStencil)
-    assert quadratic.STENCIL_FORM_PIXELS == original and quadratic.system_form(obj) == "csr"
+    assert memory_limits() == original and quadratic.system_form(obj) == "csr"

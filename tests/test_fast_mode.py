@@ -70,12 +70,12 @@ def test_upsample_bilinear_reproduces_a_plane_between_the_centres_and_checks_the
 
 @pytest.mark.parametrize("band_rows", [1, 2, None])
 @pytest.mark.parametrize("channels, dtype, rtol", [(3, np.float64, 1e-13), (3, np.float32, 1e-6), (1, np.float64, 1e-15)])
-def test_pair_distances_are_the_channel_norms_of_neighbour_differences(monkeypatch, channels, dtype, rtol, band_rows):
+def test_pair_distances_are_the_channel_norms_of_neighbour_differences(set_limits, channels, dtype, rtol, band_rows):
     import sparsedepth.grid.edges as edges
     from sparsedepth.grid.edges import pair_distances
 
     if band_rows is not None:  # the norms over bands of 1 or 2 rows (7 values per row at most)
-        monkeypatch.setattr(edges, "_NORM_BAND_VALUES", band_rows * 7)
+        set_limits(norm_band_values=band_rows * 7)
     image = np.random.default_rng(6).random((5, 7, channels)).astype(dtype)
     across, down = pair_distances(image)
     assert across.dtype == down.dtype == dtype and across.shape == (5, 6) and down.shape == (4, 7)
@@ -111,11 +111,11 @@ def _sweep_model(start, image, depth, observed, smoothness, kappa):
 
 
 @pytest.mark.parametrize("band_rows", [2, 4, None])
-def test_edge_aware_sweeps_converge_to_the_direct_solve_of_their_model(monkeypatch, band_rows):
+def test_edge_aware_sweeps_converge_to_the_direct_solve_of_their_model(set_limits, band_rows):
     import sparsedepth.grid.resample as resample
 
     if band_rows is not None:  # half sweeps over bands of rows of the (9, 6) parity arrays
-        monkeypatch.setattr(resample, "_SWEEP_BAND_VALUES", band_rows * 6)
+        set_limits(sweep_band_values=band_rows * 6)
     rng = np.random.default_rng(2)
     image = rng.random((9, 11, 3))
     start = rng.random((9, 11)) + 1.0

@@ -338,14 +338,14 @@ def test_admm_options_reach_the_same_optimum(options):
     assert _kkt_gap_bound(obj, res.depth.ravel()) <= 1e-7 * res.objective, res.message
 
 
-def test_admm_keeping_only_s_reaches_the_same_point(monkeypatch):
+def test_admm_keeping_only_s_reaches_the_same_point(set_limits):
     """Large frames keep S = 2A + ρKᵀK only (the polish reduces S); forced here on a small frame."""
     from sparsedepth.solvers import active_set
 
     image, sparse, mask, _ = make_problem((24, 30))
     obj, _, _ = build_objective(image, sparse, mask, weights=L1)
     with_a = complete_depth(image, sparse, mask, weights=L1, solver="admm")
-    monkeypatch.setattr(active_set, "KEEP_A_PIXELS", 0)
+    set_limits(reduced_matrix_pixels=0)
     s_only = complete_depth(image, sparse, mask, weights=L1, solver="admm")
     assert s_only.converged and with_a.converged
     # the same ADMM iterates, not only the same end point (compared by value: counts are not, as rounding

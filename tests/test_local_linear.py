@@ -167,11 +167,11 @@ def test_adjoint_and_block_products(channels, eps, window):
 @pytest.mark.parametrize("window", WINDOW_NAMES)
 @pytest.mark.parametrize("channels, eps", [(1, 1e-3), (3, 1e-5), (3, 0.0)])
 @pytest.mark.parametrize("band_pixels", [1, 16, 1 << 16], ids=["row bands", "two-row bands", "one band"])
-def test_symmetric_half_and_row_pieces_band_by_band(monkeypatch, channels, eps, band_pixels, window):
+def test_symmetric_half_and_row_pieces_band_by_band(set_limits, channels, eps, band_pixels, window):
     """The stored half equals those images of the full stencil and of Kᵀ K; the pieces are K z, any band."""
     from sparsedepth.grid import affinity
 
-    monkeypatch.setattr(affinity, "_BAND_PIXELS", band_pixels)
+    set_limits(affinity_band_pixels=band_pixels)
     rng = np.random.default_rng(30 + channels)
     image = rng.random((9, 8, channels))
     image[2:6, 1:5] = 0.3  # flat windows

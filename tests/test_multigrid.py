@@ -100,12 +100,12 @@ def test_bilinear_prolongation_is_kron_of_1d_interpolation(shape):
 
 
 @pytest.fixture(params=["kept", "read back"])
-def stencil_path(request, monkeypatch):
+def stencil_path(request, set_limits):
     """Both set-up paths: stencils kept as arrays (small grids) or read back from the CSR class by class (large)."""
     import sparsedepth.linalg.multigrid.hierarchy as multigrid
 
     if request.param == "read back":
-        monkeypatch.setattr(multigrid, "_KEEP_STENCIL_PIXELS", 0)
+        set_limits(keep_stencil_pixels=0)
     return request.param
 
 
@@ -548,7 +548,7 @@ def test_single_precision_coarse_levels_round_the_double_ones_and_converge():
         GridMultigrid(A, shape, coarse_precision="half")
 
 
-def test_single_precision_cycle_rounds_the_double_one_and_solves_to_double_accuracy(monkeypatch):
+def test_single_precision_cycle_rounds_the_double_one_and_solves_to_double_accuracy(set_limits):
     import sparsedepth.linalg.multigrid.hierarchy as multigrid
 
     shape = (40, 56)
@@ -591,12 +591,12 @@ def test_single_precision_cycle_rounds_the_double_one_and_solves_to_double_accur
     np.testing.assert_allclose(x, spla.spsolve(B.tocsc(), r), rtol=0, atol=1e-9 * np.abs(x).max())
     # operators with too many non-zeros for a float32 copy are smoothed in float64 (no copy) on the fine level;
     # their coarse levels are float32 only on large grids
-    monkeypatch.setattr(multigrid, "_SINGLE_FINE_VALUES", A.nnz - 1)
+    set_limits(single_fine_values=A.nnz - 1)
     no_copy = GridMultigrid(A, shape)
     assert no_copy.fine_dtype == np.float64 and no_copy.coarse_dtype == np.float64
     assert no_copy._fine_cycle_A is A
     np.testing.assert_array_equal(no_copy.vcycle(r), expected)
-    monkeypatch.setattr(multigrid, "_SINGLE_COARSE_PIXELS", 100)
+    set_limits(single_coarse_pixels=100)
     large = GridMultigrid(A, shape)
     assert large.fine_dtype == np.float64 and large.coarse_dtype == np.float32
     assert large._fine_cycle_A is A
@@ -639,7 +639,7 @@ def test_operator_prolongation_by_classes_equals_its_dense_matrix(shape):
 
 @pytest.mark.parametrize("shape", [(1, 5), (2, 3), (7, 6), (12, 9), (13, 16)])
 @pytest.mark.parametrize("band_pixels", [1, 20, 1 << 16], ids=["two-row bands", "a few rows", "one band"])
-def test_separable_prolongation_band_by_band_equals_its_csr_form(monkeypatch, shape, band_pixels):
+def test_separable_prolongation_band_by_band_equals_its_csr_form(set_limits, shape, band_pixels):
     """P x and Pᵀ r, a band of rows at a time: the same bits for every band height, and the CSR product."""
     from sparsedepth.linalg.multigrid import transfer
 
@@ -651,9 +651,9 @@ def test_separable_prolongation_band_by_band_equals_its_csr_form(monkeypatch, sh
         r = rng.standard_normal(P.shape[0]).astype(dtype)
         out = rng.standard_normal(P.shape[0]).astype(dtype)
         whole = (P.add_prolonged(out.copy(), x), P.T @ r)
-        monkeypatch.setattr(transfer, "_BAND_PIXELS", band_pixels)
+        set_limits(transfer_band_pixels=band_pixels)
         banded = (P.add_prolonged(out.copy(), x), P.T @ r)
-        monkeypatch.setattr(transfer, "_BAND_PIXELS", 1 << 16)
+        set_limits(transfer_band_pixels=1 << 16)
         for ours, ref in zip(banded, whole):
             assert ours.dtype == dtype
             np.testing.assert_array_equal(ours, ref)
@@ -663,10 +663,10 @@ def test_separable_prolongation_band_by_band_equals_its_csr_form(monkeypatch, sh
 
 
 @pytest.mark.parametrize("shape", [(1, 5), (2, 3), (7, 6), (12, 9), (13, 16)])
-def test_restriction_of_rows_handed_out_band_by_band_equals_the_whole_product(monkeypatch, shape):
+def test_restriction_of_rows_handed_out_band_by_band_equals_the_whole_product(set_limits, shape):
     from sparsedepth.linalg.multigrid import transfer
 
-    monkeypatch.setattr(transfer, "_BAND_PIXELS", 20)
+    set_limits(transfer_band_pixels=20)
     P = transfer.SeparableProlongation(shape)
     rng = np.random.default_rng(10)
     for dtype in (np.float64, np.float32):

@@ -100,11 +100,11 @@ def test_stencil_operator_equals_the_csr_operator(shape, pair):
 
 @pytest.mark.parametrize("band_rows", [1, 2, 3])
 @pytest.mark.parametrize("pair", [(gradient_stencil, gradient), (hessian_stencil, hessian_operator)])
-def test_stencil_product_over_row_bands_equals_the_csr_product(monkeypatch, band_rows, pair):
+def test_stencil_product_over_row_bands_equals_the_csr_product(set_limits, band_rows, pair):
     import sparsedepth.grid.operators as operators
 
     shape = (8, 5)
-    monkeypatch.setattr(operators, "_BAND_VALUES", band_rows * shape[1])
+    set_limits(operator_band_values=band_rows * shape[1])
     stencil_form, csr_form = pair
     K, C = stencil_form(shape), csr_form(shape)
     z = np.random.default_rng(6).standard_normal(C.shape[1])

@@ -28,3 +28,23 @@ def test_names_of_earlier_versions_stay_attributes():
                  "SolverState", "UncertaintyCalibration", "Frame", "load_embedded_frame", "list_embedded_frames",
                  "shared_data_dir", "DEPTH_SCALES", "FILL_METHODS", "edge_weights"):
         assert hasattr(sd, name), name
+
+
+def test_memory_limits_are_one_settings_object_changed_in_a_block():
+    from sparsedepth.limits import MemoryLimits, limited, memory_limits
+
+    default = memory_limits()
+    assert default == MemoryLimits()
+    with limited(stencil_form_pixels=1, gather_pixels=8) as inside:
+        assert inside is memory_limits() and inside.stencil_form_pixels == 1 and inside.gather_pixels == 8
+        with limited(gather_pixels=4):
+            assert memory_limits().gather_pixels == 4 and memory_limits().stencil_form_pixels == 1
+        assert memory_limits().gather_pixels == 8
+    assert memory_limits() == default
+    import pytest
+
+    with pytest.raises(ValueError, match="unknown memory limit"):
+        with limited(band_pixels=3):
+            pass
+    with pytest.raises(ValueError, match="must be an int >= 0"):
+        MemoryLimits(gather_pixels=-1)

@@ -118,9 +118,9 @@ def test_stencil_checks_its_arguments():
 @pytest.mark.parametrize("rows", [None, 1, 3])
 @pytest.mark.parametrize("offsets", [FIVE, THIRTEEN, TWENTY_FIVE], ids=["5", "13", "25"])
 @pytest.mark.parametrize("shape", SHAPES)
-def test_banded_sweeps_and_products_equal_the_csr_kernel(monkeypatch, rows, offsets, shape):
+def test_banded_sweeps_and_products_equal_the_csr_kernel(set_limits, rows, offsets, shape):
     if rows is not None:  # small bands: several per grid, and a shorter last one
-        monkeypatch.setattr(bands, "_BAND_VALUES", rows * shape[1] * len(offsets))
+        set_limits(stencil_band_values=rows * shape[1] * len(offsets))
     A, _ = random_spd(offsets, shape, seed=5)
     rng = np.random.default_rng(2)
     for dtype in (np.float64, np.float32):
@@ -134,10 +134,10 @@ def test_banded_sweeps_and_products_equal_the_csr_kernel(monkeypatch, rows, offs
 @pytest.mark.parametrize("rows", [None, 1, 3])
 @pytest.mark.parametrize("offsets", [THIRTEEN, TWENTY_FIVE], ids=["13", "25"])
 @pytest.mark.parametrize("shape", [(1, 7), (2, 9), (13, 8), (30, 21)])
-def test_full_stencil_sweeps_and_products_equal_the_csr_kernel(monkeypatch, rows, offsets, shape):
+def test_full_stencil_sweeps_and_products_equal_the_csr_kernel(set_limits, rows, offsets, shape):
     """A FullStencil (every image, not symmetric) cycles like its CSR form, bit for bit."""
     if rows is not None:
-        monkeypatch.setattr(bands, "_BAND_VALUES", rows * shape[1] * len(offsets))
+        set_limits(stencil_band_values=rows * shape[1] * len(offsets))
     rng = np.random.default_rng(7)
     S = rng.uniform(-1.0, 1.0, (len(offsets),) + shape)
     S[offsets.index((0, 0))] = 2.0 * len(offsets) + rng.random(shape)
@@ -254,19 +254,19 @@ def test_solve_through_the_stencil_form_equals_spsolve(kind):
 
 @pytest.mark.parametrize("layout", ["symmetric", "full", "full, read class by class"])
 @pytest.mark.parametrize("shape", [(33, 47), (64, 50)])
-def test_banded_coarse_levels_equal_the_csr_hierarchy(monkeypatch, shape, layout):
+def test_banded_coarse_levels_equal_the_csr_hierarchy(monkeypatch, set_limits, shape, layout):
     """The large-frame layout (fine float64 bands, float32 stencil coarse levels) cycles like the CSR one."""
     from sparsedepth.linalg.multigrid import hierarchy
 
     from sparsedepth.linalg.multigrid import transfer
 
-    monkeypatch.setattr(hierarchy, "_SINGLE_FINE_VALUES", 0)  # every fine operator counts as large
-    monkeypatch.setattr(hierarchy, "_BANDED_COARSE_PIXELS", 64)
-    monkeypatch.setattr(transfer, "_BAND_PIXELS", 100)  # the fine residual restricted a few rows at a time
+    set_limits(single_fine_values=0)  # every fine operator counts as large
+    set_limits(banded_coarse_pixels=64)
+    set_limits(transfer_band_pixels=100)  # the fine residual restricted a few rows at a time
     if layout.startswith("full"):  # as if no coarse level were exactly symmetric in float32
         monkeypatch.setattr(SymmetricStencil, "from_stencil", classmethod(lambda cls, *args, **kwargs: None))
     if layout.endswith("by class"):  # the 8-MP set-up: every level read one parity class at a time
-        monkeypatch.setattr(hierarchy, "_KEEP_STENCIL_PIXELS", 0)
+        set_limits(keep_stencil_pixels=0)
     image, sparse, mask = _problem(shape, seed=2)
     obj, coarse, _ = sd.build_objective(image, sparse, mask, weights=sd.DEFAULT_WEIGHTS.replace(gamma=0))
     S, b, _ = obj.normal_equations(form="stencil")
@@ -283,7 +283,7 @@ def test_banded_coarse_levels_equal_the_csr_hierarchy(monkeypatch, shape, layout
     np.testing.assert_allclose(S @ z, b, rtol=0, atol=1e-10 * np.linalg.norm(b))
 
 
-def test_large_frames_solve_in_stencil_form_with_the_csr_solution(monkeypatch):
+def test_large_frames_solve_in_stencil_form_with_the_csr_solution(set_limits):
     """From STENCIL_FORM_PIXELS on, the γ = 0 solve keeps A as a SymmetricStencil; same depth as the CSR solve.
 
     Both are solved to a relative residual of 1e-12 and compared at that accuracy.
@@ -300,7 +300,7 @@ def test_large_frames_solve_in_stencil_form_with_the_csr_solution(monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", sd.ClampWarning)
         csr = sd.complete_depth(image, sparse, mask, tol=1e-12)
-        monkeypatch.setattr(quadratic, "STENCIL_FORM_PIXELS", 1)
+        set_limits(stencil_form_pixels=1)
         objective, _, _ = sd.build_objective(image, sparse, mask)
         assert quadratic.system_form(objective) == "stencil"
         stencil = sd.complete_depth(image, sparse, mask, tol=1e-12)

@@ -42,6 +42,7 @@ import scipy.sparse as sp
 
 from .._validation import as_float_image, check_nonnegative_real
 from .operators import StencilOperator
+from ..limits import memory_limits
 
 __all__ = ["LocalLinearOperator", "local_linear_operator", "WINDOWS", "WINDOW_OFFSETS", "PINV_CUTOFF"]
 
@@ -57,9 +58,6 @@ WINDOWS = {
 WINDOW_OFFSETS = WINDOWS["3x3"]
 #: With ``ε = 0``, eigenvalues of a window's colour covariance at or below this (in [0, 1]² units) count as 0.
 PINV_CUTOFF = 1e-10
-#: pixels per band of the band-wise computations (the normal stencil, the term's value): their work arrays
-#: stay a few megabytes whatever the frame size
-_BAND_PIXELS = 1 << 15
 
 
 def local_linear_operator(image, eps: float, *, window: str = "3x3", copy: bool = True) -> "LocalLinearOperator":
@@ -189,8 +187,11 @@ class LocalLinearOperator(StencilOperator):
 
     # -- the fit of every window ---------------------------------------------
     def _band_rows(self):
-        """Window rows per band of the band-wise computations (about :data:`_BAND_PIXELS` pixels)."""
-        return max(1, _BAND_PIXELS // self.grid_shape[1])
+        """Window rows per band of the band-wise computations (about ``affinity_band_pixels`` pixels).
+
+        ``affinity_band_pixels`` is the :class:`~sparsedepth.limits.MemoryLimits` field.
+        """
+        return max(1, memory_limits().affinity_band_pixels // self.grid_shape[1])
 
     def _window_planes(self, k0, k1):
         """``(μ, P)`` of the windows of anchor rows ``k0 .. k1 − 1``: shapes ``(C, k1-k0, columns)``, ``(C, C, ...)``.

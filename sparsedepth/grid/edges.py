@@ -22,6 +22,7 @@ from scipy import ndimage
 
 from .._validation import as_float_image, check_grid_shape, check_nonnegative_real
 from .rowbands import row_bands, rows_per_band
+from ..limits import memory_limits
 
 __all__ = [
     "image_differences",
@@ -220,20 +221,18 @@ class PairEdgeWeights:
         return f"PairEdgeWeights(grid_shape={self.grid_shape}, kappa={self.kappa})"
 
 
-#: values per band of rows in :func:`_plane_norm` (256 kB in float32)
-_NORM_BAND_VALUES = 1 << 16
 
 
 def _plane_norm(first, second):
     """``‖first − second‖`` over the first axis (channel planes), summed channel by channel.
 
     One channel's difference is formed, squared and added at a time (no ``(C, …)`` temporary, and faster than a
-    reduction along the channel axis), over bands of rows (:data:`_NORM_BAND_VALUES` values each), so that a band
-    of an interleaved image is read from memory once for all its channels.
+    reduction along the channel axis), over bands of rows (``norm_band_values`` values each,
+    :class:`~sparsedepth.limits.MemoryLimits`), so that a band of an interleaved image is read from memory once for all its channels.
     """
     _, h, w = first.shape
     total = np.empty((h, w), dtype=np.result_type(first.dtype, second.dtype))
-    band = rows_per_band(w, _NORM_BAND_VALUES)
+    band = rows_per_band(w, memory_limits().norm_band_values)
     difference = np.empty((min(band, h), w), dtype=total.dtype)
     for rows in row_bands(0, h, band):
         part, work = total[rows], difference[:rows.stop - rows.start]

@@ -25,6 +25,7 @@ import scipy.sparse as sp
 
 from .._validation import check_grid_shape
 from .rowbands import row_bands, rows_per_band
+from ..limits import memory_limits
 
 __all__ = [
     "forward_diff",
@@ -176,8 +177,6 @@ def hessian_operator(shape) -> sp.csr_matrix:
 # --------------------------------------------------------------------------
 # matrix-free stencil form of the same operators
 # --------------------------------------------------------------------------
-#: values per band of image rows in :meth:`StencilOperator.block_matvec` (512 kB in float64)
-_BAND_VALUES = 1 << 16
 
 
 def _anchor_region(taps, shape):
@@ -273,7 +272,7 @@ class StencilOperator:
         out[ys, :xs.start] = 0.0
         out[ys, xs.stop:] = 0.0
         (first_offset, first_coef), *taps = self.blocks[b]
-        band = rows_per_band(W, _BAND_VALUES)
+        band = rows_per_band(W, memory_limits().operator_band_values)
         work = np.empty((min(band, max(ys.stop - ys.start, 0)), max(xs.stop - xs.start, 0)))
         for band_rows in row_bands(ys.start, ys.stop, band):
             rows = (band_rows, xs)

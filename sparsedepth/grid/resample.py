@@ -26,6 +26,7 @@ import numpy as np
 from .._validation import check_count, check_nonnegative_count, check_nonnegative_real
 from .edges import pair_distances
 from .rowbands import row_bands, rows_per_band
+from ..limits import memory_limits
 
 __all__ = ["coarse_shape", "block_mean", "block_sum", "block_sample_mean", "upsample_bilinear", "upsample_edges",
            "edge_aware_sweeps"]
@@ -294,8 +295,6 @@ def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa
     return _merge_parity(*fields)[:, :W]
 
 
-#: values per band of rows in a half sweep (512 kB in float32)
-_SWEEP_BAND_VALUES = 1 << 17
 
 
 def _pair_weights(distance, kappa, smoothness):
@@ -331,12 +330,12 @@ def _half_sweep(target, other, prior, inverse, free, horizontal, weight_above, w
     k]`` (``wx[y, 2k]``); in the other rows it is at ``x = 2k + 1``, with neighbours ``other[y, k]`` (``wx[y,
     2k]``) and ``other[y, k + 1]`` (``wx[y, 2k + 1]``).  Above and below are ``other[y ∓ 1, k]``, whose pair
     weights are the vertical weights of the pixel above (``weight_above``, the other parity's) and of the pixel
-    itself (``weight_below``).  Computed over bands of rows (:data:`_SWEEP_BAND_VALUES` values each), so that
-    the partial sums stay in cache; each pixel adds its terms in the same order as a whole-array update.
+    itself (``weight_below``).  Computed over bands of rows (``sweep_band_values`` values each,
+    :class:`~sparsedepth.limits.MemoryLimits`), so that the partial sums stay in cache; each pixel adds its terms in the same order as a whole-array update.
     """
     pairs_even, pairs_odd = horizontal  # wx[:, 2k] and wx[:, 2k + 1]
     H = target.shape[0]
-    band = rows_per_band(target.shape[1], _SWEEP_BAND_VALUES, multiple=2)  # even: a band's rows keep their parity
+    band = rows_per_band(target.shape[1], memory_limits().sweep_band_values, multiple=2)  # even: a band's rows keep their parity
     work = np.empty((min(band, H),) + target.shape[1:], dtype=target.dtype)
     term = np.empty_like(work)
     at_even = slice(row_offset, None, 2)  # rows (of a band starting at an even row) whose target pixels have even x

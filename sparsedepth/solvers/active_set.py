@@ -18,14 +18,9 @@ from ..grid.stencil import index_dtype
 from ..linalg.krylov import dot, pcg
 from ..linalg.preconditioners import make_preconditioner
 from ..objective.l1 import graph_components
+from ..limits import memory_limits
 
-__all__ = ["KEEP_A_PIXELS", "polish_active_set", "merge_by_label", "stack_rows"]
-
-#: Below this many pixels ADMM keeps the quadratic part's matrix ``A`` next to
-#: ``S = 2A + ρKᵀK`` and the polish merges ``A`` directly (faster); from it on
-#: only ``S`` is kept, and each polish round reduces ``A`` again instead of the
-#: previous reduced matrix, for the peak memory of large frames.
-KEEP_A_PIXELS = 1 << 21
+__all__ = ["polish_active_set", "merge_by_label", "stack_rows"]
 
 
 def merge_by_label(M, labels, count, *, entries=None, chunk=1 << 16):
@@ -160,9 +155,9 @@ def polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, preconditi
     contradicts its fixed sign (the minimiser of the model would cross the
     kink of ``|t_k|``); such rows are tied in the next round, whose
     components are merged from the previous ones and whose reduced matrix is
-    summed from the previous reduced matrix below :data:`KEEP_A_PIXELS`
-    pixels, from ``A`` again above (never two reduced matrices at once), for at most
-    ``rounds`` solves, stopping when no sign is wrong or ``F`` stops
+    summed from the previous reduced matrix below
+    :attr:`~sparsedepth.limits.MemoryLimits.reduced_matrix_pixels` pixels, from ``A`` again above (never two
+    reduced matrices at once), for at most ``rounds`` solves, stopping when no sign is wrong or ``F`` stops
     decreasing.
 
     With ``penalty = ρ`` the reduced matrix is ``Cᵀ(S − ρKᵀK)C / 2``, the
@@ -197,7 +192,7 @@ def polish_active_set(A, b, const, l1, u, *, z0, rounds=2, rtol=1e-7, preconditi
         merged, count = _tie(l1, signs, wrong, labels, count)
         del wrong
         labels = merged[labels]
-        if A.shape[0] < KEEP_A_PIXELS:  # merge the previous components: a smaller matrix than A
+        if A.shape[0] < memory_limits().reduced_matrix_pixels:  # merge the previous components: smaller than A
             reduced = merge_by_label(reduced, merged, count)
             del merged
         else:  # reduced again from A: the previous reduced matrix is not held alongside the new one (8-MP peak)

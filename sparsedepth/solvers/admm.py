@@ -17,12 +17,12 @@ import scipy.sparse as sp
 
 from ..grid.resample import block_mean, upsample_bilinear, upsample_edges
 from ..grid.stencil import full_pattern_offsets
+from ..limits import memory_limits
 from ..linalg.krylov import dot, pcg, pcg_steps
 from ..linalg.multigrid import GridMultigrid
 from ..linalg.preconditioners import make_preconditioner
 from ..objective.coarsen import COARSENING, coarsen_objective
 from ..objective.l1 import StackedL1
-from . import active_set
 from .active_set import polish_active_set
 from .certificate import Certificate
 from .common import Recorder, gap_threshold, objective_floor, output, refuse_robust, relative
@@ -202,7 +202,7 @@ def solve_admm(objective, x0, *, tol, max_iter, recorder, options):
     (default 0); the hierarchy is then re-computed numerically with
     :meth:`GridMultigrid.update`.
 
-    Memory: from :data:`~sparsedepth.solvers.active_set.KEEP_A_PIXELS` (2²¹)
+    Memory: from :attr:`~sparsedepth.limits.MemoryLimits.reduced_matrix_pixels` (2²¹)
     pixels on and without ρ adaptation the solver keeps ``S`` and not ``A``
     (it calls :meth:`Objective.clear_cache`; ``zᵀAz`` and the polish's
     reduced matrix are computed from ``S``); on smaller frames it keeps ``A``
@@ -378,7 +378,7 @@ class _AdmmRun:
         self.S = combine(2.0, A0, rho, KtK)
         adapt = self.options.adapt_iters > 0
         self.A0 = self.KtK = None
-        self.lean = not adapt and objective.size >= active_set.KEEP_A_PIXELS
+        self.lean = not adapt and objective.size >= memory_limits().reduced_matrix_pixels
         if self.lean:
             # S carries all the solver needs of A0: zᵀA0z = (zᵀSz − ρ‖Kz‖²)/2, and the polish reduces S
             # (penalty=rho); without rho adaptation neither A0 nor KᵀK is needed again
@@ -434,7 +434,7 @@ class _AdmmRun:
         """The duality-gap certificate of this run.
 
         On frames where the run keeps ``A`` (below
-        :data:`~sparsedepth.solvers.active_set.KEEP_A_PIXELS` pixels) one
+        :attr:`~sparsedepth.limits.MemoryLimits.reduced_matrix_pixels` pixels) one
         multigrid hierarchy of ``A`` serves all its checks; on larger ones the
         certificate keeps nothing between checks (``low_memory``; see :meth:`_gap`).
 

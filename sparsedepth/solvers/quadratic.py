@@ -21,6 +21,7 @@ from ..linalg.krylov import dot, pcg, pcg_info
 from ..linalg.multigrid import GridMultigrid
 from ..linalg.preconditioners import make_preconditioner
 from .common import output, quick_value, require_quadratic
+from ..limits import memory_limits
 
 __all__ = ["solve_direct", "solve_cg", "solve_amg", "single_precision_cg", "RemainingChange", "DEFAULT_DEPTH_RTOL",
            "default_hierarchy"]
@@ -28,8 +29,6 @@ __all__ = ["solve_direct", "solve_cg", "solve_amg", "single_precision_cg", "Rema
 #: ``depth_rtol`` of the ``amg`` solve of :func:`sparsedepth.complete_depth` when neither ``tol`` nor a depth
 #: tolerance is given: an RMS remaining change of 3e-4 of the depth scale.
 DEFAULT_DEPTH_RTOL = 3e-4
-#: frames from this many pixels (about 4.2 megapixels) solve γ = 0 with ``A`` in symmetric stencil form
-STENCIL_FORM_PIXELS = 1 << 22
 
 
 def solve_direct(objective, x0, *, tol=None, max_iter=None, recorder, options):
@@ -107,14 +106,17 @@ class RemainingChange:
 
 
 def system_form(objective):
-    """``"stencil"`` (:class:`~sparsedepth.grid.stencil.SymmetricStencil`) from :data:`STENCIL_FORM_PIXELS` pixels on, else ``"csr"``.
+    """``"stencil"`` (a :class:`~sparsedepth.grid.stencil.SymmetricStencil`) from ``stencil_form_pixels`` on, else CSR.
+
+    ``stencil_form_pixels`` is :attr:`~sparsedepth.limits.MemoryLimits.stencil_form_pixels` (2²², about 4.2
+    megapixels).
 
     The symmetric stencil keeps half the coefficient images and no index
     arrays (56 bytes per pixel instead of 160 for the 13-point system), but
     its product is slower than the CSR product (``python -m bench.scaling``,
     ``docs/scaling.md``, measures both).
     """
-    return "stencil" if objective.size >= STENCIL_FORM_PIXELS else "csr"
+    return "stencil" if objective.size >= memory_limits().stencil_form_pixels else "csr"
 
 
 def default_hierarchy(A, shape):
@@ -131,7 +133,7 @@ def default_hierarchy(A, shape):
     -------
     GridMultigrid
         ``interpolation="auto"``, ``smoother="line_gauss_seidel"`` (default ``line_anisotropy``) in either
-        form; on a stencil form (the frames of at least :data:`STENCIL_FORM_PIXELS` pixels) the line steps
+        form; on a stencil form (the frames of at least ``stencil_form_pixels``, :func:`system_form`) the line steps
         gather the fine operator's rows from its images, so no CSR copy of it is made.
 
     Notes
@@ -180,7 +182,7 @@ def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner, depth_
     rule = None if depth_tol is None else RemainingChange(b.size, depth_tol)
     z, n, converged, rel = pcg(A, b, x0=x0, M=M, rtol=tol, maxiter=max_iter, callback=cb, callback_residual=True,
                                stop=rule)
-    if preconditioner in ("grid", "amg") and objective.size < STENCIL_FORM_PIXELS:
+    if preconditioner in ("grid", "amg") and system_form(objective) == "csr":
         objective.preconditioner = M  # for the certificate's solve with A
     del M  # on frames in stencil form the hierarchy goes before the objective is evaluated: peak memory
     if values and recorder.history and recorder.history[-1].iteration == n and n > 0:

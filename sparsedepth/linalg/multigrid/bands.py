@@ -25,11 +25,10 @@ from pyamg import amg_core
 
 from ...grid.rowbands import row_bands, rows_per_band
 from ...grid.stencil import SymmetricStencil, stencil_to_csr
+from ...limits import memory_limits
 
 __all__ = ["BandedStencil", "FullStencil"]
 
-#: values per band buffer (rows x columns x offsets): 1 MB in float64, a few rows of a large image
-_BAND_VALUES = 1 << 17
 
 
 class FullStencil:
@@ -127,7 +126,7 @@ class BandedStencil:
         self.radius = R = max(max(abs(dy), abs(dx)) for dy, dx in A.offsets)
         self._wp = W + 2 * R
         K = len(A.offsets)
-        self._rows = min(H, rows_per_band(W * K, _BAND_VALUES))
+        self._rows = min(H, rows_per_band(W * K, memory_limits().stencil_band_values))
         self._delta = np.array([dy * self._wp + dx for dy, dx in A.offsets])
         self._patterns = {}
         # flat start in A.data of each offset's coefficients for pixel 0 (may be negative): entry (p, k) of a band

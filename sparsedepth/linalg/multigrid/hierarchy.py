@@ -26,27 +26,20 @@ from .interpolation import bilinear_weights, operator_weights
 from .smoothers import LineGaussSeidel, gauss_seidel_backward, gauss_seidel_forward, jacobi_damping, jacobi_sweeps
 from .stencils import CollapsedSource, StencilSource, extract_stencil, fine_stencil_source
 from .transfer import ClassProlongation, SeparableProlongation
+from ...limits import memory_limits
 
 __all__ = ["GridMultigrid", "grid_multigrid"]
 
 _INTERPOLATIONS = ("bilinear", "operator", "auto")
 _SMOOTHERS = ("gauss_seidel", "jacobi", "line_gauss_seidel")
-#: fine grids from this many pixels keep their coarse levels in float32 (coarse_precision="auto")
-_SINGLE_COARSE_PIXELS = 1 << 21
-#: fine operators with at most this many non-zeros are smoothed in float32 (fine_precision="auto"), on
-#: a float32 copy of their values (at most 256 MB); larger ones (an 8-megapixel 13-point system has
-#: 1.04e8) are smoothed in float64, as the copy would then weigh on the peak memory
-_SINGLE_FINE_VALUES = 1 << 26
-# Below this many fine pixels every level's stencil is kept as one (K, H, W)
-# array during the set-up (fine: read from the CSR once; coarse: the Galerkin
-# result itself) instead of being read back from the CSR one parity class at a
-# time, which keeps the 8-MP set-up's memory low but reads most classes twice.
-_KEEP_STENCIL_PIXELS = 1 << 21
-#: With a fine SymmetricStencil smoothed in float64 (above _SINGLE_FINE_VALUES: the frames whose memory counts),
-#: coarse levels of at least this many pixels are kept as float32 stencils and swept band by band (:mod:`.bands`):
-#: symmetric ones when their float32 coefficients are exactly symmetric, else all their images; smaller levels
-#: stay CSR.
-_BANDED_COARSE_PIXELS = 1 << 18
+# The sizes at which the hierarchy stores a level more leanly are sparsedepth.limits.MemoryLimits':
+# single_coarse_pixels (fine grids from it keep their coarse levels in float32, coarse_precision="auto"),
+# single_fine_values (fine operators with at most that many non-zeros are smoothed on a float32 copy,
+# fine_precision="auto"; larger ones in float64, as the copy would weigh on the peak memory),
+# keep_stencil_pixels (below it every level's stencil is kept as one (K, H, W) array during the set-up instead of
+# being read back from the CSR one parity class at a time) and banded_coarse_pixels (with a fine SymmetricStencil
+# smoothed in float64, coarse levels of at least that many pixels are float32 stencils swept band by band,
+# :mod:`.bands`; smaller ones stay CSR).
 
 
 class _Level:
@@ -260,8 +253,9 @@ class GridMultigrid:
         self.max_levels = None if max_levels is None else int(max_levels)
         A, shape = _as_fine_operator(A, shape)
         self.shape = shape
-        large = shape[0] * shape[1] >= _SINGLE_COARSE_PIXELS
-        fine_single = fine_precision == "single" or (fine_precision == "auto" and A.nnz <= _SINGLE_FINE_VALUES)
+        limits = memory_limits()
+        large = shape[0] * shape[1] >= limits.single_coarse_pixels
+        fine_single = fine_precision == "single" or (fine_precision == "auto" and A.nnz <= limits.single_fine_values)
         coarse_single = coarse_precision == "single" or (coarse_precision == "auto" and (large or fine_single))
         self.fine_dtype = np.dtype(np.float32 if fine_single else np.float64)
         self.coarse_dtype = np.dtype(np.float32 if coarse_single else np.float64)
@@ -309,7 +303,7 @@ class GridMultigrid:
         Galerkin product.
         """
         source = box.pop()
-        keep = self.shape[0] * self.shape[1] < _KEEP_STENCIL_PIXELS
+        keep = self.shape[0] * self.shape[1] < memory_limits().keep_stencil_pixels
         if keep:
             source.read_whole()
         levels = self.levels
@@ -327,7 +321,7 @@ class GridMultigrid:
                 interp = bilinear_weights(fine.shape)
                 if refill_p:
                     fine.P = SeparableProlongation(fine.shape)
-            banded = self._banded and coarse.shape[0] * coarse.shape[1] >= _BANDED_COARSE_PIXELS
+            banded = self._banded and coarse.shape[0] * coarse.shape[1] >= memory_limits().banded_coarse_pixels
             # a banded level is stored image by image from a list, each float64 image freed once stored
             S = galerkin_stencil(fine.offsets, source, interp, fine.shape, coarse.offsets, as_list=banded)
             del source, interp  # the fine level's weights are kept by its prolongation (float32 for operator ones)

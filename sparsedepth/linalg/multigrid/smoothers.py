@@ -13,12 +13,11 @@ import scipy.linalg
 from pyamg import amg_core
 
 from ...grid.stencil import SymmetricStencil, index_dtype
+from ...limits import memory_limits
 
 __all__ = ["gauss_seidel_forward", "gauss_seidel_backward", "jacobi_damping", "jacobi_sweeps", "LineGaussSeidel",
            "anisotropic_pixels", "stencil_rows_product"]
 
-#: pixels per chunk of :func:`stencil_rows_product` (its temporaries: a few hundred kilobytes)
-_GATHER_PIXELS = 1 << 15
 
 
 def gauss_seidel_forward(A, x, b, sweeps):
@@ -124,16 +123,17 @@ def stencil_rows_product(A, idx, x, out):
     symmetry.  A neighbour outside the grid has a zero coefficient; its flat index (``p + u`` past the end,
     ``p - u`` before the start, or a pixel of the next or previous image row) reads that zero: ``x`` is
     read with clipped indices, the coefficient ``a_u[p - u]`` with ``p - u < 0`` at ``p - u + N``, a pixel
-    whose neighbour at ``u`` lies past the grid's last row.  Pixels go ``_GATHER_PIXELS`` at a time, so the
-    temporaries stay small.
+    whose neighbour at ``u`` lies past the grid's last row.  Pixels go ``gather_pixels``
+    (:class:`~sparsedepth.limits.MemoryLimits`) at a time, so the temporaries stay small.
     """
     h, w = A.grid_shape
     # an offset reaching past the grid from every pixel has a zero image; the others step 0 < dy W + dx < N
     terms = [(dy * w + dx, image.reshape(-1)) for (dy, dx), image in zip(A.upper, A.images)
              if dy < h and abs(dx) < w]
-    for start in range(0, idx.shape[0], _GATHER_PIXELS):
-        p = idx[start:start + _GATHER_PIXELS]
-        acc = out[start:start + _GATHER_PIXELS]
+    chunk = max(1, memory_limits().gather_pixels)
+    for start in range(0, idx.shape[0], chunk):
+        p = idx[start:start + chunk]
+        acc = out[start:start + chunk]
         acc[:] = 0.0
         for step, a in terms:
             if step == 0:

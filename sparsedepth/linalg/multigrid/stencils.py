@@ -195,7 +195,7 @@ class StencilSource:
     full in-grid pattern of :func:`~sparsedepth.grid.stencil.stencil_to_csr`, read
     class by class so that the fine stencil is never held whole (a quarter
     of its pixels at a time).  Grids below
-    ``_KEEP_STENCIL_PIXELS`` read it whole once (:meth:`read_whole`).
+    ``keep_stencil_pixels`` (:class:`~sparsedepth.limits.MemoryLimits`) read it whole once (:meth:`read_whole`).
     """
 
     def __init__(self, offsets, shape, *, array=None, csr=None, csr_offsets=None, symmetric=None):

@@ -16,11 +16,10 @@ import scipy.sparse as sp
 
 from ...grid.stencil import index_dtype
 from .interpolation import linear_weights_1d
+from ...limits import memory_limits
 
 __all__ = ["SeparableProlongation", "ClassProlongation"]
 
-#: fine pixels per band of the band-wise transfers of :class:`SeparableProlongation`
-_BAND_PIXELS = 1 << 16
 
 
 def _interp_matrix_1d(weights):
@@ -76,8 +75,11 @@ class SeparableProlongation:
         return self.add_prolonged(np.zeros(self.shape[0]), x)
 
     def _rows_per_band(self, even=False):
-        """Rows per band of the band-wise transfers (about :data:`_BAND_PIXELS` fine pixels; even if asked)."""
-        rows = max(2, _BAND_PIXELS // self.fine_shape[1])
+        """Rows per band of the band-wise transfers (about ``transfer_band_pixels`` fine pixels; even if asked).
+
+        ``transfer_band_pixels`` is the :class:`~sparsedepth.limits.MemoryLimits` field.
+        """
+        rows = max(2, memory_limits().transfer_band_pixels // self.fine_shape[1])
         return rows - rows % 2 if even else rows
 
     def add_prolonged(self, out, x):
