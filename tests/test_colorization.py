@@ -266,7 +266,7 @@ def test_weights_in_two_threads_equal_one_pass(window_radius, height, monkeypatc
     monkeypatch.setattr(colorization, "available_cpus", lambda: 2)
     grey = np.random.default_rng(3).random((height, 37))
     one, steps_one = affinity.window_weights(grey, window_radius)
-    two, steps_two = colorization._window_weights_two_threads(grey, window_radius)
+    two, steps_two = colorization.window_weights_two_threads(grey, window_radius)
     np.testing.assert_array_equal(two, one)
     np.testing.assert_array_equal(steps_two, steps_one)
 

@@ -5,7 +5,7 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
-from sparsedepth.grid.geodesic import _grid_graph, geodesic_fill
+from sparsedepth.grid.geodesic import grid_graph, geodesic_fill
 
 
 def _coo_graph(cx, cy):
@@ -23,7 +23,7 @@ def test_grid_graph_equals_coordinate_construction(shape):
     rng = np.random.default_rng(H * 100 + W)
     cx = 1.0 + rng.random((H, W - 1))
     cy = 1.0 + rng.random((H - 1, W))
-    ours, ref = _grid_graph(cx, cy), _coo_graph(cx, cy)
+    ours, ref = grid_graph(cx, cy), _coo_graph(cx, cy)
     ref.sum_duplicates()
     ref.sort_indices()
     assert ours.shape == ref.shape

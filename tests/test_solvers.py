@@ -7,7 +7,7 @@ import scipy.sparse.linalg as spla
 import sparsedepth as sd
 from sparsedepth import Weights, build_objective, complete_depth
 
-from sparsedepth.solvers.adam import _stalled, _step_size
+from sparsedepth.solvers.adam import window_means_stalled, step_size
 from sparsedepth.solvers.options import AdamOptions
 
 from conftest import make_problem
@@ -169,11 +169,11 @@ def optimum(problem):
 def test_cosine_steps_by_hand():
     options = AdamOptions()
     assert options.schedule == "cosine"
-    steps = [_step_size(options, 2.0, k, 4) for k in range(1, 5)]
+    steps = [step_size(options, 2.0, k, 4) for k in range(1, 5)]
     expected = [2.0 * 0.5 * (1 + math.cos(math.pi * j / 4)) for j in range(4)]  # 2, 1.707, 1, 0.293
     np.testing.assert_allclose(steps, expected, rtol=1e-15)
     legacy = AdamOptions(schedule="inverse_sqrt", decay_steps=3.0)
-    assert _step_size(legacy, 2.0, 6, 4) == pytest.approx(2.0 / math.sqrt(3.0))
+    assert step_size(legacy, 2.0, 6, 4) == pytest.approx(2.0 / math.sqrt(3.0))
 
 
 def test_adam_stop_compares_window_means_not_single_values():
@@ -182,18 +182,18 @@ def test_adam_stop_compares_window_means_not_single_values():
     falling = 100.0 - 1e-3 * k + np.where(k % 2 == 0, 1.0, -1.0)  # the mean falls 1e-3 per step
     means = (np.mean(falling[100:150]), np.mean(falling[150:]))
     assert means[0] - means[1] == pytest.approx(0.05)  # 5e-4 of the value
-    assert _stalled(list(falling), 50, tol=4e-4, floor=0.0) is None
-    assert _stalled(list(falling), 50, tol=6e-4, floor=0.0) == pytest.approx(means)
-    assert _stalled(list(falling), 50, tol=0.0, floor=0.06) == pytest.approx(means)  # the absolute floor
+    assert window_means_stalled(list(falling), 50, tol=4e-4, floor=0.0) is None
+    assert window_means_stalled(list(falling), 50, tol=6e-4, floor=0.0) == pytest.approx(means)
+    assert window_means_stalled(list(falling), 50, tol=0.0, floor=0.06) == pytest.approx(means)  # the absolute floor
     bouncing = np.where(k % 50 == 49, 95.0, 100.0 - 1e-2 * k)  # falling, with equal low points 50 steps apart
     single = bouncing[-51] - bouncing[-1]
     assert 0 <= single <= 1e-7 * bouncing[-1]  # the single-value rule would read a plateau here ...
-    assert _stalled(list(bouncing), 50, tol=1e-7, floor=0.0) is None  # ... the window means do not
+    assert window_means_stalled(list(bouncing), 50, tol=1e-7, floor=0.0) is None  # ... the window means do not
     flat = [7.0] * 100
-    assert _stalled(flat, 50, tol=0.0, floor=0.0) == (7.0, 7.0)
-    assert _stalled(flat[:99], 50, tol=1.0, floor=1.0) is None  # fewer than two windows
+    assert window_means_stalled(flat, 50, tol=0.0, floor=0.0) == (7.0, 7.0)
+    assert window_means_stalled(flat[:99], 50, tol=1.0, floor=1.0) is None  # fewer than two windows
     rising = list(1.0 + 1e-9 * k)
-    assert _stalled(rising, 50, tol=1.0, floor=1.0) is None  # the objective went up: not converged
+    assert window_means_stalled(rising, 50, tol=1.0, floor=1.0) is None  # the objective went up: not converged
 
 
 def test_cosine_adam_reaches_the_optimum_within_its_horizon(problem, optimum):

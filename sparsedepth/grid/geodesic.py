@@ -18,7 +18,7 @@ from scipy.sparse.csgraph import dijkstra
 from .._validation import as_depth_and_mask, as_float_image, check_nonnegative_real, check_same_shape
 from .edges import pair_distances
 
-__all__ = ["geodesic_fill", "step_costs"]
+__all__ = ["geodesic_fill", "step_costs", "grid_graph"]
 
 
 def step_costs(image, contrast: float):
@@ -86,7 +86,7 @@ def geodesic_fill(image, sparse_depth, mask=None, *, contrast: float = 10.0, ret
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     img = as_float_image(image)
     check_same_shape(img.shape[:2], depth.shape, "image", "sparse_depth")
-    graph = _grid_graph(*step_costs(img, contrast))
+    graph = grid_graph(*step_costs(img, contrast))
     sources = np.flatnonzero(observed)
     distance, _, nearest = dijkstra(graph, directed=False, indices=sources, min_only=True, return_predecessors=True)
     del graph
@@ -96,7 +96,7 @@ def geodesic_fill(image, sparse_depth, mask=None, *, contrast: float = 10.0, ret
     return fill
 
 
-def _grid_graph(cx, cy):
+def grid_graph(cx, cy):
     """The 4-connected grid graph with step costs ``cx`` (to the right) and ``cy`` (down), as canonical CSR.
 
     Row ``p = i W + j`` stores its edge to ``p + 1`` (when ``j < W − 1``),

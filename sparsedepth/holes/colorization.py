@@ -44,10 +44,11 @@ __all__ = [
     "rgb_to_grey",
     "colorization_weights",
     "colorization_fill",
+    "window_weights_two_threads",
 ]
 
 
-def _window_weights_two_threads(grey, radius):
+def window_weights_two_threads(grey, radius):
     """:func:`~sparsedepth.holes.affinity.window_weights` computed for the top and the bottom half in two threads.
 
     Each half is given ``radius`` rows of the other as a halo, so every
@@ -241,7 +242,7 @@ def colorization_fill(image, depth, *, mask=None, alpha=1.0, rtol=1e-8, window_r
     known = np.flatnonzero(~elim)
     order = np.concatenate((unknown, known))
 
-    planes, steps = _window_weights_two_threads(grey, radius)
+    planes, steps = window_weights_two_threads(grey, radius)
     flat, pixels, position = window_entries(planes, 1.0 + alpha * known_flat, -1, order)
     n_e = unknown.size
     b = d.ravel()[order]  # 0 at the holes

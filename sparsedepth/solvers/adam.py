@@ -9,17 +9,17 @@ import numpy as np
 
 from .common import objective_floor, output, relative
 
-__all__ = ["solve_adam"]
+__all__ = ["solve_adam", "step_size", "window_means_stalled"]
 
 
-def _step_size(options, learning_rate, k, horizon):
+def step_size(options, learning_rate, k, horizon):
     """``η_k`` of the schedule (see :class:`~sparsedepth.solvers.options.AdamOptions`)."""
     if options.schedule == "cosine":
         return learning_rate * 0.5 * (1.0 + np.cos(np.pi * (k - 1) / horizon))
     return learning_rate / np.sqrt(1.0 + k / options.decay_steps)
 
 
-def _stalled(values, window, tol, floor):
+def window_means_stalled(values, window, tol, floor):
     """``(earlier, last)`` window means when the last ``2 window`` values have stalled, else ``None``.
 
     ``earlier`` and ``last`` are the means of the smoothed objective over the ``window`` steps before the last
@@ -75,11 +75,11 @@ def solve_adam(objective, x0, *, tol, max_iter, recorder, options):
         v = b2 * v + (1 - b2) * g * g
         mhat = m / (1 - b1**k)
         vhat = v / (1 - b2**k)
-        step = _step_size(options, lr, k, horizon)
+        step = step_size(options, lr, k, horizon)
         z = np.maximum(z - step * mhat / (np.sqrt(vhat) + 1e-8 * scale), 0.0)
         if k % record_every == 0:
             recorder(k, z, fevals=k, gevals=k)
-        means = _stalled(values, window, tol, floor)
+        means = window_means_stalled(values, window, tol, floor)
         if means is not None:
             earlier, last = means
             converged = True

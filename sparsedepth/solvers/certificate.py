@@ -139,7 +139,7 @@ class Certificate:
         g *= 2.0
         return g
 
-    def _k_norm_sq(self):
+    def k_norm_squared(self):
         """An upper bound on ``‖K‖₂²``: max absolute row sum times max absolute column sum."""
         if self._K_norm_sq is None:
             if self.l1.grid_gradient:
@@ -218,7 +218,7 @@ class Certificate:
     def _projected_gradient_fit(self, q, free, g):
         """``q`` improved on its tied rows by ``fit_steps`` FISTA steps on ``‖g + Kᵀq‖²`` over the box, if lower."""
         l1 = self.l1
-        step = 1.0 / self._k_norm_sq()
+        step = 1.0 / self.k_norm_squared()
         c = l1.weights
         lo, hi = -c[free], c[free]
         del c
