@@ -294,7 +294,7 @@ def test_certificate_of_a_general_sparse_operator_with_gradient_steps():
                             AbsTerm("edge", 0.3, K, rng.random(K.shape[0]))])
     cert = Certificate(obj, fit_steps=20)
     assert not cert.l1.grid_gradient
-    assert cert._k_norm_sq() >= np.linalg.norm(K.toarray(), 2) ** 2 * (1 - 1e-12)
+    assert cert.k_norm_squared() >= np.linalg.norm(K.toarray(), 2) ** 2 * (1 - 1e-12)
     # any feasible point's value bounds F* from above: the best of two long ADMM runs
     runs = [solve(obj, np.ones(n), solver="admm", tol=1e-10, max_iter=20000, options={"polish": False})[0],
             solve(obj, np.ones(n), solver="admm", options={"polish_rtol": 1e-12})[0]]
