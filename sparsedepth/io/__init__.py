@@ -37,10 +37,10 @@ Imports NumPy, imageio, Pillow, tifffile, h5py and :mod:`sparsedepth._validation
 """
 
 from .calibration import KINECT_NYU, KinectDisparity, StereoCalibration, disparity_to_depth, read_calib
-from .arrays import read_depth_array
+from .formats import read_depth_array
 from .depth import DEPTH_SCALES, read_depth, read_depth_png, read_mask, resolve_scale  # noqa: F401 - resolve_scale for the CLI
 from .files import MAX_PIXELS, atomic_target, create_temporary, fsync  # noqa: F401 - atomic writes for the CLI and batch runs
-from .images import read_image
+from .formats import read_image
 from .nyu import NYUDepthV2Labeled, read_nyu_h5
 from .pfm import read_pfm, write_pfm
 from .pointcloud import depth_to_points, ply_writer, read_ply, write_ply  # noqa: F401 - ply_writer for the CLI

@@ -1,6 +1,6 @@
 """Arrays stored with NumPy (``.npy``, ``.npz``) and HDF5 (``.h5``, ``.hdf5``, MATLAB v7.3 ``.mat``).
 
-What lives here: :func:`read_depth_array`, the header-first ``.npy`` reader
+What lives here: the header-first ``.npy`` reader
 (shape, dtype and pixel limit are checked before the data are read; pickled
 objects are refused), the ``.npz`` member choice, and the HDF5 helpers that
 :mod:`.nyu` and :func:`sparsedepth.io.read_depth` share (:func:`open_hdf5`,
@@ -10,28 +10,27 @@ raw storage); :func:`hdf5_dataset` refuses all three before anything is read,
 so no file the user did not name is ever opened.  The depth and mask readers
 and the writers of the NumPy and HDF5 entries of :mod:`.formats` live here too.
 
-Imports NumPy, h5py, :mod:`sparsedepth._validation` and :mod:`.files` /
-:mod:`.stored` only.
+Imports NumPy, h5py and :mod:`.files` / :mod:`.stored` only
+(:func:`sparsedepth.io.read_depth_array`, which checks the extension against the table, lives in
+:mod:`.formats`).
 """
 
 from __future__ import annotations
 
 import zipfile
 from pathlib import Path
-from typing import Callable, Mapping
+from typing import Callable
 
 import h5py
 import numpy as np
 
-from .._validation import check_input_file
-from .files import (MAX_PIXELS, as_value_error, check_extension, check_max_pixels, file_label, load_error,
-                    option_labels, suffix)
-from .stored import as_depth, check_stored_array
+from .files import as_value_error, file_label, load_error, option_labels, suffix
+from .stored import check_stored_array
 
 __all__ = ["hdf5_dataset", "hdf5_read", "hdf5_writer", "load_array", "npy_writer", "npz_writer", "open_hdf5",
            "read_array_depth", "read_array_mask", "read_hdf5_depth", "read_hdf5_mask", "write_hdf5_file",
            "write_npy_file", "write_npz_file",
-           "read_depth_array", "read_hdf5_array"]
+           "read_hdf5_array"]
 
 
 
@@ -97,50 +96,6 @@ def load_array(path: Path, key: str | None, max_pixels, where: str, label: Calla
             raise
         except Exception as exc:
             raise load_error(source, exc) from exc
-
-
-def read_depth_array(path, *, key: str | None = None, max_pixels: int | None = MAX_PIXELS,
-                     name: str = "path", option_names: Mapping[str, str] | None = None) -> np.ndarray:
-    """Read a depth map stored with NumPy (``.npy`` or ``.npz``).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        ``.npy`` file holding one (H, W) array, or ``.npz`` archive.
-    key : str, optional
-        Array name inside an ``.npz``.  If omitted, the archive's only array
-        is used, or else the one called ``'depth'``.
-    max_pixels : int or None, optional
-        Largest accepted ``H * W``, checked from the array header before the
-        data are read; default :data:`MAX_PIXELS`, None for no limit.
-    name : str, optional
-        Label of ``path`` in error messages.
-    option_names : mapping, optional
-        Labels of the keywords in messages, e.g. ``{"key": "--depth-key"}``.
-
-    Returns
-    -------
-    depth : (H, W) ndarray of float64
-        Stored values (no unit conversion: :func:`read_depth` requires a
-        ``scale`` for integer arrays), with NaN where they are 0, inf or NaN.
-
-    Raises
-    ------
-    FileNotFoundError
-        If ``path`` does not exist.
-    ValueError
-        If ``path`` is not a regular file, the file cannot be loaded
-        (pickled objects are refused), ``key`` is missing or ambiguous, or
-        the array is not a non-negative 2-D real array within ``max_pixels``.
-    """
-    label = option_labels(option_names)
-    path = check_input_file(path, name=name)
-    from .formats import NUMPY_EXTENSIONS  # the table refers to the readers of this module
-
-    check_extension(path, NUMPY_EXTENSIONS, "read depth array", name)
-    max_pixels = check_max_pixels(max_pixels, label("max_pixels"))
-    stored, source = load_array(path, key, max_pixels, file_label(path, name), label)
-    return as_depth(stored, source)
 
 
 def open_hdf5(path: Path, where: str | None = None) -> h5py.File:

@@ -36,8 +36,8 @@ import numpy as np
 from .._validation import argument_label, check_input_file, check_positive_finite, is_real
 from .calibration import KinectDisparity, StereoCalibration, read_calib
 from .files import MAX_PIXELS, check_extension, check_max_pixels, option_labels
-from .formats import DEPTH_EXTENSIONS, KEYED_EXTENSIONS, MASK_EXTENSIONS, extensions_of, format_of
-from .images import read_grey_depth, read_image, read_single_channel
+from .formats import (DEPTH_EXTENSIONS, KEYED_EXTENSIONS, MASK_EXTENSIONS, extensions_of, format_of, read_grey_depth,
+                      read_image, read_single_channel)
 from .netpbm import check_byteorder
 from .stored import as_depth, is_real_dtype
 

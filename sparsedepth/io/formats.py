@@ -16,8 +16,13 @@ module in :mod:`sparsedepth.io`, whose functions follow the signatures below
 (:data:`ImageReader`, :data:`StoredReader`, :data:`MaskReader`,
 :data:`Writer`); nothing else changes.
 
-Imports :mod:`.arrays`, :mod:`.images` and :mod:`.pfm` (the readers and
-writers) only.
+:func:`read_image` and :func:`read_depth_array`, which pick a reader by the
+table, and the depth reader of grey images (:func:`read_grey_depth`) live
+here too, so the format modules never look the table up.
+
+Imports :mod:`.arrays`, :mod:`.images`, :mod:`.netpbm` and :mod:`.pfm` (the
+readers and writers), :mod:`.files`, :mod:`.stored` and
+:mod:`sparsedepth._validation` only.
 """
 
 from __future__ import annotations
@@ -28,15 +33,20 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from .arrays import (hdf5_writer, npy_writer, npz_writer, read_array_depth, read_array_mask, read_hdf5_depth,
-                     read_hdf5_mask)
-from .images import (png_writer, read_grey_depth, read_netpbm_image, read_pillow_image, read_tiff_depth,
+from .._validation import check_input_file
+from .arrays import (hdf5_writer, load_array, npy_writer, npz_writer, read_array_depth, read_array_mask,
+                     read_hdf5_depth, read_hdf5_mask)
+from .files import MAX_PIXELS, check_extension, check_max_pixels, file_label, option_labels
+from .images import (normalise_image, png_writer, read_netpbm_image, read_pillow_image, read_tiff_depth,
                      read_tiff_image, tiff_writer)
+from .netpbm import check_byteorder
+from .stored import as_depth
 from .pfm import pfm_writer, read_pfm_depth
 
 __all__ = ["DEPTH_EXTENSIONS", "DISCOVERED_DEPTH_EXTENSIONS", "DISCOVERED_IMAGE_EXTENSIONS", "FORMATS",
            "FileFormat", "IMAGE_EXTENSIONS", "KEYED_EXTENSIONS", "MASK_EXTENSIONS", "NUMPY_EXTENSIONS",
-           "OUT_EXTENSIONS", "OUT_FORMATS", "WRITE_EXTENSIONS", "extensions_of", "format_of"]
+           "OUT_EXTENSIONS", "OUT_FORMATS", "WRITE_EXTENSIONS", "extensions_of", "format_of", "read_image",
+           "read_depth_array", "read_grey_depth", "read_single_channel"]
 
 #: ``read(path, byteorder, max_pixels, where, label) -> samples``: the decoded (H, W) or (H, W, C) image as stored.
 ImageReader = Callable[[Path, "str | None", "int | None", str, Callable[[str], str]], np.ndarray]
@@ -123,6 +133,133 @@ class FileFormat:
     def holds_uncertainty(self) -> bool:
         """:func:`~sparsedepth.io.write_uncertainty` writes it (every format that depth is written in)."""
         return self.write is not None
+
+
+def read_image(path, *, byteorder: str | None = None, max_pixels: int | None = MAX_PIXELS,
+               name: str = "path", option_names: Mapping[str, str] | None = None) -> np.ndarray:
+    """Read a grey or colour image as stored (8 or 16 bit).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Image file: PNG, JPEG, PPM/PGM/PNM (ASCII or binary), BMP or TIFF.
+    byteorder : {None, 'big', 'little'}, optional
+        Byte order of 16-bit binary Netpbm rasters.  The Netpbm standard is
+        ``'big'``; some datasets (e.g. the NYU Depth V2 raw ``.pgm`` Kinect
+        frames) store little-endian samples despite the header.  ``None``
+        (default) reads big-endian but refuses a raster that looks
+        byte-swapped (see Notes).  Ignored for other formats.
+    max_pixels : int or None, optional
+        Largest accepted ``height * width``, checked from the file header
+        before decoding (default :data:`MAX_PIXELS`); None for no limit.
+        Pillow's own limit ``PIL.Image.MAX_IMAGE_PIXELS`` (twice it, in fact)
+        also applies to the formats Pillow decodes.
+    name : str, optional
+        Label of ``path`` in error messages (e.g. the command-line flag).
+    option_names : mapping, optional
+        Labels of the keywords in messages, e.g. ``{"byteorder": "--byteorder"}``.
+
+    Returns
+    -------
+    image : (H, W) or (H, W, 3) ndarray of uint8 or uint16
+        The decoded samples, unscaled.  An alpha channel is dropped; 1-bit
+        images become uint8 0 (black) and 255 (white).
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If ``path`` is not a regular file, the extension is not supported,
+        the declared size exceeds ``max_pixels``, the file cannot be decoded,
+        or it decodes to something other than a 1/8/16-bit grey or RGB image.
+    TypeError
+        If ``path`` is not a str or os.PathLike.
+
+    Notes
+    -----
+    Byte-swap check (``byteorder=None``, 16-bit binary Netpbm of at least
+    2x2 pixels): with :math:`V(x)` the mean absolute difference between
+    vertical plus horizontal neighbours, the file is refused when
+    :math:`4\\,V(\\mathrm{swap}(x)) < V(x)`.  Depth and photographs vary
+    slowly, so swapping their bytes moves the noisy low byte into the high
+    one and multiplies :math:`V` many times over.
+
+    Examples
+    --------
+    >>> import numpy as np, imageio.v3 as iio, tempfile, os
+    >>> fname = os.path.join(tempfile.mkdtemp(), "grey.png")
+    >>> iio.imwrite(fname, np.array([[0, 1000]], dtype=np.uint16))
+    >>> read_image(fname)
+    array([[   0, 1000]], dtype=uint16)
+    """
+    label = option_labels(option_names)
+    path = check_input_file(path, name=name)
+    where = file_label(path, name)
+    byteorder = check_byteorder(byteorder, label("byteorder"))
+    max_pixels = check_max_pixels(max_pixels, label("max_pixels"))
+    ext = check_extension(path, IMAGE_EXTENSIONS, "read image", name)
+    image = format_of(ext).read_image(path, byteorder, max_pixels, where, label)
+    return normalise_image(image, where)
+
+
+def read_single_channel(path: Path, byteorder, max_pixels, name: str, option_names) -> np.ndarray:
+    """Stored samples of a single-channel PNG/PGM depth image."""
+    stored = read_image(path, byteorder=byteorder, max_pixels=max_pixels, name=name,
+                        option_names=option_names)
+    if stored.ndim != 2:
+        raise ValueError(
+            f"{file_label(path, name)} has shape {stored.shape}; a depth image must be single-channel "
+            "(8- or 16-bit grey)."
+        )
+    return stored
+
+
+def read_grey_depth(path: Path, key, byteorder, max_pixels, name: str, option_names) -> tuple[np.ndarray, str]:
+    """The depth reader of grey images (PNG, PGM): the stored samples and their source."""
+    return read_single_channel(path, byteorder, max_pixels, name, option_names), file_label(path, name)
+
+
+def read_depth_array(path, *, key: str | None = None, max_pixels: int | None = MAX_PIXELS,
+                     name: str = "path", option_names: Mapping[str, str] | None = None) -> np.ndarray:
+    """Read a depth map stored with NumPy (``.npy`` or ``.npz``).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.npy`` file holding one (H, W) array, or ``.npz`` archive.
+    key : str, optional
+        Array name inside an ``.npz``.  If omitted, the archive's only array
+        is used, or else the one called ``'depth'``.
+    max_pixels : int or None, optional
+        Largest accepted ``H * W``, checked from the array header before the
+        data are read; default :data:`MAX_PIXELS`, None for no limit.
+    name : str, optional
+        Label of ``path`` in error messages.
+    option_names : mapping, optional
+        Labels of the keywords in messages, e.g. ``{"key": "--depth-key"}``.
+
+    Returns
+    -------
+    depth : (H, W) ndarray of float64
+        Stored values (no unit conversion: :func:`read_depth` requires a
+        ``scale`` for integer arrays), with NaN where they are 0, inf or NaN.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If ``path`` is not a regular file, the file cannot be loaded
+        (pickled objects are refused), ``key`` is missing or ambiguous, or
+        the array is not a non-negative 2-D real array within ``max_pixels``.
+    """
+    label = option_labels(option_names)
+    path = check_input_file(path, name=name)
+    check_extension(path, NUMPY_EXTENSIONS, "read depth array", name)
+    max_pixels = check_max_pixels(max_pixels, label("max_pixels"))
+    stored, source = load_array(path, key, max_pixels, file_label(path, name), label)
+    return as_depth(stored, source)
 
 
 #: Every supported format.  The order is the order of the extensions in messages and help texts.

@@ -1,17 +1,14 @@
 """Images: PNG, JPEG, BMP and TIFF through Pillow, imageio and tifffile, Netpbm through :mod:`.netpbm`.
 
-What lives here: :func:`read_image` (grey or colour samples as stored, 8 or
-16 bit), the image readers of the formats of :mod:`.formats` (Pillow,
-Netpbm, TIFF), the TIFF reader that keeps 16-bit and float32 samples, the
-depth readers of grey images and TIFFs (:func:`read_grey_depth`,
-:func:`read_tiff_depth`) and the PNG and TIFF writers (:func:`png_writer`,
-:func:`tiff_writer`).  Every size is checked against the pixel limit from the
-header before decoding.
+What lives here: the image readers of the formats of :mod:`.formats`
+(Pillow, Netpbm, TIFF; each returns the grey or colour samples as stored, 8
+or 16 bit), the TIFF reader that keeps 16-bit and float32 samples, the depth
+reader of TIFFs (:func:`read_tiff_depth`) and the PNG and TIFF writers
+(:func:`png_writer`, :func:`tiff_writer`).  Every size is checked against the
+pixel limit from the header before decoding.  :func:`sparsedepth.io.read_image`,
+which picks the reader by the table, lives in :mod:`.formats`.
 
-Imports NumPy, Pillow, imageio, tifffile, :mod:`sparsedepth._validation` and
-:mod:`.files` / :mod:`.netpbm` only (:func:`read_image` looks its format up
-in :mod:`.formats` when called, since that table refers to this module's
-readers).
+Imports NumPy, Pillow, imageio, tifffile and :mod:`.files` / :mod:`.netpbm` only.
 """
 
 from __future__ import annotations
@@ -19,26 +16,24 @@ from __future__ import annotations
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Iterator, Mapping
+from typing import Callable, Iterator
 
 import imageio.v3 as iio
 import numpy as np
 import tifffile
 from PIL import Image
 
-from .._validation import check_input_file
-from .files import (MAX_PIXELS, as_value_error, check_extension, check_max_pixels, check_pixels, decode_error,
-                    file_label, option_labels, suffix)
-from .netpbm import check_byteorder, read_netpbm
+from .files import as_value_error, check_pixels, decode_error, file_label, option_labels, suffix
+from .netpbm import read_netpbm
 
-__all__ = ["png_writer", "read_grey_depth", "read_image", "read_netpbm_image", "read_pillow_image",
-           "read_single_channel", "read_tiff", "read_tiff_depth", "read_tiff_image", "tiff_writer",
+__all__ = ["png_writer", "read_netpbm_image", "read_pillow_image",
+           "read_tiff", "read_tiff_depth", "read_tiff_image", "tiff_writer",
            "write_png_file", "write_tiff_file"]
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
-def _normalise_image(image: np.ndarray, where: str) -> np.ndarray:
+def normalise_image(image: np.ndarray, where: str) -> np.ndarray:
     """Decoded samples as contiguous (H, W) or (H, W, 3) uint8/uint16: 1-bit to 0/255, grey+alpha and RGBA lose alpha."""
     if image.dtype == bool:  # 1-bit images: black 0, white 255
         image = image.astype(np.uint8) * np.uint8(255)
@@ -149,93 +144,6 @@ def read_tiff_image(path: Path, byteorder, max_pixels: int | None, where: str,
     with _tiff_of_one_image(path, where):  # Pillow decodes the first page whatever follows it
         pass
     return _read_pillow(path, max_pixels, where, label("max_pixels"))
-
-
-def read_image(path, *, byteorder: str | None = None, max_pixels: int | None = MAX_PIXELS,
-               name: str = "path", option_names: Mapping[str, str] | None = None) -> np.ndarray:
-    """Read a grey or colour image as stored (8 or 16 bit).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        Image file: PNG, JPEG, PPM/PGM/PNM (ASCII or binary), BMP or TIFF.
-    byteorder : {None, 'big', 'little'}, optional
-        Byte order of 16-bit binary Netpbm rasters.  The Netpbm standard is
-        ``'big'``; some datasets (e.g. the NYU Depth V2 raw ``.pgm`` Kinect
-        frames) store little-endian samples despite the header.  ``None``
-        (default) reads big-endian but refuses a raster that looks
-        byte-swapped (see Notes).  Ignored for other formats.
-    max_pixels : int or None, optional
-        Largest accepted ``height * width``, checked from the file header
-        before decoding (default :data:`MAX_PIXELS`); None for no limit.
-        Pillow's own limit ``PIL.Image.MAX_IMAGE_PIXELS`` (twice it, in fact)
-        also applies to the formats Pillow decodes.
-    name : str, optional
-        Label of ``path`` in error messages (e.g. the command-line flag).
-    option_names : mapping, optional
-        Labels of the keywords in messages, e.g. ``{"byteorder": "--byteorder"}``.
-
-    Returns
-    -------
-    image : (H, W) or (H, W, 3) ndarray of uint8 or uint16
-        The decoded samples, unscaled.  An alpha channel is dropped; 1-bit
-        images become uint8 0 (black) and 255 (white).
-
-    Raises
-    ------
-    FileNotFoundError
-        If ``path`` does not exist.
-    ValueError
-        If ``path`` is not a regular file, the extension is not supported,
-        the declared size exceeds ``max_pixels``, the file cannot be decoded,
-        or it decodes to something other than a 1/8/16-bit grey or RGB image.
-    TypeError
-        If ``path`` is not a str or os.PathLike.
-
-    Notes
-    -----
-    Byte-swap check (``byteorder=None``, 16-bit binary Netpbm of at least
-    2x2 pixels): with :math:`V(x)` the mean absolute difference between
-    vertical plus horizontal neighbours, the file is refused when
-    :math:`4\\,V(\\mathrm{swap}(x)) < V(x)`.  Depth and photographs vary
-    slowly, so swapping their bytes moves the noisy low byte into the high
-    one and multiplies :math:`V` many times over.
-
-    Examples
-    --------
-    >>> import numpy as np, imageio.v3 as iio, tempfile, os
-    >>> fname = os.path.join(tempfile.mkdtemp(), "grey.png")
-    >>> iio.imwrite(fname, np.array([[0, 1000]], dtype=np.uint16))
-    >>> read_image(fname)
-    array([[   0, 1000]], dtype=uint16)
-    """
-    label = option_labels(option_names)
-    path = check_input_file(path, name=name)
-    where = file_label(path, name)
-    byteorder = check_byteorder(byteorder, label("byteorder"))
-    max_pixels = check_max_pixels(max_pixels, label("max_pixels"))
-    from .formats import IMAGE_EXTENSIONS, format_of  # the table refers to the readers of this module
-
-    ext = check_extension(path, IMAGE_EXTENSIONS, "read image", name)
-    image = format_of(ext).read_image(path, byteorder, max_pixels, where, label)
-    return _normalise_image(image, where)
-
-
-def read_single_channel(path: Path, byteorder, max_pixels, name: str, option_names) -> np.ndarray:
-    """Stored samples of a single-channel PNG/PGM depth image."""
-    stored = read_image(path, byteorder=byteorder, max_pixels=max_pixels, name=name,
-                        option_names=option_names)
-    if stored.ndim != 2:
-        raise ValueError(
-            f"{file_label(path, name)} has shape {stored.shape}; a depth image must be single-channel "
-            "(8- or 16-bit grey)."
-        )
-    return stored
-
-
-def read_grey_depth(path: Path, key, byteorder, max_pixels, name: str, option_names) -> tuple[np.ndarray, str]:
-    """The depth reader of grey images (PNG, PGM): the stored samples and their source."""
-    return read_single_channel(path, byteorder, max_pixels, name, option_names), file_label(path, name)
 
 
 def read_tiff_depth(path: Path, key, byteorder, max_pixels, name: str, option_names) -> tuple[np.ndarray, str]:
