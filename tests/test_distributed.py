@@ -246,7 +246,7 @@ def test_a_worker_killed_mid_frame_costs_a_retry_not_a_frame(tmp_path, monkeypat
     """Real `dask scheduler` and two `dask worker` processes; one is SIGKILLed while it runs a frame."""
     from sparsedepth.batch.distributed import run_batch_on_cluster
 
-    folder = _write_frames(tmp_path / "frames", 6, shape=(48, 64))
+    folder = _write_frames(tmp_path / "frames", 6)
     out = tmp_path / "out"
     out.mkdir()
     scheduler_file = tmp_path / "scheduler.json"
@@ -287,21 +287,23 @@ def test_a_worker_killed_mid_frame_costs_a_retry_not_a_frame(tmp_path, monkeypat
                 if killed:
                     return
                 names = client.run_on_scheduler(worker_names)  # scheduler_info() may be a cached copy
-                while True:
-                    busy = [(addr, keys) for addr, keys in client.processing().items() if keys]
-                    if busy:
-                        break
+                deadline = time.monotonic() + 2
+                while not (busy := [addr for addr, keys in client.processing().items() if keys]):
+                    if time.monotonic() > deadline:  # the frames in flight ended before this call: try at the next
+                        return
                     time.sleep(0.05)
-                addr = busy[0][0]
-                time.sleep(0.2)  # well inside the frame (its solve takes seconds)
+                addr = busy[0]
+                time.sleep(0.1)  # inside the frame (its solve takes about 0.4 s)
                 keys = client.processing([addr])[addr]
+                if not keys:
+                    return
                 workers[names[addr]].send_signal(signal.SIGKILL)
                 killed.update(name=names[addr], keys=list(keys), done=done)
                 while len(client.run_on_scheduler(worker_names)) > 1:  # the scheduler notices the lost worker
                     time.sleep(0.05)
                 killed["suspicious"] = client.run_on_scheduler(suspicious, keys=killed["keys"])
 
-            options = BatchOptions(keep_fraction=0.1, solver="adam", tol=1e-30, max_iter=150, out_dir=str(out))
+            options = BatchOptions(keep_fraction=0.1, solver="adam", tol=1e-30, max_iter=60, out_dir=str(out))
             monkeypatch.chdir(tmp_path.parent)  # relative paths here do not exist in the workers' folder (tmp_path)
             relative = Path(tmp_path.name)
             options = dataclasses.replace(options, out_dir=str(relative / "out"))
@@ -309,7 +311,7 @@ def test_a_worker_killed_mid_frame_costs_a_retry_not_a_frame(tmp_path, monkeypat
                                            client=client, progress=kill_a_busy_worker)
         finally:
             client.close()
-        assert killed and killed["done"] == 1
+        assert killed, "no worker was busy when a frame ended"
         # a task the dead worker was running was rescheduled: the scheduler counts it as run on a dead worker
         assert 1 in killed["suspicious"].values() and set(killed["suspicious"].values()) <= {0, 1}
         assert workers[killed["name"]].wait(timeout=30) == -signal.SIGKILL
@@ -322,9 +324,9 @@ def test_a_worker_killed_mid_frame_costs_a_retry_not_a_frame(tmp_path, monkeypat
         assert sorted(p.name for p in out.iterdir()) == sorted(f"{r['name']}.npy" for r in rows)  # no temporaries
         # every frame, the one of the killed worker included, has the output of a full local run
         for r in rows:
-            image, depth = make_scene((48, 64), seed=int(r["position"]))
+            image, depth = make_scene((40, 60), seed=int(r["position"]))
             expected = evaluate_frame(image, depth, keep_fraction=0.1, seed=np.random.default_rng([0, int(r["position"])]),
-                                      solver="adam", tol=1e-30, max_iter=150)
+                                      solver="adam", tol=1e-30, max_iter=60)
             np.testing.assert_allclose(np.load(r["output"]), expected.depth, rtol=0, atol=1e-6)  # metres
     finally:
         _stop(processes)
