@@ -155,7 +155,7 @@ def test_false_convergence_example_is_no_longer_reported_converged():
     obj, coarse, _ = build_objective(image, sparse, mask, weights=FALSE_W)
     ref, _ = solve(obj, coarse.ravel(), solver="admm", tol=1e-10, max_iter=20000, options={"polish": False})
     F_ref = obj.value(ref.z)
-    lb, _ = solve(obj, coarse.ravel(), solver="lbfgsb")
+    lb, _ = solve(obj, coarse.ravel(), solver="lbfgsb", tol=1e-8)
     assert abs(obj.value(lb.z) - F_ref) <= 1e-4 * F_ref  # the two references agree (lbfgsb: smoothed problem)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -212,23 +212,22 @@ def _problems(draw):
 @settings(derandomize=True, database=None, deadline=None, max_examples=12,
           suppress_health_check=[HealthCheck.too_slow])
 @given(problem=_problems())
-def test_converged_admm_is_within_its_gap_of_the_reference(problem):
-    _check_within_gap_of_lbfgsb(problem, "admm", None)
-
-
-def _check_within_gap_of_lbfgsb(problem, solver, options):
-    """The solver's gap bounds F − F_ref (F* <= F_ref, L-BFGS-B's tight run); converged means gap <= 1e-6 F."""
+def test_converged_admm_and_irls_at_gap_tol_1e6_are_within_their_gap_of_lbfgsb(problem):
+    """Each solver's gap bounds F − F_ref (F* <= F_ref, one tight L-BFGS-B run per problem); converged means
+    gap <= 1e-6 F.  ADMM with its defaults, IRLS with gap_tol 1e-6."""
     image, sparse, mask, weights = problem
     obj, coarse, _ = build_objective(image, sparse, mask, weights=weights)
-    ref, _ = solve(obj, coarse.ravel(), solver="lbfgsb", tol=1e-15, max_iter=20000)
+    # 100 correction pairs: the ill-conditioned draws (delta = 0) reach the tolerance in a fraction of the steps
+    ref, _ = solve(obj, coarse.ravel(), solver="lbfgsb", tol=1e-15, max_iter=20000, options={"maxcor": 100})
     F_ref = obj.value(ref.z)
-    out, _ = solve(obj, coarse.ravel(), solver=solver, options=options)
-    F = obj.value(out.z)
     rounding = 1e-10 * F_ref
-    assert out.gap >= F - F_ref - rounding  # gap >= F − F_ref >= ... (F* <= F_ref)
-    if out.converged:
-        assert out.gap <= 1e-6 * F * (1 + 1e-12)
-        assert F - out.gap <= F_ref + rounding
+    for solver, options in (("admm", None), ("irls", {"gap_tol": 1e-6})):
+        out, _ = solve(obj, coarse.ravel(), solver=solver, options=options)
+        F = obj.value(out.z)
+        assert out.gap >= F - F_ref - rounding, solver  # gap >= F − F_ref >= ... (F* <= F_ref)
+        if out.converged:
+            assert out.gap <= 1e-6 * F * (1 + 1e-12), solver
+            assert F - out.gap <= F_ref + rounding, solver
 
 
 def test_gap_is_nan_where_the_quadratic_part_is_singular():
@@ -270,13 +269,6 @@ def test_irls_finish_none_is_newton_steps_only(l1_problem):
     if handed.converged and "finished by" not in handed.message:
         np.testing.assert_array_equal(handed.z, newton.z)
     assert newton.gap >= obj.value(newton.z) - F_ref - 1e-12 * F_ref
-
-
-@settings(derandomize=True, database=None, deadline=None, max_examples=6,
-          suppress_health_check=[HealthCheck.too_slow])
-@given(problem=_problems())
-def test_irls_at_gap_tol_1e6_is_within_its_gap_of_lbfgsb(problem):
-    _check_within_gap_of_lbfgsb(problem, "irls", {"gap_tol": 1e-6})
 
 
 def test_certificate_of_a_general_sparse_operator_with_gradient_steps():
