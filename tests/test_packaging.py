@@ -1,6 +1,7 @@
 """Packaging: the console script, --version from one place, every imported package declared in pyproject.toml."""
 
 import ast
+import functools
 import importlib.metadata
 import re
 import shutil
@@ -30,6 +31,7 @@ def _requirement_name(requirement: str) -> str:
     return re.sub(r"[-_.]+", "-", name).lower()
 
 
+@functools.cache
 def _imports():
     """{top-level module: [(file, line, inside a function)]} of every absolute import in the package."""
     found = {}
@@ -52,9 +54,15 @@ def _imports():
     return found
 
 
+@functools.cache
+def _packages_distributions():
+    """importlib.metadata.packages_distributions(), read once (it scans every installed distribution)."""
+    return importlib.metadata.packages_distributions()
+
+
 def _distributions(module: str) -> set[str]:
     """Distributions that provide ``module`` where it is installed; its own name otherwise."""
-    names = importlib.metadata.packages_distributions().get(module) or [module]
+    names = _packages_distributions().get(module) or [module]
     return {re.sub(r"[-_.]+", "-", n).lower() for n in names}
 
 
