@@ -166,7 +166,7 @@ def silent_servers():
 
 
 def test_cli_a_server_that_does_not_speak_dask_ends_after_the_timeout_with_exit_2(silent_servers, tmp_path):
-    cases = [(["--scheduler", server.address, "--scheduler-timeout", "1"], {}) for server in silent_servers]
+    cases = [(["--scheduler", server.address, "--scheduler-timeout", "0.5"], {}) for server in silent_servers]
     start = time.monotonic()
     codes, err = _run_cli(cases, tmp_path)
     assert time.monotonic() - start < 60  # a hang guard only
