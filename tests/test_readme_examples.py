@@ -3,8 +3,9 @@
 Every ```bash block line that calls ``python -m sparsedepth.complete`` or ``sparsedepth`` with files is run with
 ``main(argv)`` in a folder holding the files it names: ``rgb.png`` (the KITTI image), ``sparse.png`` (its LiDAR
 depth, KITTI scale) and ``mono.npy`` (a dense prior in the file scale of ``sparse.png``); or, for the example of a
-dense NYU map, ``rgb.png`` and ``depth.png`` (millimetres) of the shared NYU labeled frame.  The frames keep their
-size (``--camera kitti`` requires KITTI's 1242x375).  Examples
+dense NYU map, ``rgb.png`` and ``depth.png`` (millimetres) of the shared NYU labeled frame.  An example with
+``--camera`` runs on the full frame (``--camera kitti`` requires KITTI's 1242x375); the others on every second row and
+column of it (the same scene and about the same share of observed pixels, a quarter of the pixels).  Examples
 naming a file that is not there (the NYU ``.mat``, a scheduler file) are skipped with the reason; without
 matplotlib, ``--figure PATH`` is left out of an example (the rest of it still runs).
 """
@@ -62,13 +63,12 @@ def _shared(source):
     return paths
 
 
-@pytest.fixture(scope="module")
-def kitti_files(tmp_path_factory):
-    """rgb.png, sparse.png and mono.npy, written once from the shared KITTI frame."""
+def _kitti_files(tmp_path_factory, step):
+    """rgb.png, sparse.png and mono.npy from the shared KITTI frame, every ``step``-th row and column."""
     rgb, depth = _shared(KITTI)
-    out = tmp_path_factory.mktemp("kitti")
-    iio.imwrite(out / "rgb.png", sd.read_image(rgb))
-    metres = sd.read_depth(depth, scale="kitti")
+    out = tmp_path_factory.mktemp(f"kitti_step{step}")
+    iio.imwrite(out / "rgb.png", sd.read_image(rgb)[::step, ::step])
+    metres = sd.read_depth(depth, scale="kitti")[::step, ::step]
     sd.write_depth(out / "sparse.png", metres, scale="kitti")
     rows, cols = ndimage.distance_transform_edt(~np.isfinite(metres), return_distances=False, return_indices=True)
     np.save(out / "mono.npy", metres[rows, cols] * 256.0)  # dense, in the file scale of sparse.png
@@ -76,18 +76,43 @@ def kitti_files(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def nyu_files(tmp_path_factory):
-    """rgb.png and depth.png (dense, millimetres), written once from the shared NYU labeled frame."""
+def kitti_files(tmp_path_factory):
+    """The full KITTI frame's files, written once."""
+    return _kitti_files(tmp_path_factory, 1)
+
+
+@pytest.fixture(scope="module")
+def kitti_half_files(tmp_path_factory):
+    """The KITTI frame's files at every second row and column, written once."""
+    return _kitti_files(tmp_path_factory, 2)
+
+
+def _nyu_files(tmp_path_factory, step):
+    """rgb.png and depth.png (dense, millimetres) from the shared NYU labeled frame, every ``step``-th row and
+    column."""
     rgb, depth = _shared(NYU)
-    out = tmp_path_factory.mktemp("nyu")
-    iio.imwrite(out / "rgb.png", sd.read_image(rgb))
-    sd.write_depth(out / "depth.png", sd.read_depth(depth, scale="mm"), scale="mm")
+    out = tmp_path_factory.mktemp(f"nyu_step{step}")
+    iio.imwrite(out / "rgb.png", sd.read_image(rgb)[::step, ::step])
+    sd.write_depth(out / "depth.png", sd.read_depth(depth, scale="mm")[::step, ::step], scale="mm")
     return out
+
+
+@pytest.fixture(scope="module")
+def nyu_files(tmp_path_factory):
+    """The full NYU frame's files, written once."""
+    return _nyu_files(tmp_path_factory, 1)
+
+
+@pytest.fixture(scope="module")
+def nyu_half_files(tmp_path_factory):
+    """The NYU frame's files at every second row and column, written once."""
+    return _nyu_files(tmp_path_factory, 2)
 
 
 @pytest.mark.parametrize("argv", EXAMPLES, ids=[" ".join(a)[:60] for a in EXAMPLES])
 def test_readme_example_runs(argv, tmp_path, monkeypatch, capsys, request):
-    provided = request.getfixturevalue("nyu_files" if "depth.png" in argv else "kitti_files")
+    dataset = "nyu" if "depth.png" in argv else "kitti"
+    provided = request.getfixturevalue(f"{dataset}_files" if "--camera" in argv else f"{dataset}_half_files")
     for path in provided.iterdir():
         (tmp_path / path.name).symlink_to(path)
     for flag in ("--nyu-mat", "--scheduler-file", "--calib", "--batch"):
