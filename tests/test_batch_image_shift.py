@@ -18,7 +18,7 @@ OFFSET = (0, 2)  # the image files are this far from the depth: (0, -2) register
 pytestmark = pytest.mark.filterwarnings("ignore::sparsedepth.ClampWarning")
 
 
-def _scene(seed, shape=(64, 80), regions=14):
+def _scene(seed, shape=(48, 60), regions=14):
     """Voronoi regions, a depth and a colour per region; the image moved by OFFSET (uint8)."""
     rng = np.random.default_rng(seed)
     centres = rng.uniform((0, 0), shape, size=(regions, 2))
