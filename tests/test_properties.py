@@ -79,7 +79,7 @@ def _lambda_min(image, sparse, mask, w):
 def _nonnegative(solver, problem, w):
     image, sparse, mask = problem
     # lbfgsb and adam are capped: the bound must hold at any iterate they return, converged or not
-    max_iter = 300 if solver in SLOW else None
+    max_iter = 100 if solver in SLOW else None
     res = sd.complete_depth(image, sparse, mask, weights=w, solver=solver, max_iter=max_iter)
     assert res.depth.shape == mask.shape
     assert np.all(np.isfinite(res.depth))
