@@ -27,8 +27,7 @@ class MemoryLimits:
     ----------
     stencil_form_pixels : int, default 2**22
         Frames of at least this many pixels solve γ = 0 with ``A`` as a symmetric stencil
-        (:func:`sparsedepth.solvers.quadratic.system_form`) instead of a CSR matrix, and the solve's hierarchy is
-        not kept for the certificate.
+        (:func:`sparsedepth.solvers.quadratic.system_form`) instead of a CSR matrix.
     reduced_matrix_pixels : int, default 2**21
         Below this many pixels ADMM's active-set polish merges the previous reduced matrix (a smaller matrix than
         ``A``) and ADMM keeps its certificate's hierarchy between checks; from it on it works lean

@@ -225,6 +225,7 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
         if np.isnan(solver_gap) and certified:
             solver_gap = certify(objective, out.z, solver, options)
         gap = solver_gap
+    objective.preconditioner = None  # the hierarchy a solve left for the certificate: not held past it
     proven = curvature_lower_bound(objective) > 0
     converged, message = out.converged, out.message
     own = converged
@@ -298,7 +299,7 @@ def certify(objective, z, solver, options, *, bounds=None, cheap=False):
     (:meth:`Certificate.cheap_gap`) is returned when it already meets
     ``gap_tol``, else the solve with ``A`` runs to
     :data:`QUADRATIC_CERTIFICATE_RTOL`, preconditioned by the hierarchy the
-    solve left (:attr:`Objective.preconditioner`).  With ``cheap`` that
+    solve left (:attr:`Objective.preconditioner`, dropped by :func:`solve_scaled` after the certificate).  With ``cheap`` that
     one-product bound is returned as it is (``inf`` with L1 terms).  NaN for
     an objective with robust terms: the certificate covers quadratic and L1
     terms only (and a robust objective may be non-convex).

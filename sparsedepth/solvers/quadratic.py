@@ -182,9 +182,9 @@ def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner, depth_
     rule = None if depth_tol is None else RemainingChange(b.size, depth_tol)
     z, n, converged, rel = pcg(A, b, x0=x0, M=M, rtol=tol, maxiter=max_iter, callback=cb, callback_residual=True,
                                stop=rule)
-    if preconditioner in ("grid", "amg") and system_form(objective) == "csr":
-        objective.preconditioner = M  # for the certificate's solve with A
-    del M  # on frames in stencil form the hierarchy goes before the objective is evaluated: peak memory
+    if preconditioner in ("grid", "amg"):
+        objective.preconditioner = M  # for the certificate's solve with A (solvers.core.solve_scaled drops it)
+    del M
     if values and recorder.history and recorder.history[-1].iteration == n and n > 0:
         recorder.set_last_value(quick_value(objective, z))  # with the true residual, not the recurrence's
     residual = f"relative residual {rel:.2e} {'<=' if converged else '>'} tol {tol:.1e}"
