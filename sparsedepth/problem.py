@@ -24,7 +24,7 @@ from .objective.objective import (DEFAULT_L1_SMOOTHING, AbsTerm, Objective, Quad
                                   build_objective, sample_fill)
 from .objective.weights import Weights, check_weights, observed_fraction, resolve_weights
 from .result import ClampWarning, CompletionResult, RangeOutlierWarning
-from .solvers import SOLVERS, check_solver_arguments, depth_unit, solve_scaled
+from .solvers import SOLVERS, check_solver_arguments, depth_unit, scaled_objective, solve_scaled
 from .solvers.quadratic import DEFAULT_DEPTH_RTOL
 
 __all__ = ["CompletionProblem", "choose_solver", "range_outliers", "depth_jump_factor", "CLAMP_WARNING_SHARE",
@@ -90,9 +90,12 @@ class CompletionProblem:
 
     Notes
     -----
-    Depth, ``γ``, ``edge_scale`` and ``l1_smoothing`` are divided by the
-    scale ``s``; the quadratic weights are unchanged, so the objective is
-    ``F / s²`` and every solver sees data of order 1 whatever the unit.  A
+    The objective is built in depth units and put in the unit ``s`` by
+    :func:`~sparsedepth.solvers.scaled_objective`, the one place a depth unit
+    is applied to an objective: depth targets, L1 and robust weights, robust
+    scales and ``l1_smoothing`` are divided by ``s``, the quadratic weights
+    are unchanged, so the objective is ``F / s²`` and every solver sees data
+    of order 1 whatever the unit.  A
     power of two makes the division exact: completing ``2ᵏ · depth`` gives
     exactly ``2ᵏ`` times the result.  Results are in the user's units.
     """
@@ -118,15 +121,15 @@ class CompletionProblem:
                                                                      for b in bounds)
         self._has_bounds = bounds is not None
         del values
-        depth /= self.scale
-        scaled = weights.replace(gamma=weights.gamma / self.scale, edge_scale=weights.edge_scale / self.scale)
         if _reuse is None:
-            self.objective, fill, _ = build_objective(image, depth, observed, weights=scaled,
-                                                      l1_smoothing=l1_smoothing / self.scale,
-                                                      pair_factor=_pair_factor)
+            objective, fill, _ = build_objective(image, depth, observed, weights=weights, l1_smoothing=l1_smoothing,
+                                                 pair_factor=_pair_factor)
         else:
-            self.objective, fill = _with_new_data(_reuse, depth, observed, scaled, l1_smoothing / self.scale)
-        self.fill = fill
+            objective, fill = _with_new_data(_reuse, depth, observed, weights, l1_smoothing)
+        del depth
+        self.objective = scaled_objective(objective, self.scale)  # the one place a depth unit is applied
+        del objective
+        self.fill = fill / self.scale
 
     # -- variants of the problem ------------------------------------------------
     def with_samples(self, sparse_depth, mask=None) -> "CompletionProblem":
@@ -244,11 +247,11 @@ def solver_settings(weights, solver, tol, max_iter, options):
 
 
 def _with_new_data(problem, depth, observed, weights, l1_smoothing):
-    """``(objective, fill)``: ``problem``'s objective with the data and prior terms of new samples, in their unit.
+    """``(objective, fill)`` in depth units: ``problem``'s objective with the data and prior terms of new samples.
 
-    The terms that depend on the image alone are ``problem``'s own objects; the edge term is rebuilt when the
-    depth unit changed (its weight and scale are in depth units).  The fill is the one :func:`build_objective`
-    computes for these samples.
+    The quadratic terms that depend on the image alone are ``problem``'s own objects (they hold no depth); the
+    edge term keeps its operator and row weights with the weight (and robust scale) of ``weights``, in depth
+    units.  The fill is the one :func:`build_objective` computes for these samples.
     """
     fill = sample_fill(problem.image, depth, observed, weights)
     terms = []
