@@ -127,9 +127,10 @@ class CompletionProblem:
         else:
             objective, fill = _with_new_data(_reuse, depth, observed, weights, l1_smoothing)
         del depth
-        self.objective = scaled_objective(objective, self.scale)  # the one place a depth unit is applied
+        # the one place a depth unit is applied; in place: the data and prior targets are depth's and fill's memory
+        self.objective = scaled_objective(objective, self.scale, overwrite=True)
         del objective
-        self.fill = fill / self.scale
+        self.fill = fill  # the prior term's target, now in the solve's unit
 
     # -- variants of the problem ------------------------------------------------
     def with_samples(self, sparse_depth, mask=None) -> "CompletionProblem":

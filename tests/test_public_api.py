@@ -48,3 +48,22 @@ def test_memory_limits_are_one_settings_object_changed_in_a_block():
             pass
     with pytest.raises(ValueError, match="must be an int >= 0"):
         MemoryLimits(gather_pixels=-1)
+
+
+def test_scaling_in_place_divides_each_target_once_even_when_two_terms_share_it():
+    import numpy as np
+    import pytest
+
+    from sparsedepth.objective import Objective, QuadraticTerm
+    from sparsedepth.solvers import scaled_objective
+
+    shared = np.full(6, 4.0)
+    objective = Objective((2, 3), [QuadraticTerm("data", 1.0, None, None, shared),
+                                   QuadraticTerm("prior", 0.5, None, None, shared[:])])
+    scaled = scaled_objective(objective, 2.0, overwrite=True)
+    np.testing.assert_array_equal(scaled.term("data").target, 2.0)
+    np.testing.assert_array_equal(scaled.term("prior").target, 2.0)
+    reference = Objective((2, 3), [QuadraticTerm("data", 1.0, None, None, np.full(6, 4.0)),
+                                   QuadraticTerm("prior", 0.5, None, None, np.full(6, 4.0))])
+    z = np.arange(6.0)
+    assert scaled.value(z / 2.0) * 4.0 == pytest.approx(reference.value(z), rel=1e-15)

@@ -101,21 +101,35 @@ def depth_unit(values) -> float:
 #: The former name of :func:`depth_unit`, kept for code that imports it (``--depth-scale`` is the file's unit).
 depth_scale = depth_unit
 
-def scaled_objective(objective, scale):
+def scaled_objective(objective, scale, *, overwrite=False):
     """The objective in depth units of ``scale``: ``F_s(z / s) = F(z) / s²``.
 
     Every quadratic term's target is divided by ``s`` (its weight is
     unchanged), every L1 weight and the smoothing ``ε`` are divided by ``s``,
     and so are every robust term's weight and scale (``φ_σ(s t) = s φ_{σ/s}(t)``).
-    Returns ``objective`` itself for ``s = 1``.
+    Returns ``objective`` itself for ``s = 1``.  With ``overwrite`` the
+    targets (float64 arrays) are divided in place, without a copy: for a
+    caller that built ``objective`` and gives it up (a frame's targets are
+    two arrays of its size).
     """
     s = float(scale)
     if s == 1.0:
         return objective
+    targets = [t.target for t in objective.terms if isinstance(t, QuadraticTerm) and t.target is not None]
+    # in place only when every target is a writeable float64 array of its own (no two share memory)
+    overwrite = overwrite and all(isinstance(a, np.ndarray) and a.dtype == np.float64 and a.flags.writeable
+                                  for a in targets) and not any(
+        np.shares_memory(a, b) for i, a in enumerate(targets) for b in targets[i + 1:])
     terms = []
     for t in objective.terms:
         if isinstance(t, QuadraticTerm):
-            target = None if t.target is None else np.asarray(t.target, dtype=np.float64) / s
+            if t.target is None:
+                target = None
+            elif overwrite:
+                target = t.target
+                target /= s
+            else:
+                target = np.asarray(t.target, dtype=np.float64) / s
             terms.append(QuadraticTerm(t.name, t.weight, t.operator, t.row_weights, target))
         elif isinstance(t, AbsTerm):
             terms.append(AbsTerm(t.name, t.weight / s, t.operator, t.row_weights))
