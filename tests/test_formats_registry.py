@@ -50,7 +50,7 @@ def test_every_list_of_extensions_is_the_table_s():
     depths = _extensions(lambda f: f.read_depth is not None)
     outs = _extensions(lambda f: f.out)
     assert set(formats.IMAGE_EXTENSIONS) == images
-    assert set(formats.DEPTH_EXTENSIONS) == set(io_depth._READ_EXTENSIONS) == depths
+    assert set(formats.DEPTH_EXTENSIONS) == depths
     assert set(formats.MASK_EXTENSIONS) == images | _extensions(lambda f: f.read_mask is not None)
     assert set(formats.WRITE_EXTENSIONS) == _extensions(lambda f: f.write is not None)
     # a batch discovers every depth format and every image format

@@ -23,8 +23,7 @@ from .._validation import check_input_file
 from ..io import KINECT_NYU, KinectDisparity, read_calib, read_depth, read_image, read_mask
 from ..io import depth_to_points, depth_writer, ply_writer, resolve_scale
 from ..io.writing import uncertainty_writer
-from ..io.depth import _READ_EXTENSIONS, _read_stored  # the stored values read_depth starts from
-from ..io.files import check_extension
+from ..io.depth import read_stored
 from ..priors import as_prior
 from ..registration import shift_image
 from ..sampling import valid_depth_mask
@@ -144,10 +143,9 @@ def _read_prior(args, calib, shape) -> np.ndarray:
     """
     path = check_input_file(args.prior, name="--prior")
     _check_units(path, "--prior", args)
-    ext = check_extension(path, _READ_EXTENSIONS, "read depth", "--prior")
     # io's readers turn 0 into NaN and refuse negatives (depth readings); the prior needs the stored values
-    stored, source = _read_stored(path, ext, args.depth_key, args.byteorder, args.max_pixels, "--prior",
-                                  READER_FLAGS)
+    stored, source = read_stored(path, key=args.depth_key, byteorder=args.byteorder, max_pixels=args.max_pixels,
+                                 name="--prior", option_names=READER_FLAGS)
     if np.issubdtype(stored.dtype, np.integer) and args.depth_scale is None and not isinstance(calib, KinectDisparity):
         raise UsageError(f"{source} holds integers ({stored.dtype}): give --depth-scale, the divisor of --depth's "
                           "stored values, which --prior shares")

@@ -41,7 +41,8 @@ from .formats import (DEPTH_EXTENSIONS, KEYED_EXTENSIONS, MASK_EXTENSIONS, exten
 from .netpbm import check_byteorder
 from .stored import as_depth, is_real_dtype
 
-__all__ = ["DEPTH_IMAGE_EXTENSIONS", "DEPTH_SCALES", "read_depth", "read_depth_png", "read_mask", "resolve_scale"]
+__all__ = ["DEPTH_IMAGE_EXTENSIONS", "DEPTH_SCALES", "read_depth", "read_depth_png", "read_mask", "read_stored",
+           "resolve_scale"]
 
 #: Named divisors for integer depth images: ``depth = stored_value / scale``.
 DEPTH_SCALES: Mapping[str, float] = MappingProxyType(
@@ -59,7 +60,6 @@ DEPTH_SCALES: Mapping[str, float] = MappingProxyType(
 #: What :func:`read_depth_png` reads: the formats whose depth is a grey image (PNG, PGM).
 DEPTH_IMAGE_EXTENSIONS = extensions_of(lambda f: f.read_depth is read_grey_depth)
 #: What :func:`read_depth` reads (:data:`sparsedepth.io.formats.DEPTH_EXTENSIONS`).
-_READ_EXTENSIONS = DEPTH_EXTENSIONS
 #: Formats whose arrays have names, chosen with ``key``.
 _KEYED_EXTENSIONS = KEYED_EXTENSIONS
 #: Stored values that sensors use for "no measurement" (warned about when frequent).
@@ -254,7 +254,7 @@ def read_depth(path, *, scale=None, calib=None, key: str | None = None, byteorde
     """
     label = option_labels(option_names)
     path = check_input_file(path, name=name)
-    ext = check_extension(path, _READ_EXTENSIONS, "read depth", name)
+    ext = check_extension(path, DEPTH_EXTENSIONS, "read depth", name)
     if key is not None and ext not in _KEYED_EXTENSIONS:
         raise ValueError(f"{label('key')} only applies to .npz and HDF5 files, not '{ext}'.")
     divisor = None if scale is None else resolve_scale(scale, label("scale"))
@@ -299,6 +299,19 @@ def _resolve_calib(calib, label: Callable[[str], str], option_names):
         f"{label('calib')} must be a StereoCalibration, a KinectDisparity or a path to calib.txt, "
         f"got {type(calib).__name__}."
     )
+
+
+def read_stored(path, *, key=None, byteorder=None, max_pixels=MAX_PIXELS, name: str = "path",
+                option_names=None) -> tuple[np.ndarray, str]:
+    """The stored 2-D samples of a depth file as they are (no scale, no missing values), and their source.
+
+    Read by the reader :mod:`.formats` lists for the extension: what :func:`read_depth` starts from, for values
+    that are all values (a dense prior, whose 0 and negative values are relative depth).  ``ValueError`` for an
+    unsupported extension or a non-numeric array.
+    """
+    path = check_input_file(path, name=name)
+    ext = check_extension(path, DEPTH_EXTENSIONS, "read depth", name)
+    return _read_stored(path, ext, key, byteorder, max_pixels, name, option_names)
 
 
 def _read_stored(path: Path, ext: str, key, byteorder, max_pixels, name: str,
