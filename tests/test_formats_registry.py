@@ -9,7 +9,6 @@ from sparsedepth.batch import BatchOptions, find_frame_pairs, find_frames
 from sparsedepth.batch import frames as batch_frames
 from sparsedepth.cli import checks as cli_checks
 from sparsedepth.cli.parser import build_parser
-from sparsedepth.io import depth as io_depth
 from sparsedepth.io import formats
 from sparsedepth.io.formats import FORMATS
 from sparsedepth.io.writing import write_uncertainty
