@@ -113,6 +113,12 @@ class Certificate:
         self._precondition = preconditioner
         self._K_norm_sq = None
 
+    @property
+    def preconditioner(self):
+        """The preconditioner of ``A`` this certificate keeps for its next call (None before the first solve with
+        ``A``, and with ``low_memory``): to hand to another certificate of the same objective."""
+        return self._precondition
+
     def _preconditioner(self, A):
         """The preconditioner of ``A``: kept for the next call, or (``low_memory``) a new one each time."""
         if self._precondition is not None:

@@ -228,16 +228,19 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
     certified = certify_result and not robust
     z_returned = out.z if bounds is None else np.clip(out.z, bounds[0], bounds[1])
     moved = int(np.count_nonzero(z_returned != out.z))
+    # F at the returned point and at the solver's point, each evaluated once for every test and message below
+    F_returned = quick_value(objective, z_returned) if certified else float("nan")
+    F_solver = quick_value(objective, out.z) if certified and moved else F_returned
     solver_gap = out.gap
     if moved and certified:
-        gap = certify(objective, z_returned, solver, options, bounds=bounds)
+        gap = certify(objective, z_returned, solver, options, bounds=bounds, value=F_returned)
         if np.isnan(solver_gap):
             # the solver's own point is certified in full only where it tells why the returned depth failed
-            failed = not gap <= gap_threshold(objective, quick_value(objective, z_returned), options.gap_tol)
-            solver_gap = certify(objective, out.z, solver, options, cheap=not failed)
+            failed = not gap <= gap_threshold(objective, F_returned, options.gap_tol)
+            solver_gap = certify(objective, out.z, solver, options, cheap=not failed, value=F_solver)
     else:
         if np.isnan(solver_gap) and certified:
-            solver_gap = certify(objective, out.z, solver, options)
+            solver_gap = certify(objective, out.z, solver, options, value=F_solver)
         gap = solver_gap
     objective.preconditioner = None  # the hierarchy a solve left for the certificate: not held past it
     proven = curvature_lower_bound(objective) > 0
@@ -252,8 +255,8 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
     elif np.isnan(gap):
         message += "; duality gap not available (the solve with the quadratic part's matrix failed)"
     else:
-        converged, message = _gap_verdict(objective, out, z_returned, gap, solver_gap, moved, bounds, scale,
-                                          options.gap_tol, proven)
+        converged, message = _gap_verdict(objective, out, (F_returned, F_solver), gap, solver_gap, moved, bounds,
+                                          scale, options.gap_tol, proven)
     if own and solver != "direct" and (out.iterations <= 1 or np.array_equal(out.z, np.maximum(x0, 0.0))):
         kkt = start_kkt_residual(objective, np.maximum(out.z, 0.0), entry.smoothed)
         if not kkt <= START_KKT_RTOL:
@@ -266,23 +269,26 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
                          solver_gap * s2, proven), recorder.elapsed())
 
 
-def _gap_verdict(objective, out, z_returned, gap, solver_gap, moved, bounds, scale, gap_tol, proven):
-    """``(converged, message)``: the solver's rule and the gap test of the returned point, said in the message."""
-    F = quick_value(objective, z_returned)
+def _gap_verdict(objective, out, values, gap, solver_gap, moved, bounds, scale, gap_tol, proven):
+    """``(converged, message)``: the solver's rule and the gap test of the returned point, said in the message.
+
+    ``values`` are ``F`` at the returned point and at the solver's point.
+    """
+    F, F_solver = values
     threshold = gap_threshold(objective, F, gap_tol)
     message = out.message
     if moved:
         low, high = (float(np.min(b)) * scale if np.ndim(b) else float(b) * scale for b in bounds)
         message += (f"; clipping to [{low:g}, {high:g}] moved {moved} pixel(s): duality gap of the returned depth "
                     f"{relative(gap, F):.1e} (relative, over that range), of the solver's point "
-                    f"{relative(solver_gap, quick_value(objective, out.z)):.1e}")
+                    f"{relative(solver_gap, F_solver):.1e}")
     else:
         message += f"; duality gap {relative(gap, F):.1e} (relative)"
     if not proven:
         message += " (an estimate, not a proven bound: no positive curvature bound, delta = 0)"
     if not gap <= threshold:
         cause = ""
-        if moved and solver_gap <= gap_threshold(objective, quick_value(objective, out.z), gap_tol):
+        if moved and solver_gap <= gap_threshold(objective, F_solver, gap_tol):
             cause = " (the clipping, not the solver: clip_to_observed=False returns the solver's point)"
         return False, message + f"; NOT converged: > gap_tol {gap_tol:.1e}{cause}"
     return out.converged, message + (f" <= gap_tol {gap_tol:.1e}" if out.converged else "")
@@ -294,7 +300,7 @@ def _gap_verdict(objective, out, z_returned, gap, solver_gap, moved, bounds, sca
 QUADRATIC_CERTIFICATE_RTOL = 1e-2
 
 
-def certify(objective, z, solver, options, *, bounds=None, cheap=False):
+def certify(objective, z, solver, options, *, bounds=None, cheap=False, value=None):
     """The duality gap (:mod:`sparsedepth.solvers.certificate`) of a solver's output ``z``, in solver units.
 
     Without ``bounds``: a bound on ``F(z) − F*`` with ``F*`` the minimum of
@@ -314,7 +320,8 @@ def certify(objective, z, solver, options, *, bounds=None, cheap=False):
     ``gap_tol``, else the solve with ``A`` runs to
     :data:`QUADRATIC_CERTIFICATE_RTOL`, preconditioned by the hierarchy the
     solve left (:attr:`Objective.preconditioner`, dropped by :func:`solve_scaled` after the certificate).  With ``cheap`` that
-    one-product bound is returned as it is (``inf`` with L1 terms).  NaN for
+    one-product bound is returned as it is (``inf`` with L1 terms).  ``value``
+    is ``F(z)`` when the caller has it (the scale of ``gap_tol``).  NaN for
     an objective with robust terms: the certificate covers quadratic and L1
     terms only (and a robust objective may be non-convex).
     """
@@ -326,22 +333,20 @@ def certify(objective, z, solver, options, *, bounds=None, cheap=False):
     nonnegative = not entry.quadratic and not (solver == "admm" and not objective.has_l1)
     quadratic = not objective.has_l1
     rtol = QUADRATIC_CERTIFICATE_RTOL if quadratic and curvature_lower_bound(objective) > 0 else 1e-10
-    threshold = gap_threshold(objective, quick_value(objective, z), options.gap_tol)
+    threshold = gap_threshold(objective, quick_value(objective, z) if value is None else value, options.gap_tol)
     problem_low = 0.0 if nonnegative else -np.inf
-    certificates = []
+    boxes = []  # the solver's problem (when the box lies inside it), then the box itself
     if bounds is None or np.all(np.asarray(bounds[0]) >= problem_low):
-        certificates.append(Certificate(objective, nonnegative=nonnegative, rtol=rtol))
+        boxes.append((problem_low, np.inf))
     if bounds is not None:
-        low = np.maximum(bounds[0], problem_low)
-        certificates.append(Certificate(objective, bounds=(low, bounds[1]), rtol=rtol))
+        boxes.append((np.maximum(bounds[0], problem_low), bounds[1]))
     gap, shared = float("nan"), None
-    for certificate in certificates:
-        if shared is not None:
-            certificate._precondition = shared  # one hierarchy of A for both
+    for box in boxes:
+        certificate = Certificate(objective, bounds=box, rtol=rtol, preconditioner=shared)  # one hierarchy of A
         bound = certificate.cheap_gap(z)
-        value = bound if cheap or bound <= threshold else certificate.gap(z, eps=eps)
-        gap = value if np.isnan(gap) else min(gap, value)
-        shared = certificate._precondition
+        bound = bound if cheap or bound <= threshold else certificate.gap(z, eps=eps)
+        gap = bound if np.isnan(gap) else min(gap, bound)
+        shared = certificate.preconditioner
         if gap <= threshold:
             break
     return gap
