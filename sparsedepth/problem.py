@@ -27,8 +27,8 @@ from .result import ClampWarning, CompletionResult, RangeOutlierWarning
 from .solvers import SOLVERS, check_solver_arguments, depth_unit, scaled_objective, solve_scaled
 from .solvers.quadratic import DEFAULT_DEPTH_RTOL
 
-__all__ = ["CompletionProblem", "choose_solver", "range_outliers", "depth_jump_factor", "CLAMP_WARNING_SHARE",
-           "OUTLIER_FACTOR"]
+__all__ = ["CompletionProblem", "choose_solver", "observed_range", "range_outliers", "depth_jump_factor",
+           "CLAMP_WARNING_SHARE", "OUTLIER_FACTOR"]
 
 #: The share of the pixels the range clamp must move for a :class:`~sparsedepth.ClampWarning`: fewer moved pixels
 #: are the ordinary overshoot of the smoothness terms near steep depth changes, counted in ``result.clamped`` only.
@@ -115,7 +115,7 @@ class CompletionProblem:
         self.observed = observed
         self.shape = depth.shape
         values = depth[observed]
-        self.depth_range = _depth_range(values, self.clip_to_observed)
+        self.depth_range = observed_range(values, self.clip_to_observed)
         self.scale = depth_unit(values)
         self.bounds = self.depth_range if bounds is None else tuple(b if np.ndim(b) == 0 else np.ravel(b)
                                                                      for b in bounds)
@@ -178,13 +178,15 @@ class CompletionProblem:
                             bounds=_in_units(self.bounds, self.scale) if clip else None)
 
     def solve(self, *, solver="auto", tol=None, max_iter=None, callback=None, options=None, x0=None,
-              certify=True) -> CompletionResult:
+              certify=True, evaluate=True) -> CompletionResult:
         """Solve and clamp: the :class:`~sparsedepth.result.CompletionResult` of :func:`sparsedepth.complete_depth`.
 
         With ``weights.depth_jump > 0`` (and an image-weighted smoothness term) it solves twice: the second
         problem's pair weights are relaxed where the first solution jumps (:func:`depth_jump_factor`) and its solve
         starts from the first solution; iterations and runtime are those of both solves, the history that of the
-        second.  ``certify=False`` computes no duality gap (NaN; ``converged`` is the solver's rule).
+        second.  ``certify=False`` computes no duality gap (NaN; ``converged`` is the solver's rule);
+        ``evaluate=False`` no term values (``objective`` NaN, ``terms`` empty): for an intermediate completion
+        whose depth alone is used (the uncertainty's halves).
         """
         name = solver_settings(self.weights, solver, tol, max_iter, options)[0]
         weights = self.weights
@@ -201,10 +203,11 @@ class CompletionProblem:
             iterations += out.iterations
         z, clamped = clamp(out.z, self.bounds, self.clip_to_observed or self._has_bounds)
         scale2 = problem.scale * problem.scale
-        terms = {key: value * scale2 for key, value in problem.objective.term_values(z / problem.scale).items()}
+        terms = ({key: value * scale2 for key, value in problem.objective.term_values(z / problem.scale).items()}
+                 if evaluate else {})
         return CompletionResult(
             depth=z.reshape(self.shape),
-            objective=float(sum(terms.values())),
+            objective=float(sum(terms.values())) if evaluate else float("nan"),
             terms=terms,
             iterations=iterations,
             converged=out.converged,
@@ -284,7 +287,7 @@ def checked_start(x0, shape):
     return start
 
 
-def _depth_range(observed_values, clip_to_observed):
+def observed_range(observed_values, clip_to_observed):
     """The clamp range in depth units: ``[min, max]`` of the observations, or ``[0, inf)`` without the clamp.
 
     With the clamp, observations that widen it as outliers would are warned about (:func:`range_outliers`).

@@ -15,7 +15,7 @@ from .._validation import as_depth_and_mask, as_float_image, check_same_shape
 from ..grid.resample import block_mean, block_sample_mean, coarse_shape, edge_aware_sweeps, upsample_bilinear
 from ..objective.objective import DEFAULT_L1_SMOOTHING
 from ..objective.weights import DEFAULT_WEIGHTS, Weights, observed_fraction, resolve_weights
-from ..problem import CompletionProblem, checked_start, choose_solver, clamp, _depth_range
+from ..problem import CompletionProblem, checked_start, choose_solver, clamp, observed_range
 from ..result import CompletionResult
 from ..solvers.common import Recorder
 from ..solvers.quadratic import single_precision_cg
@@ -129,7 +129,7 @@ def complete_fast(image, sparse_depth, mask=None, *, weights=None, l1_smoothing=
     z = upsample_bilinear(coarse_z.reshape(problem.shape).astype(np.float32), shape, factor)
     z = edge_aware_sweeps(z, fine_image, depth, observed, smoothness=FAST_SMOOTHNESS, kappa=FAST_KAPPA,
                           sweeps=FAST_SWEEPS).astype(np.float64)
-    depth_range = _depth_range(depth[observed], clip_to_observed)
+    depth_range = observed_range(depth[observed], clip_to_observed)
     z, clamped = clamp(z, depth_range, clip_to_observed, rounding=FLOAT32_ROUNDING)
     return CompletionResult(
         depth=z,

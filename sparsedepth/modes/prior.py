@@ -10,7 +10,7 @@ import numpy as np
 from .._validation import as_depth_and_mask
 from ..objective.objective import DEFAULT_L1_SMOOTHING
 from ..priors import align_prior
-from ..problem import CompletionProblem, _depth_range, warn_clamped
+from ..problem import CompletionProblem, observed_range, warn_clamped
 from ..result import ClampWarning, CompletionResult
 
 __all__ = ["complete_with_prior"]
@@ -51,7 +51,7 @@ def complete_with_prior(image, sparse_depth, mask, prior, *, alignment="scale_sh
     aligned, _, _ = align_prior(prior, depth, observed, alignment=alignment)
     values = depth[observed]
     residual = values - aligned[observed]
-    depth_range = _depth_range(values, clip_to_observed)
+    depth_range = observed_range(values, clip_to_observed)
     # c keeps every residual sample >= the median depth: positive, and of the depth's magnitude for the scaling
     shift = float(np.median(values)) + max(0.0, -float(residual.min()))
     shifted = np.zeros_like(depth)

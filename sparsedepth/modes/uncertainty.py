@@ -61,8 +61,8 @@ def complete_with_uncertainty(problem: CompletionProblem, *, solver="auto", tol=
     half_a, half_b = split_samples(observed, seed=0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ClampWarning)  # the halves' clamps are not the user's result
-        halves = [_half_depth(problem.with_samples(np.where(half, depth, np.nan), half), result.depth, settings)
-                  for half in (half_a, half_b)]
+        halves = [problem.with_samples(np.where(half, depth, np.nan), half).solve(
+            x0=result.depth, certify=False, evaluate=False, **settings).depth for half in (half_a, half_b)]
     checked_options = solver_settings(problem.weights, solver, tol, max_iter, options)[3]
     sigma, calibration = estimate_uncertainty(result.depth, *halves, depth, half_a, half_b, image=problem.image,
                                               precision=problem.precision(checked_options))
@@ -74,11 +74,3 @@ def complete_with_uncertainty(problem: CompletionProblem, *, solver="auto", tol=
     return dataclasses.replace(result, depth=dense, uncertainty=sigma, uncertainty_calibration=calibration,
                                removed=removed)
 
-
-def _half_depth(half, start, settings):
-    """The clamped depth of one half's problem, solved from ``start``: no certificate and no term values."""
-    weights = half.weights
-    if weights.depth_jump > 0 and (weights.beta_image > 0 or weights.beta_second_image > 0):
-        return half.solve(x0=start, certify=False, **settings).depth
-    out, _ = half.run(start=half.start(start), certify=False, **settings)
-    return np.clip(out.z, *half.bounds).reshape(half.shape)
