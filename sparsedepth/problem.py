@@ -7,8 +7,8 @@ it and returns a :class:`~sparsedepth.result.CompletionResult`; :meth:`Completio
 problem with another set of observations (the uncertainty's half-sample solves), sharing every term that depends on
 the image alone.  :func:`sparsedepth.complete_depth` is: build the problem, solve it.
 
-May import :mod:`sparsedepth.objective`, :mod:`sparsedepth.solvers`, :mod:`sparsedepth.result` and
-:mod:`sparsedepth._validation`.
+May import :mod:`sparsedepth.objective`, :mod:`sparsedepth.solvers`, :mod:`sparsedepth.result`,
+:mod:`sparsedepth.profiling` and :mod:`sparsedepth._validation`.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from ._validation import as_depth_and_mask, check_nonnegative_real
 from .objective.objective import (DEFAULT_L1_SMOOTHING, AbsTerm, Objective, QuadraticTerm, RobustTerm,
                                   build_objective, sample_fill)
 from .objective.weights import Weights, check_weights, observed_fraction, resolve_weights
+from .profiling import phase
 from .result import ClampWarning, CompletionResult, RangeOutlierWarning
 from .solvers import SOLVERS, check_solver_arguments, depth_unit, scaled_objective, solve_scaled
 from .solvers.quadratic import DEFAULT_DEPTH_RTOL
@@ -128,8 +129,12 @@ class CompletionProblem:
             objective, fill = _with_new_data(_reuse, depth, observed, weights, l1_smoothing)
         del depth
         # the one place a depth unit is applied; in place: the data and prior targets are depth's and fill's memory
-        self.objective = scaled_objective(objective, self.scale, overwrite=True)
+        with phase("image terms"):
+            self.objective = scaled_objective(objective, self.scale, overwrite=True)
         del objective
+        if _reuse is not None:  # the quadratic part differs from _reuse's by the data term's diagonal alone
+            self.objective.share_matrix(_reuse.objective, weights.alpha * (observed.reshape(-1).astype(np.float64)
+                                                                          - _reuse.observed.reshape(-1)))
         self.fill = fill  # the prior term's target, now in the solve's unit
 
     # -- variants of the problem ------------------------------------------------
@@ -138,7 +143,9 @@ class CompletionProblem:
 
         Every term that depends on the image alone is shared with this problem (the same objects); the data term,
         the nearest-sample fill of the prior term and the depth unit are those of the new samples.  The weights
-        are used as they are (not re-evaluated at the new observed fraction).
+        are used as they are (not re-evaluated at the new observed fraction).  When this problem's normal equations
+        are assembled (after a γ = 0 solve), the new problem's matrix is a copy of them with the data term's
+        diagonal changed (:meth:`~sparsedepth.objective.objective.Objective.share_matrix`), not assembled again.
         """
         return CompletionProblem(self.image, sparse_depth, mask, weights=self.weights, l1_smoothing=self.l1_smoothing,
                                  clip_to_observed=self.clip_to_observed, _reuse=self)
@@ -201,10 +208,14 @@ class CompletionProblem:
             out, second = problem.run(start=np.maximum(out.z, 0.0) / problem.scale, certify=certify, **settings)
             runtime += second
             iterations += out.iterations
-        z, clamped = clamp(out.z, self.bounds, self.clip_to_observed or self._has_bounds)
+        with phase("clamp"):
+            z, clamped = clamp(out.z, self.bounds, self.clip_to_observed or self._has_bounds)
         scale2 = problem.scale * problem.scale
-        terms = ({key: value * scale2 for key, value in problem.objective.term_values(z / problem.scale).items()}
-                 if evaluate else {})
+        terms = {}
+        if evaluate:
+            with phase("term values"):
+                terms = {key: value * scale2
+                         for key, value in problem.objective.term_values(z / problem.scale).items()}
         return CompletionResult(
             depth=z.reshape(self.shape),
             objective=float(sum(terms.values())) if evaluate else float("nan"),

@@ -14,6 +14,7 @@ import numpy as np
 
 from .._validation import check_nonnegative_real
 from ..problem import CompletionProblem, solver_settings
+from ..profiling import phase
 from ..result import ClampWarning, CompletionResult
 from ..uncertainty import MIN_OBSERVED, check_uncertainty_shape, estimate_uncertainty, split_samples
 
@@ -64,8 +65,9 @@ def complete_with_uncertainty(problem: CompletionProblem, *, solver="auto", tol=
         halves = [problem.with_samples(np.where(half, depth, np.nan), half).solve(
             x0=result.depth, certify=False, evaluate=False, **settings).depth for half in (half_a, half_b)]
     checked_options = solver_settings(problem.weights, solver, tol, max_iter, options)[3]
-    sigma, calibration = estimate_uncertainty(result.depth, *halves, depth, half_a, half_b, image=problem.image,
-                                              precision=problem.precision(checked_options))
+    with phase("uncertainty map"):
+        sigma, calibration = estimate_uncertainty(result.depth, *halves, depth, half_a, half_b, image=problem.image,
+                                                  precision=problem.precision(checked_options))
     dense, removed = result.depth, 0
     if max_uncertainty is not None:
         too_uncertain = sigma > max_uncertainty

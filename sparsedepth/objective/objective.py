@@ -23,7 +23,7 @@ units, metres by default) is :attr:`Objective.l1_smoothing`, default
 
 The terms and the image edge weights (:mod:`sparsedepth.grid.edges`) are
 re-exported here.  May import :mod:`sparsedepth.grid`, the nearest fill of
-:mod:`sparsedepth.baselines` and :mod:`sparsedepth._validation`.
+:mod:`sparsedepth.baselines`, :mod:`sparsedepth.profiling` and :mod:`sparsedepth._validation`.
 """
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ from ..grid.edges import (PairEdgeWeights, SecondOrderEdgeWeights, edge_weights,
 from ..grid.geodesic import geodesic_fill
 from ..grid.operators import StencilOperator, gradient_stencil, hessian_stencil
 from ..grid.stencil import SymmetricStencil, stencil_to_csr
+from ..profiling import phase
 from .terms import AbsTerm, QuadraticTerm, RobustTerm
 from .weights import observed_fraction, resolve_weights
 
@@ -255,29 +256,59 @@ class Objective:
         if self._normal is not None:
             A, b, c = self._normal
             if form == "csr" and not sp.issparse(A):
-                self._normal = (A.tocsr(), b, c)
+                with phase("assembly"):
+                    self._normal = (A.tocsr(), b, c)
             return self._normal
-        n = self.size
-        offsets, stencil, general = self._stencil_parts(symmetric=form == "stencil")
-        if form == "stencil" and not general:
-            A = SymmetricStencil(offsets, stencil)
-        else:
-            A = stencil_to_csr(offsets, stencil)
-        del stencil
-        for t in general:
-            A = A + t.normal_matrix(n)
-        if general:
-            A = sp.csr_array(A)
-            A.sum_duplicates()
-            A.sort_indices()
-        b = np.zeros(n)
-        for t in self.quadratic_terms:
-            b += t.normal_rhs(n)
-        normal = (A, b, self.constant())
+        with phase("assembly"):
+            n = self.size
+            offsets, stencil, general = self._stencil_parts(symmetric=form == "stencil")
+            if form == "stencil" and not general:
+                A = SymmetricStencil(offsets, stencil)
+            else:
+                A = stencil_to_csr(offsets, stencil)
+            del stencil
+            for t in general:
+                A = A + t.normal_matrix(n)
+            if general:
+                A = sp.csr_array(A)
+                A.sum_duplicates()
+                A.sort_indices()
+            b = np.zeros(n)
+            for t in self.quadratic_terms:
+                b += t.normal_rhs(n)
+            normal = (A, b, self.constant())
         if cache:
             self._normal = normal
             self._last_system = None
         return normal
+
+    def share_matrix(self, other, diagonal=None) -> None:
+        """Take ``other``'s assembled matrix ``A``, plus ``diag(diagonal)``, as this objective's own.
+
+        For an objective whose quadratic part is ``other``'s but for a diagonal term (the data term of another
+        set of samples: ``diagonal = α (M_new − M_other)``); the caller vouches for that.  ``b`` and ``c`` are this
+        objective's own.  Nothing happens when ``other`` has no assembled system or this one has one already.
+
+        Parameters
+        ----------
+        other : Objective
+            An objective of the same shape whose :meth:`normal_equations` were assembled.
+        diagonal : ndarray, (H*W,), optional
+            Added to the diagonal of a copy of ``other``'s ``A`` (``other``'s is left as it is).
+        """
+        if other._normal is None or self._normal is not None:
+            return
+        if other.shape != self.shape:
+            raise ValueError(f"share_matrix needs objectives of one shape; got {other.shape} and {self.shape}")
+        with phase("assembly"):
+            A = other._normal[0]
+            if diagonal is not None:
+                A = _plus_diagonal(A, np.asarray(diagonal, dtype=np.float64).reshape(-1))
+            b = np.zeros(self.size)
+            for t in self.quadratic_terms:
+                b += t.normal_rhs(self.size)
+            self._normal = (A, b, self.constant())
+            self._last_system = None
 
     def constant(self) -> float:
         """The constant ``c`` of :meth:`normal_equations` (the quadratic part at ``z = 0``), without assembling ``A``.
@@ -316,7 +347,8 @@ class Objective:
             If a quadratic term's operator is a general sparse matrix (not a
             :class:`~sparsedepth.grid.operators.StencilOperator`).
         """
-        offsets, stencil, general = self._stencil_parts()
+        with phase("assembly"):
+            offsets, stencil, general = self._stencil_parts()
         if general:
             raise ValueError(f"terms {[t.name for t in general]} have general sparse operators; no stencil form")
         return offsets, stencil
@@ -357,6 +389,21 @@ class Objective:
         if z.size != self.size:
             raise ValueError(f"z has {z.size} values, the objective expects {self.size} (shape {self.shape})")
         return z.reshape(-1)
+
+
+def _plus_diagonal(A, diagonal):
+    """A copy of ``A`` (CSR with every diagonal entry stored, or a SymmetricStencil) plus ``diag(diagonal)``."""
+    if isinstance(A, SymmetricStencil):
+        images = A.data.copy()
+        images[A.upper.index((0, 0))] += diagonal.reshape(A.grid_shape)
+        return SymmetricStencil(A.offsets, images)
+    A = sp.csr_array(A, copy=True)
+    rows = np.repeat(np.arange(A.shape[0], dtype=A.indices.dtype), np.diff(A.indptr))
+    on_diagonal = np.flatnonzero(A.indices == rows)
+    if on_diagonal.size != A.shape[0]:
+        raise ValueError("the matrix does not store every diagonal entry")
+    A.data[on_diagonal] += diagonal
+    return A
 
 
 def build_objective(
@@ -417,6 +464,12 @@ def build_objective(
         If ``weights`` is not a :class:`~sparsedepth.objective.weights.Weights`,
         a :class:`~sparsedepth.objective.weights.DensitySchedule` or ``None``.
     """
+    with phase("image terms"):
+        return _build_objective(image, sparse_depth, mask, weights, l1_smoothing, pair_factor)
+
+
+def _build_objective(image, sparse_depth, mask, weights, l1_smoothing, pair_factor):
+    """:func:`build_objective`'s work."""
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     weights = resolve_weights(weights, observed_fraction(observed))
     img = smoothed_image(image, weights.edge_sigma)
@@ -479,9 +532,10 @@ def sample_fill(image, depth, observed, weights):
 
 def _fill(blurred, depth, observed, weights):
     """:func:`sample_fill` on the image already blurred."""
-    if weights.fill_contrast > 0:
-        return geodesic_fill(blurred, depth, observed, contrast=weights.fill_contrast)
-    return nearest_fill(depth, observed)
+    with phase("prior fill"):
+        if weights.fill_contrast > 0:
+            return geodesic_fill(blurred, depth, observed, contrast=weights.fill_contrast)
+        return nearest_fill(depth, observed)
 
 
 def _edge_term(weights, G, w):

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import is_int, is_real
+from ..profiling import phase
 from ..objective.objective import AbsTerm, Objective, QuadraticTerm, RobustTerm
 from .certificate import Certificate, curvature_lower_bound
 from .common import CallbackStop, Recorder, SolverOutput, gap_threshold, refuse_robust, relative, quick_value
@@ -220,7 +221,8 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
     options = entry.options.from_mapping(options).in_depth_units(scale)
     recorder = Recorder(objective, callback, scale, values=objective_values)
     try:
-        out = entry.solve(objective, x0, tol=tol, max_iter=max_iter, recorder=recorder, options=options)
+        with phase("iterations"):
+            out = entry.solve(objective, x0, tol=tol, max_iter=max_iter, recorder=recorder, options=options)
     except CallbackStop as stop:
         out = SolverOutput(stop.z, stop.iteration, False, f"stopped by callback at iteration {stop.iteration}",
                            tuple(recorder.history))
@@ -228,20 +230,21 @@ def solve_scaled(objective, x0, *, scale, solver, tol, max_iter, callback, optio
     certified = certify_result and not robust
     z_returned = out.z if bounds is None else np.clip(out.z, bounds[0], bounds[1])
     moved = int(np.count_nonzero(z_returned != out.z))
-    # F at the returned point and at the solver's point, each evaluated once for every test and message below
-    F_returned = quick_value(objective, z_returned) if certified else float("nan")
-    F_solver = quick_value(objective, out.z) if certified and moved else F_returned
-    solver_gap = out.gap
-    if moved and certified:
-        gap = certify(objective, z_returned, solver, options, bounds=bounds, value=F_returned)
-        if np.isnan(solver_gap):
-            # the solver's own point is certified in full only where it tells why the returned depth failed
-            failed = not gap <= gap_threshold(objective, F_returned, options.gap_tol)
-            solver_gap = certify(objective, out.z, solver, options, cheap=not failed, value=F_solver)
-    else:
-        if np.isnan(solver_gap) and certified:
-            solver_gap = certify(objective, out.z, solver, options, value=F_solver)
-        gap = solver_gap
+    with phase("certificate"):
+        # F at the returned point and at the solver's point, each evaluated once for every test and message below
+        F_returned = quick_value(objective, z_returned) if certified else float("nan")
+        F_solver = quick_value(objective, out.z) if certified and moved else F_returned
+        solver_gap = out.gap
+        if moved and certified:
+            gap = certify(objective, z_returned, solver, options, bounds=bounds, value=F_returned)
+            if np.isnan(solver_gap):
+                # the solver's own point is certified in full only where it tells why the returned depth failed
+                failed = not gap <= gap_threshold(objective, F_returned, options.gap_tol)
+                solver_gap = certify(objective, out.z, solver, options, cheap=not failed, value=F_solver)
+        else:
+            if np.isnan(solver_gap) and certified:
+                solver_gap = certify(objective, out.z, solver, options, value=F_solver)
+            gap = solver_gap
     objective.preconditioner = None  # the hierarchy a solve left for the certificate: not held past it
     proven = curvature_lower_bound(objective) > 0
     converged, message = out.converged, out.message

@@ -3,7 +3,8 @@
 Each minimises ``F(z) = zᵀAz − 2bᵀz + c`` without bounds, i.e. solves the
 normal equations ``A z = b``.
 
-May import :mod:`sparsedepth.linalg` and the other modules of :mod:`sparsedepth.solvers`.
+May import :mod:`sparsedepth.linalg`, :mod:`sparsedepth.grid`, :mod:`sparsedepth.limits`,
+:mod:`sparsedepth.profiling` and the other modules of :mod:`sparsedepth.solvers`.
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ from ..grid.operators import StencilOperator
 from ..linalg.krylov import dot, pcg, pcg_info
 from ..linalg.multigrid import GridMultigrid
 from ..linalg.preconditioners import make_preconditioner
-from .common import output, quick_value, require_quadratic
 from ..limits import memory_limits
+from ..profiling import phase
+from .common import output, quick_value, require_quadratic
 
 __all__ = ["solve_direct", "solve_cg", "solve_amg", "single_precision_cg", "RemainingChange", "DEFAULT_DEPTH_RTOL",
            "default_hierarchy"]
@@ -169,10 +171,11 @@ def _solve_pcg(objective, x0, *, tol, max_iter, recorder, preconditioner, depth_
     A, b, c = objective.normal_equations(form=system_form(objective))
     values = recorder.values
     recorder(0, x0, value=quick_value(objective, x0) if values else math.nan)
-    if preconditioner == "grid":
-        M = default_hierarchy(A, objective.shape).aspreconditioner()
-    else:
-        M = make_preconditioner(A, preconditioner, shape=objective.shape)
+    with phase("hierarchy"):
+        if preconditioner == "grid":
+            M = default_hierarchy(A, objective.shape).aspreconditioner()
+        else:
+            M = make_preconditioner(A, preconditioner, shape=objective.shape)
     it = [0]
 
     def cb(xk, rk):
