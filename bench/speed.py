@@ -5,7 +5,9 @@ Run from the repository root::
     nice -n 5 python -m bench.speed --out docs/speed.md     # ~10 min on 2 shared cores
     python -m bench.speed --quick                          # a smoke run on two tiny frames
 
-Two sections:
+Sections: where the time of the default, fast and uncertainty completions goes, and the default against a sparse
+direct solve (:mod:`bench.time_breakdown`; ``--skip-breakdown`` leaves them out); then these two, and the fast
+filters beside ours (``--skip-peers`` leaves it out):
 
 * **Stopping rule** (:func:`stopping_rows`): per report frame at full size (5 % observed, seed 0), the default
   ``amg`` solve stopping on its estimated RMS remaining change (``depth_rtol`` =
@@ -22,7 +24,7 @@ Two sections:
   ``bench`` extra); without it those rows are left out and the report says so.
 
 May import :mod:`sparsedepth`, numpy, :mod:`bench.blas`, :mod:`bench.frames`, :mod:`bench.harness` and
-:mod:`bench.fast_peers`.
+:mod:`bench.fast_peers` and :mod:`bench.time_breakdown`.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from sparsedepth.solvers.quadratic import (DEFAULT_DEPTH_RTOL, RemainingChange, 
 
 from . import fast_peers  # noqa: E402
 from . import harness as H  # noqa: E402
+from . import time_breakdown  # noqa: E402
 
 #: Observed fraction and seed of the stopping-rule section.
 FRACTION, SEED = 0.05, 0
@@ -186,13 +189,17 @@ def run(argv=(), figure=None):
     """``(markdown, stopping rows)`` of a run with command-line arguments ``argv``; ``figure``: see
     :func:`bench.fast_peers.run_section`."""
     p = H.parser("Speed of the default solve and the fast filters", default_step=1)
-    p.add_argument("--skip-peers", action="store_true", help="only the stopping-rule section")
+    p.add_argument("--skip-peers", action="store_true", help="without the fast filters' section")
+    p.add_argument("--skip-breakdown", action="store_true",
+                   help="without the time breakdown and the comparison with a direct solve")
     args = p.parse_args(argv)
     started = time.perf_counter()
     frames = H.get_frames(args)
+    parts = ["# Speed", "", "Written by `" + H.command_line("speed", argv) + "`.", ""]
+    if not args.skip_breakdown:
+        parts.append(time_breakdown.run_sections(argv, quick=args.quick))
     stop_text, rows = stopping_section(frames, argv, started)
-    parts = ["# Speed", "", "Written by `" + H.command_line("speed", argv) + "`.", "", stop_text,
-             terms_section(frames, argv, time.perf_counter())]
+    parts += [stop_text, terms_section(frames, argv, time.perf_counter())]
     if not args.skip_peers:
         peer_text, _ = fast_peers.run_section(args, argv, figure)
         parts.append(peer_text)
@@ -203,6 +210,7 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = H.parser("", default_step=1)
     args.add_argument("--skip-peers", action="store_true")
+    args.add_argument("--skip-breakdown", action="store_true")
     return H.script_main(run, args.parse_args(argv), argv)
 
 

@@ -37,6 +37,7 @@ PHASES = (
     "iterations",  # the solver's loop
     "certificate",  # the duality gap of the returned depth
     "term values",  # the value of each term at the returned depth
+    "upsampling and sweeps",  # the fast mode's interpolation to the full grid and its edge-aware sweeps
     "clamp",  # the range clamp of the returned depth
     "uncertainty map",  # the calibration of the half-sample differences into sigma
 )

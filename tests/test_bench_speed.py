@@ -16,6 +16,7 @@ def test_speed_quick_run(tmp_path):
     text, rows = speed.run(["--quick"], figure=tmp_path / "speed.png")
     assert "## Stopping rule of the default solve" in text and "## Fast filters beside ours" in text
     assert "## Iterations by the terms of the objective" in text
+    assert "## Where the time goes" in text and "## The default against a direct solve" in text
     for r in rows:
         assert r["rule_met"] and r["its"][0] <= r["its"][1]
         assert r["true_rms"] <= 3 * r["tol"]  # the stated factor of tests/test_depth_stop.py
@@ -75,3 +76,21 @@ def test_fast_mode_quick_run(capsys):
     if fast_peers.available():
         assert "FGS setting picked on the tuning frames" in text
 
+
+
+def test_time_breakdown_columns_add_up_to_the_phases():
+    time_breakdown = importlib.import_module("bench.time_breakdown")
+    from sparsedepth.profiling import PhaseTimes
+
+    times = PhaseTimes()  # hand-made: 1 s of iterations inside 3 s of assembly, 4 s in all
+    times._enter("assembly", 0.0)
+    times._enter("iterations", 1.0)
+    times._leave(2.0)
+    times._leave(3.0)
+    times.wall = 4.0
+    table = time_breakdown.breakdown_table([dict(mode="default", shape=(2, 3), times=times)])
+    row = table.splitlines()[-1].split("|")[1:-1]
+    header = table.splitlines()[0].split("|")[1:-1]
+    cell = dict(zip((h.strip() for h in header), (c.strip() for c in row)))
+    assert cell["assembly"] == "2.000" and cell["iterations"] == "1.000" and cell["other"] == "1.000"
+    assert cell["not iterations / iterations"] == "3.00" and cell["size"] == "3x2"

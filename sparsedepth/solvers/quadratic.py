@@ -261,8 +261,9 @@ def single_precision_cg(objective, x0, *, tol, max_iter, recorder):
         step = next(steps)
         recorder(step, z, inner=step, value=math.nan)
 
-    result = pcg_info(A, b, x0=x0, M=lambda r: inverse_diagonal * r, rtol=tol, maxiter=max_iter, callback=record,
-                      callback_residual=True)
+    with phase("iterations"):
+        result = pcg_info(A, b, x0=x0, M=lambda r: inverse_diagonal * r, rtol=tol, maxiter=max_iter,
+                          callback=record, callback_residual=True)
     message = (f"relative residual {result.relative_residual:.2e} {'<=' if result.converged else '>'} tol {tol:.1e} "
                f"after {result.iterations} CG iterations")
     return output(result.x, result.iterations, result.converged, message, recorder)
