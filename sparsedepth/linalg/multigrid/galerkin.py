@@ -4,12 +4,16 @@ r"""Coarse operators of the hierarchy: Galerkin products :math:`P^\top A P` comp
 per grid), :func:`galerkin_stencil` its coefficient images (numbers, at every
 set-up and :meth:`~.hierarchy.GridMultigrid.update`), by vectorised
 arithmetic on the four parity classes of fine pixels, never by a general
-sparse matrix product.  May import NumPy only.
+sparse matrix product; for the bilinear prolongation of a symmetric stencil
+held as whole images, :func:`separable_galerkin_stencil` coarsens the rows,
+then the columns, computing half the offsets of each symmetric product.  May import NumPy and :mod:`.stencils`.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from .stencils import mirrored_image
 
 __all__ = ["galerkin_offsets", "galerkin_stencil"]
 
@@ -37,6 +41,12 @@ def galerkin_stencil(offsets, source, interp, shape, coarse_offsets, *, as_list=
     list of ``(hc, wc)`` images, each its own allocation (a caller that
     converts them one by one can free each once converted).
 
+    With separable (bilinear) weights, a source that holds whole images
+    (:meth:`~.stencils.StencilSource.whole_images`) and offsets closed under
+    negation, the product is :func:`separable_galerkin_stencil`'s (the same
+    coefficients up to the order of the sums); otherwise the parity-class sums
+    below.
+
     For a fine pixel :math:`i = (2Y+p_y, 2X+p_x)`, neighbour offset
     :math:`o = (d_y, d_x)` and parents :math:`e, f \in \{0,1\}^2`,
 
@@ -58,6 +68,9 @@ def galerkin_stencil(offsets, source, interp, shape, coarse_offsets, *, as_list=
     """
     h, w = shape
     hc, wc = (h + 1) // 2, (w + 1) // 2
+    image_of = source.whole_images() if interp.separable else None
+    if image_of is not None and _closed_under_negation(offsets) and _closed_under_negation(coarse_offsets):
+        return separable_galerkin_stencil(offsets, image_of, interp.wy, interp.wx, coarse_offsets, as_list=as_list)
     radius = max(max(abs(dy), abs(dx)) for dy, dx in offsets)
     pad = (radius + 1) // 2
     slot = {d: i for i, d in enumerate(coarse_offsets)}
@@ -128,3 +141,149 @@ def _add_class(acc, slot, Ssub, terms, own, padded, pad, separable):
             else:
                 np.multiply(we, ap, out=tmp)
                 view += tmp
+
+
+def _closed_under_negation(offsets):
+    """True when ``-o`` is an offset for every offset ``o`` (the stencil of a symmetric operator)."""
+    present = set(map(tuple, offsets))
+    return all((-dy, -dx) in present for dy, dx in present)
+
+
+def _upper(dy, dx):
+    """True for the centre and the offsets after it in lexicographic order."""
+    return dy > 0 or (dy == 0 and dx >= 0)
+
+
+def _coarsen_rows(offsets, image_of, weights, keep, target_of):
+    r"""One axis of a bilinear Galerkin product: :math:`P_1^\top A P_1` with :math:`P_1` acting on the rows only.
+
+    Parameters
+    ----------
+    offsets : list of tuple of int
+        Offsets ``(d, e)`` of the operator: ``d`` along the rows (the axis coarsened), ``e`` along the other
+        axis (kept as it is).
+    image_of : callable
+        ``image_of(o)``: the ``(n, m)`` coefficient image of offset ``o`` (float64, zero where the neighbour
+        is outside the grid); called at most once per offset, only for offsets that reach a kept target.
+    weights : ndarray, shape (2, n)
+        Linear weights of the rows (:func:`~.interpolation.linear_weights_1d`): fine row ``i`` has the parents
+        ``i // 2`` and ``i // 2 + 1`` with weights ``weights[0, i]`` and ``weights[1, i]``.
+    keep : callable
+        ``keep(D, e)``: whether the coarse offset ``(D, e)`` is wanted.
+    target_of : callable
+        ``target_of(D, e)``: the ``(nc, m)`` array (``nc = (n + 1) // 2``) that the coefficients of ``(D, e)``
+        are added to.
+
+    Notes
+    -----
+    Fine row :math:`2i + p` (class :math:`p`) couples through offset :math:`d` to row :math:`2(i + q) + r`,
+    :math:`q = \lfloor (p + d)/2 \rfloor`, :math:`r = (p + d) \bmod 2`; with own parents :math:`i + e`,
+    :math:`e \le p`, and neighbour parents :math:`i + q + f`, :math:`f \le r`,
+
+    .. math::
+
+        C_{(q + f - e,\, \cdot)}[i + e] \mathrel{+}= w_e(2i + p)\, a_{(d, \cdot)}(2i + p)\, w_f(2(i + q) + r).
+
+    Away from the last two rows of an even-length axis every weight is 1 (a coarse point) or
+    :math:`\tfrac12` (a point between two), so the products are :math:`2^{-(p + r)} a`: one scaled copy of the
+    class's rows per offset and one slice addition per pair of parents.  The rows next to the end of an
+    even-length axis (whose last point has the weights 1 and 0) are added one by one with their weights.
+    Scaling by a power of two is exact, so every product is the one of the general formula; only the order of
+    the sums differs.
+    """
+    n = weights.shape[1]
+    tail = 2 if n % 2 == 0 else 0
+    for d, other in offsets:
+        image = None
+        for p in (0, 1):
+            q, r = divmod(p + d, 2)
+            n_p, n_r = len(range(p, n, 2)), len(range(r, n, 2))
+            lo, hi = max(0, -q), min(n_p, n_r - q)  # class rows whose neighbour is inside the grid
+            targets = [(e, f, q + f - e) for e in range(p + 1) for f in range(r + 1) if keep(q + f - e, other)]
+            if hi <= lo or not targets:
+                continue
+            if image is None:
+                image = image_of((d, other))
+            rows = image[p::2]
+            mid = max(lo, hi - tail)
+            if mid > lo:
+                part = rows[lo:mid]
+                if p + r:
+                    part = part * 0.5 ** (p + r)
+                for e, _, D in targets:
+                    target_of(D, other)[lo + e:mid + e] += part
+            for i in range(mid, hi):
+                for e, f, D in targets:
+                    weight = weights[e, 2 * i + p] * weights[f, 2 * (i + q) + r]
+                    if weight:
+                        target_of(D, other)[i + e] += weight * rows[i]
+
+
+def separable_galerkin_stencil(offsets, image_of, wy, wx, coarse_offsets, *, as_list=False):
+    r"""Coarse stencil of :math:`P^\top A P` for a bilinear :math:`P = P_y \otimes P_x` and a symmetric ``A``.
+
+    Parameters
+    ----------
+    offsets : list of tuple of int
+        Offsets of ``A``'s stencil, closed under negation.
+    image_of : callable
+        ``image_of(o)``: the ``(H, W)`` float64 image of offset ``o`` (zero where the neighbour is outside).
+    wy, wx : ndarray, shapes (2, H) and (2, W)
+        The 1-D linear weights of the rows and of the columns.
+    coarse_offsets : list of tuple of int
+        Offsets of the coarse stencil (:func:`galerkin_offsets`), closed under negation.
+    as_list : bool, default False
+        Return a list of ``(hc, wc)`` images, each its own allocation, instead of one array.
+
+    Returns
+    -------
+    ndarray (len(coarse_offsets), hc, wc) or list of (hc, wc) arrays
+
+    Notes
+    -----
+    :math:`P^\top A P = P_x'^\top (P_y'^\top A P_y') P_x'` with :math:`P_y' = P_y \otimes I`,
+    :math:`P_x' = I \otimes P_x`: the rows are coarsened first (:func:`_coarsen_rows`, giving
+    :math:`B = P_y'^\top A P_y'` on an ``(hc, W)`` grid), then the columns of :math:`B`.  Both products are
+    symmetric when ``A`` is, so each step computes only the offsets :math:`o \ge (0, 0)` (lexicographically)
+    and reads those of :math:`-o` as mirrored images (:func:`mirrored_image`): :math:`a_{-o}(p) = a_o(p - o)`.
+    The coefficients equal those of :func:`galerkin_stencil`'s parity-class sums up to the order of the
+    additions (rounding).
+    """
+    h, w = wy.shape[1], wx.shape[1]
+    hc, wc = (h + 1) // 2, (w + 1) // 2
+    slot = {tuple(o): k for k, o in enumerate(coarse_offsets)}
+    if as_list:
+        out = [np.zeros((hc, wc)) for _ in coarse_offsets]
+    else:
+        out = np.zeros((len(coarse_offsets), hc, wc))
+    # rows: B = P_y'^T A P_y', its offsets (DY, dx) >= (0, 0)
+    rows_coarse = {}
+
+    def row_target(D, dx):
+        if (D, dx) not in rows_coarse:
+            rows_coarse[D, dx] = np.zeros((hc, w))
+        return rows_coarse[D, dx]
+
+    _coarsen_rows(list(offsets), image_of, wy, _upper, row_target)
+
+    # columns: C = P_x'^T B P_x' on the transposed images, offsets (DX, DY) with (DY, DX) >= (0, 0)
+    def column_image(o):
+        dx, dy = o
+        if (dy, dx) in rows_coarse:
+            return rows_coarse[dy, dx].T
+        if (-dy, -dx) in rows_coarse:
+            return mirrored_image(rows_coarse[-dy, -dx], (-dy, -dx)).T
+        return np.zeros((w, hc))
+
+    def column_target(DX, DY):
+        if (DY, DX) not in slot:
+            raise ValueError(f"the Galerkin product reaches the offset {(DY, DX)}, not in the coarse offsets")
+        return out[slot[DY, DX]].T
+
+    column_offsets = sorted({(dx, dy) for dy, dx in rows_coarse} | {(-dx, -dy) for dy, dx in rows_coarse})
+    _coarsen_rows(column_offsets, column_image, wx, lambda DX, DY: _upper(DY, DX), column_target)
+    del rows_coarse
+    for (dy, dx), k in slot.items():
+        if not _upper(dy, dx):
+            mirrored_image(out[slot[-dy, -dx]], (-dy, -dx), out=out[k])
+    return out

@@ -14,7 +14,8 @@ import numpy as np
 from ..._validation import as_grid_operator
 from ...grid.stencil import SymmetricStencil, csr_to_stencil, full_pattern_offsets
 
-__all__ = ["grid_stencil", "extract_stencil", "StencilSource", "CollapsedSource", "fine_stencil_source"]
+__all__ = ["grid_stencil", "extract_stencil", "StencilSource", "CollapsedSource", "fine_stencil_source",
+           "mirrored_image"]
 
 
 def _square_offsets(radius):
@@ -187,6 +188,35 @@ def _stencil_of(A, shape, radius=None):
     return present, S
 
 
+def mirrored_image(image, offset, out=None):
+    r"""The image of the offset :math:`-o` of a symmetric operator from the image of :math:`o`.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W)
+        Coefficients :math:`a_o(p) = A_{p, p+o}`, zero where :math:`p + o` is outside the grid.
+    offset : tuple of int
+        :math:`o = (d_y, d_x)`.
+    out : ndarray, shape (H, W), optional
+        Receives the result (float64 unless given).
+
+    Returns
+    -------
+    ndarray, shape (H, W)
+        :math:`a_{-o}(p) = A_{p, p-o} = A_{p-o, p} = a_o(p - o)` where :math:`p - o` is inside the grid, else 0.
+    """
+    dy, dx = offset
+    h, w = image.shape
+    if out is None:
+        out = np.zeros((h, w))
+    else:
+        out[...] = 0.0
+    ty, tx = slice(max(0, dy), min(h, h + dy)), slice(max(0, dx), min(w, w + dx))
+    if ty.start < ty.stop and tx.start < tx.stop:
+        out[ty, tx] = image[ty.start - dy:ty.stop - dy, tx.start - dx:tx.stop - dx]
+    return out
+
+
 class StencilSource:
     """A level's stencil for the numeric set-up, handed out one parity class at a time.
 
@@ -235,6 +265,29 @@ class StencilSource:
         if self.array is None and self.symmetric is not None and self.csr_offsets == self.offsets:
             return _ClassImages(self.symmetric, py, px)
         return self.parity_class(py, px)
+
+    def whole_images(self):
+        """``image_of(offset)``: the whole ``(H, W)`` float64 image of an offset, or None for a CSR source.
+
+        An array source hands out its images (views when float64); a symmetric one the stored images of the
+        offsets ``>= (0, 0)`` and mirrored copies of the others
+        (:func:`mirrored_image`).  A CSR source (read class by class to
+        keep the memory low) has none: None.
+        """
+        if self.array is not None:
+            slot = {o: k for k, o in enumerate(self.offsets)}
+            return lambda offset: np.asarray(self.array[slot[offset]], dtype=np.float64)
+        if self.symmetric is not None and self.csr_offsets == self.offsets:
+            stored = dict(zip(self.symmetric.upper, self.symmetric.images))
+
+            def image_of(offset):
+                if offset in stored:
+                    return stored[offset].astype(np.float64, copy=False)
+                dy, dx = offset
+                return mirrored_image(stored[-dy, -dx], (-dy, -dx))
+
+            return image_of
+        return None
 
     def read_whole(self):
         """Read a CSR source into one array now (the set-up asks for most classes twice)."""
