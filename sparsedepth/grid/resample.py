@@ -16,7 +16,7 @@ The nested iteration of the ADMM solver (option ``warm_start="coarse"``)
 moves an L1 problem's solution back with :func:`upsample_bilinear` and its
 dual edge field with :func:`upsample_edges`.
 
-May import NumPy, :mod:`sparsedepth._validation`, :mod:`.edges` and :mod:`.rowbands`.
+May import NumPy, :mod:`sparsedepth._validation`, :mod:`sparsedepth.limits`, :mod:`.edges` and :mod:`.rowbands`.
 """
 
 from __future__ import annotations
@@ -38,15 +38,22 @@ def coarse_shape(shape, factor: int) -> tuple[int, int]:
     return -(-int(shape[0]) // factor), -(-int(shape[1]) // factor)
 
 
-def _block_sums(values, factor):
+def _block_sums(values, factor, where=None):
     """Sums over each ``f x f`` block (the partial blocks of the last row and column included), leading axes ``(h, w)``.
 
     Strided adds (faster than a reduction over a middle axis): the rows ``y ≡ o (mod f)`` are added offset by
-    offset, then the columns; an offset with one row or column fewer adds to all blocks but the last.
+    offset, then the columns; an offset with one row or column fewer adds to all blocks but the last.  ``where``
+    (a boolean ``(H, W)`` array): only those values are summed (the others count as 0), masked a row offset at a
+    time.
     """
-    rows = values[0::factor].copy()
-    for offset in range(1, factor):
+    def rows_at(offset):
         part = values[offset::factor]
+        return part if where is None else np.where(where[offset::factor], part, 0.0)
+
+    rows = rows_at(0)
+    rows = rows.copy() if where is None else rows
+    for offset in range(1, factor):
+        part = rows_at(offset)
         rows[:part.shape[0]] += part
     out = rows[:, 0::factor].copy()
     for offset in range(1, factor):
@@ -109,8 +116,9 @@ def block_sample_mean(depth, observed, factor: int):
     """
     observed = np.asarray(observed, dtype=bool)
     factor = check_count(factor, name="factor")
-    counts = _block_sums(observed.astype(np.uint8 if factor < 16 else np.int64), factor)  # exact: <= f² per block
-    sums = _block_sums(np.where(observed, depth, 0.0), factor)
+    # exact: <= f² per block (a bool array is its 0/1 bytes)
+    counts = _block_sums(observed.view(np.uint8) if factor < 16 else observed.astype(np.int64), factor)
+    sums = _block_sums(np.asarray(depth), factor, where=observed)
     coarse_observed = counts > 0
     return np.where(coarse_observed, sums / np.maximum(counts, 1), 0.0), coarse_observed
 
@@ -138,11 +146,12 @@ def _interpolate(coarse, r_taps, c_taps):
     wr = wr.astype(coarse.dtype)[:, None]
     wc = wc.astype(coarse.dtype)
     rows = coarse[r0] * (1 - wr) + coarse[r1] * wr  # (H, w): the coarse rows interpolated
-    # the columns: gathers along the first axis of the transpose are contiguous row copies
-    columns = rows.T
-    out = columns[c0] * (1 - wc)[:, None]
-    out += columns[c1] * wc[:, None]
-    return np.ascontiguousarray(out.T)
+    out = np.take(rows, c0, axis=1)
+    out *= 1 - wc
+    right = np.take(rows, c1, axis=1)
+    right *= wc
+    out += right
+    return out
 
 
 def upsample_bilinear(coarse, shape, factor: int) -> np.ndarray:
@@ -210,7 +219,8 @@ def upsample_edges(coarse, shape, factor: int, axis: int) -> np.ndarray:
 
 
 # the numpydoc docstring (the model in Notes) is most of the length
-def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa: float, sweeps: int) -> np.ndarray:
+def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa: float, sweeps: int,
+                      dtype=np.float32) -> np.ndarray:
     r"""Red-black Gauss-Seidel sweeps on an image-weighted smoothness model, the observations held fixed.
 
     Parameters
@@ -230,10 +240,13 @@ def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa
     sweeps : int
         Red-black sweeps (``>= 0``; 0 returns ``start`` with the observations
         put back).
+    dtype : {numpy.float32, numpy.float64}
+        The type of the returned array; the sweeps compute in float32 either
+        way (float64 holds the float32 values exactly).
 
     Returns
     -------
-    ndarray, shape (H, W), float32
+    ndarray, shape (H, W), ``dtype``
 
     Notes
     -----
@@ -250,51 +263,157 @@ def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa
     convex) but only over distances of about one pixel per sweep: it
     corrects the start locally, near the observations and across image
     edges, where a weight ``w_ij`` near 0 keeps depth from leaking.
-    Computed in float32.
+    Computed in float32, each update adding the terms of the left, right,
+    upper and lower neighbour in that order.
+
+    Each parity is kept as its own contiguous array, the grid read row by
+    row with an odd row length ``P`` (``W``, or ``W + 1`` with a fixed
+    column of zero weights), so that the parity of the flat index ``i = P y
+    + x`` is that of ``y + x``; the neighbours ``i ± 1`` and ``i ± P`` of a
+    pixel are then at constant offsets in the other parity's array.
     """
     smoothness = check_nonnegative_real(smoothness, name="smoothness")
     kappa = check_nonnegative_real(kappa, name="kappa")
     sweeps = check_nonnegative_count(sweeps, name="sweeps")
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise ValueError(f"dtype must be float32 or float64, got {dtype}")
     observed = np.asarray(observed, dtype=bool)
-    prior = np.asarray(start, dtype=np.float32)
-    z = prior.copy()
-    np.copyto(z, np.asarray(depth), where=observed, casting="unsafe")  # the samples in float32
+    start = np.asarray(start)
     if sweeps == 0 or smoothness == 0:
-        return z
-    image = np.asarray(image)
-    H, W = z.shape
-    padded = W + W % 2  # an even width: the last column of an odd-width grid is a fixed pixel without links
-    wx = np.zeros((H, padded), dtype=np.float32)  # wx[y, x]: the pair (x, x + 1)
-    wy = np.zeros((H, padded), dtype=np.float32)  # wy[y, x]: the pair (y, y + 1)
-    across, down = pair_distances(np.asarray(image, dtype=np.float32))
-    wx[:, :W - 1] = _pair_weights(across, kappa, smoothness)
-    wy[:-1, :W] = _pair_weights(down, kappa, smoothness)
-    diagonal = np.ones((H, padded), dtype=np.float32)
-    diagonal[:, 1:] += wx[:, :-1]
-    diagonal += wx
-    diagonal[1:] += wy[:-1]
-    diagonal += wy
-    inverse = np.reciprocal(diagonal, out=diagonal)
-    full = np.zeros((H, padded), dtype=np.float32)
-    full[:, :W] = prior
-    priors = _split_parity(full)
-    full[:, :W] = z
-    fields = _split_parity(full)
-    free = np.zeros((H, padded), dtype=bool)
-    free[:, :W] = ~observed
-    frees = _split_parity(free)
-    inverses = _split_parity(inverse)
-    vertical = _split_parity(wy)
-    # each parity of y + x as an (H, padded / 2) array: a half sweep touches only the pixels it updates; the
-    # horizontal pair weights are read as views: wx[:, 0::2] (pairs (2k, 2k + 1)) and wx[:, 1::2] ((2k + 1, 2k + 2))
-    horizontal = (wx[:, 0::2], wx[:, 1::2])
+        z = start.astype(np.float32)
+        np.copyto(z, np.asarray(depth), where=observed, casting="unsafe")  # the samples in float32
+        return z.astype(dtype, copy=False)
+    layout = _ParityLayout(*start.shape)
+    priors = layout.split(start, np.float32)
+    fields = priors.copy()
+    held = layout.entries(observed)  # the observed pixels' entries in the flat (2 * half) parity storage
+    samples = np.asarray(depth)[observed].astype(np.float32)
+    fields.reshape(-1)[held] = samples
+    across, down = _parity_pair_weights(layout, image, kappa, smoothness)
+    inverses = np.ones_like(priors)  # 1 + the pixel's pair weights (left, right, upper, lower), then its reciprocal
+    for target in (0, 1):
+        _add_pair_weights(inverses[target], across, down, target, layout.offsets(target))
+    np.reciprocal(inverses, out=inverses)
+    chunk = max(1, memory_limits().sweep_band_values)
     for _ in range(int(sweeps)):
         for target in (0, 1):
-            _half_sweep(fields[target], fields[1 - target], priors[target], inverses[target], frees[target],
-                        horizontal, vertical[1 - target], vertical[target], row_offset=target)
-    return _merge_parity(*fields)[:, :W]
+            _half_sweep(fields, target, priors, inverses, across, down, layout.offsets(target), chunk)
+            fields.reshape(-1)[held] = samples  # the observations stay as they are
+    return layout.merge(fields, dtype)
 
 
+def _parity_pair_weights(layout, image, kappa, smoothness):
+    """``(across, down)`` split by parity: ``λ exp(−κ d)`` of each pixel's pair with its right / lower neighbour.
+
+    The pair distances (:func:`~sparsedepth.grid.edges.pair_distances`, in float32) are computed over bands of
+    rows (about ``sweep_band_values`` pair weights each) and written into the parity storage band by band; the
+    pairs beyond the last column and row have weight 0.
+    """
+    image = np.asarray(image)
+    H, W = layout.shape
+    across, down = np.zeros((2, 2, layout.half), dtype=np.float32)
+    band = rows_per_band(W, memory_limits().sweep_band_values, multiple=2)  # even: bands start on even rows
+    for rows in row_bands(0, H, band):
+        y0, y1 = rows.start, rows.stop
+        distance_across, distance_down = pair_distances(np.asarray(image[y0:y1 + 1], dtype=np.float32))
+        layout.put(across, _pair_weights(distance_across[:y1 - y0], kappa, smoothness), first_row=y0)
+        layout.put(down, _pair_weights(distance_down, kappa, smoothness), first_row=y0)
+    return across, down
+
+
+class _ParityLayout:
+    """The pixels of an ``(H, W)`` grid split by the parity of ``y + x``, each parity a contiguous array.
+
+    The grid is padded to an even number of rows ``H'`` and an odd row length ``P`` (``W``, or ``W + 1``) with fixed
+    pixels whose pair weights are 0, and read row by row: flat index ``i = P y + x`` has the parity of ``y + x``.
+    Parity ``p`` holds flat index ``2j + p`` at entry ``j`` (``H' P / 2`` entries).  Rows ``2k`` and ``2k + 1`` of
+    the grid are entries ``k P .. (k + 1) P − 1`` of either parity: of parity 0, first ``x = 0, 2, ..`` of row
+    ``2k`` (``(P + 1) / 2`` of them), then ``x = 1, 3, ..`` of row ``2k + 1``; of parity 1, ``x = 1, 3, ..`` of row
+    ``2k`` (``(P − 1) / 2``), then ``x = 0, 2, ..`` of row ``2k + 1``.
+    """
+
+    def __init__(self, H, W):
+        self.shape = (int(H), int(W))
+        self.row = int(W) + 1 - int(W) % 2
+        self.pairs_of_rows = (int(H) + 1) // 2
+        self.half = self.pairs_of_rows * self.row
+
+    def _views(self, parts, first_row=0):
+        """The four strided pieces of ``parts`` (2, half) from grid row ``first_row`` (even) on, and the grid slices
+        of an array starting at that row that each holds."""
+        even = (self.row + 1) // 2
+        start = first_row // 2
+        first, second = (part.reshape(self.pairs_of_rows, self.row)[start:] for part in parts)
+        return (((first[:, :even]), (slice(0, None, 2), slice(0, None, 2))),
+                ((first[:, even:]), (slice(1, None, 2), slice(1, None, 2))),
+                ((second[:, :even - 1]), (slice(0, None, 2), slice(1, None, 2))),
+                ((second[:, even - 1:]), (slice(1, None, 2), slice(0, None, 2))))
+
+    def put(self, parts, values, first_row=0):
+        """Write the grid array ``values`` into ``parts``, cast to their type.
+
+        ``values`` has shape ``(h, w)``, ``w <= W``: grid rows ``first_row .. first_row + h − 1`` (``first_row``
+        even), columns ``0 .. w − 1``.
+        """
+        for view, (rows, columns) in self._views(parts, first_row):
+            piece = values[rows, columns]
+            np.copyto(view[:piece.shape[0], :piece.shape[1]], piece, casting="unsafe")
+
+    def entries(self, mask):
+        """The indices in the flattened ``(2, half)`` storage of the pixels where the ``(H, W)`` mask is True."""
+        y, x = np.nonzero(mask)
+        flat = y * self.row + x
+        return (flat & 1) * self.half + (flat >> 1)
+
+    def split(self, values, dtype):
+        """``(2, half)`` of ``dtype``: the grid array ``values`` (see :meth:`put`) split by parity, 0 elsewhere."""
+        parts = np.zeros((2, self.half), dtype=dtype)
+        self.put(parts, values)
+        return parts
+
+    def merge(self, parts, dtype):
+        """The ``(H, W)`` array of ``dtype`` whose pixels are in ``parts`` (the inverse of :meth:`split`)."""
+        out = np.empty(self.shape, dtype=dtype)
+        for view, (rows, columns) in self._views(parts):
+            piece = out[rows, columns]
+            piece[...] = view[:piece.shape[0], :piece.shape[1]]
+        return out
+
+    def offsets(self, target):
+        """Offsets ``(left, right, up, down)`` in the other parity of the neighbours of parity ``target``'s entry ``j``.
+
+        Entry ``j`` of parity 0 is flat ``2j``, whose neighbours ``2j − 1``, ``2j + 1``, ``2j ∓ P`` are entries ``j −
+        1``, ``j``, ``j − (P + 1) / 2``, ``j + (P − 1) / 2`` of parity 1; entry ``j`` of parity 1 is flat ``2j + 1``,
+        whose neighbours are entries ``j``, ``j + 1``, ``j − (P − 1) / 2``, ``j + (P + 1) / 2`` of parity 0.
+        """
+        up, down = (self.row + 1) // 2, (self.row - 1) // 2
+        return (-1, 0, -up, down) if target == 0 else (0, 1, -down, up)
+
+
+def _neighbour_terms(across, down, target, offsets):
+    """``(pair weights, their offset, the neighbour's offset)`` of the left, right, upper and lower neighbour.
+
+    A pixel's left and upper pairs are its neighbour's right and lower pairs, read at the neighbour's entry of the
+    other parity; its right and lower pairs are its own.
+    """
+    other = 1 - target
+    left, right, up, below = offsets
+    return ((across[other], left, left), (across[target], 0, right), (down[other], up, up), (down[target], 0, below))
+
+
+def _overlap(j0, j1, offset, half):
+    """``(lo, hi)``: the entries of ``j0:j1`` whose neighbour at ``offset`` is one of the ``half`` entries."""
+    return max(j0, -offset), min(j1, half - offset)
+
+
+def _add_pair_weights(diagonal, across, down, target, offsets):
+    """Add to ``diagonal`` (parity ``target``) each pixel's pair weights in the order left, right, up, down."""
+    half = diagonal.shape[0]
+    for weights, weight_offset, offset in _neighbour_terms(across, down, target, offsets):
+        lo, hi = _overlap(0, half, offset, half)
+        if hi > lo:
+            diagonal[lo:hi] += weights[lo + weight_offset:hi + weight_offset]
 
 
 def _pair_weights(distance, kappa, smoothness):
@@ -305,59 +424,29 @@ def _pair_weights(distance, kappa, smoothness):
     return distance
 
 
-def _split_parity(a):
-    """``(even, odd)``: the entries with ``y + x`` even / odd of an even-width ``a``, row by row, ``(H, W / 2)`` each."""
-    even = np.empty((a.shape[0], a.shape[1] // 2), dtype=a.dtype)
-    odd = np.empty_like(even)
-    even[0::2], even[1::2] = a[0::2, 0::2], a[1::2, 1::2]
-    odd[0::2], odd[1::2] = a[0::2, 1::2], a[1::2, 0::2]
-    return even, odd
+def _half_sweep(fields, target, priors, inverses, across, down, offsets, chunk):
+    """Update parity ``target`` of ``fields`` (in place) from its neighbours in the other parity.
 
-
-def _merge_parity(even, odd):
-    """The inverse of :func:`_split_parity`."""
-    out = np.empty((even.shape[0], 2 * even.shape[1]), dtype=even.dtype)
-    out[0::2, 0::2], out[1::2, 1::2] = even[0::2], even[1::2]
-    out[0::2, 1::2], out[1::2, 0::2] = odd[0::2], odd[1::2]
-    return out
-
-
-def _half_sweep(target, other, prior, inverse, free, horizontal, weight_above, weight_below, *, row_offset):
-    """Update ``target`` (one parity, in place) from its neighbours in ``other`` (the other parity).
-
-    In the rows where the target's pixels sit at even ``x`` (``y + row_offset`` even), entry ``k`` is at ``x =
-    2k``: its left neighbour is ``other[y, k − 1]`` (pair weight ``wx[y, 2k − 1]``) and its right one ``other[y,
-    k]`` (``wx[y, 2k]``); in the other rows it is at ``x = 2k + 1``, with neighbours ``other[y, k]`` (``wx[y,
-    2k]``) and ``other[y, k + 1]`` (``wx[y, 2k + 1]``).  Above and below are ``other[y ∓ 1, k]``, whose pair
-    weights are the vertical weights of the pixel above (``weight_above``, the other parity's) and of the pixel
-    itself (``weight_below``).  Computed over bands of rows (``sweep_band_values`` values each,
-    :class:`~sparsedepth.limits.MemoryLimits`), so that the partial sums stay in cache; each pixel adds its terms in the same order as a whole-array update.
+    ``fields``, ``priors``, ``inverses``, ``across`` and ``down`` are split by parity
+    (:meth:`_ParityLayout.split`); ``across`` and ``down`` hold the pair of each pixel with its right and its lower
+    neighbour.  A pixel's left and upper pairs are thus its neighbour's, read at the neighbour's entry of the other
+    parity; its right and lower pairs are its own.  ``offsets``: :meth:`_ParityLayout.offsets`.  Every entry is
+    updated, the observed ones too (the caller puts them back).  The entries are updated in chunks of ``chunk``
+    (the partial sums stay in cache); each adds its terms in the order left, right, up, down.
     """
-    pairs_even, pairs_odd = horizontal  # wx[:, 2k] and wx[:, 2k + 1]
-    H = target.shape[0]
-    band = rows_per_band(target.shape[1], memory_limits().sweep_band_values, multiple=2)  # even: a band's rows keep their parity
-    work = np.empty((min(band, H),) + target.shape[1:], dtype=target.dtype)
-    term = np.empty_like(work)
-    at_even = slice(row_offset, None, 2)  # rows (of a band starting at an even row) whose target pixels have even x
-    at_odd = slice(1 - row_offset, None, 2)
-    for rows in row_bands(0, H, band):
-        y0, y1 = rows.start, rows.stop
-        update, t = work[:y1 - y0], term[:y1 - y0]
-        np.copyto(update, prior[rows])
-        near, odd_pairs, even_pairs = other[rows], pairs_odd[rows], pairs_even[rows]
-        np.multiply(odd_pairs[at_even, :-1], near[at_even, :-1], out=t[at_even, :-1])
-        update[at_even, 1:] += t[at_even, :-1]
-        np.multiply(even_pairs[at_even], near[at_even], out=t[at_even])
-        update[at_even] += t[at_even]
-        np.multiply(even_pairs[at_odd], near[at_odd], out=t[at_odd])
-        update[at_odd] += t[at_odd]
-        np.multiply(odd_pairs[at_odd, :-1], near[at_odd, 1:], out=t[at_odd, :-1])
-        update[at_odd, :-1] += t[at_odd, :-1]
-        lo = max(y0, 1)  # rows y >= 1: + w_above[y − 1] z[y − 1]
-        np.multiply(weight_above[lo - 1:y1 - 1], other[lo - 1:y1 - 1], out=t[lo - y0:])
-        update[lo - y0:] += t[lo - y0:]
-        hi = min(y1, H - 1)  # rows y <= H − 2: + w_below[y] z[y + 1]
-        np.multiply(weight_below[y0:hi], other[y0 + 1:hi + 1], out=t[:hi - y0])
-        update[:hi - y0] += t[:hi - y0]
-        update *= inverse[rows]
-        np.copyto(target[rows], update, where=free[rows])
+    near, z = fields[1 - target], fields[target]
+    terms = _neighbour_terms(across, down, target, offsets)
+    half = z.shape[0]
+    product = np.empty(min(chunk, half), dtype=z.dtype)
+    for j0 in range(0, half, chunk):
+        j1 = min(half, j0 + chunk)
+        update = z[j0:j1]  # the other parity alone is read: the update is summed in place
+        np.copyto(update, priors[target, j0:j1])
+        for weights, weight_offset, offset in terms:
+            lo, hi = _overlap(j0, j1, offset, half)
+            if hi <= lo:
+                continue
+            part = product[lo - j0:hi - j0]
+            np.multiply(weights[lo + weight_offset:hi + weight_offset], near[lo + offset:hi + offset], out=part)
+            update[lo - j0:hi - j0] += part
+        update *= inverses[target, j0:j1]

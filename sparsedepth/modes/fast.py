@@ -128,7 +128,7 @@ def complete_fast(image, sparse_depth, mask=None, *, weights=None, l1_smoothing=
         coarse_z = out.z
     z = upsample_bilinear(coarse_z.reshape(problem.shape).astype(np.float32), shape, factor)
     z = edge_aware_sweeps(z, fine_image, depth, observed, smoothness=FAST_SMOOTHNESS, kappa=FAST_KAPPA,
-                          sweeps=FAST_SWEEPS).astype(np.float64)
+                          sweeps=FAST_SWEEPS, dtype=np.float64)
     depth_range = observed_range(depth[observed], clip_to_observed)
     z, clamped = clamp(z, depth_range, clip_to_observed, rounding=FLOAT32_ROUNDING)
     return CompletionResult(
