@@ -336,3 +336,35 @@ def test_objective_constant_and_uncached_normal_equations():
     assert float(z @ (A @ z) - 2 * b @ z + c) == pytest.approx(quadratic, rel=1e-12)
     cached = obj.normal_equations(form="stencil")
     assert obj._normal is not None and cached[2] == constant == obj.constant()
+
+
+@pytest.mark.parametrize("box", [(-np.inf, np.inf), "clamp"])
+def test_a_target_stops_the_certificate_early_with_a_bound_still_above_the_true_gap(box):
+    image, sparse, mask, _ = make_problem(shape=(30, 40), fraction=0.08)
+    obj, coarse, _ = build_objective(image, sparse, mask, weights=Weights.paper(alpha=1.0, beta=0.1, gamma=0.0,
+                                                                                delta=1e-3, kappa=10.0))
+    A, b, _ = obj.normal_equations()
+    z_star = spsolve(sp.csc_matrix(A), b)
+    if box == "clamp":  # a clamp range that cuts the minimiser: the box's own minimum by L-BFGS-B
+        from scipy.optimize import minimize
+
+        low, high = np.percentile(z_star, [10, 90])
+        F_box = minimize(lambda z: (obj.value(z), obj.quadratic_gradient(z)), np.clip(z_star, low, high), jac=True,
+                         method="L-BFGS-B", bounds=[(low, high)] * obj.size,
+                         options={"ftol": 1e-15, "gtol": 1e-12, "maxiter": 20000}).fun
+        bounds = (low, high)
+    else:
+        F_box, bounds = obj.value(z_star), box
+    rng = np.random.default_rng(0)
+    z = np.clip(z_star + 0.05 * rng.standard_normal(obj.size), *bounds)  # a point to certify, inside the box
+    true_gap = obj.value(z) - F_box
+    tight = Certificate(obj, bounds=bounds, rtol=1e-10).gap(z)
+    cheap = Certificate(obj, bounds=bounds).cheap_gap(z)
+    assert true_gap * (1 - 1e-6) <= tight <= cheap
+    for target in np.geomspace(tight * 1.5, cheap, 4):
+        certificate = Certificate(obj, bounds=bounds, rtol=1e-10)
+        early = certificate.gap(z, target=target)
+        assert true_gap * (1 - 1e-6) <= tight * (1 - 1e-9) <= early <= target  # proven, and answers the question
+    # a target below the true gap cannot be met: the solve runs to rtol and returns the tight bound
+    unreachable = Certificate(obj, bounds=bounds, rtol=1e-10).gap(z, target=0.5 * true_gap)
+    assert unreachable == pytest.approx(tight, rel=1e-6)

@@ -21,7 +21,7 @@ from ..linalg.multigrid import GridMultigrid
 from ..linalg.preconditioners import make_preconditioner
 from ..objective.objective import QuadraticTerm
 
-__all__ = ["Certificate", "duality_gap", "curvature_lower_bound"]
+__all__ = ["Certificate", "BoundReached", "duality_gap", "curvature_lower_bound"]
 
 
 def curvature_lower_bound(objective) -> float:
@@ -291,7 +291,7 @@ class Certificate:
             return cand
         return q
 
-    def gap(self, z, *, p=None, eps=0.0, tied=None, overwrite_p=False):
+    def gap(self, z, *, p=None, eps=0.0, tied=None, overwrite_p=False, target=None):
         """:func:`duality_gap` of ``z`` (solver units) for the problem over the box; NaN when the solve with ``A`` fails.
 
         ``z`` is clipped to the box first.
@@ -302,6 +302,15 @@ class Certificate:
         is a work vector.  The dual point is formed first and reduced to
         ``r`` before the preconditioner of ``A`` is built or used, so that
         the edge vectors and the multigrid hierarchy are not held together.
+
+        ``target``: for a caller that only asks whether the gap is at most
+        ``target``.  When the bound is proven (:attr:`proven`), the solve with
+        ``A`` stops as soon as the bound at its current iterate, error term
+        included, is at most half of ``target`` (:class:`BoundReached`), and
+        the bound of that iterate is returned: a proven bound at most
+        ``target``, looser than the one of a solve to ``rtol``.  Where it
+        is not (the recursive residual drifted from the true one), the solve
+        goes on to ``rtol``.
         """
         z = np.asarray(z, dtype=np.float64).ravel()
         if np.any(z < self.low) or np.any(z > self.high):
@@ -325,11 +334,22 @@ class Certificate:
             return first
         A = self.objective.normal_equations(form="stencil", cache=not self.low_memory)[0]
         precondition = self._preconditioner(A)
-        y, _, ok, _ = pcg(A, r, M=precondition, rtol=self.rtol, maxiter=2000)
-        del precondition
+        early = None
+        if target is not None and self.proven and np.isfinite(target):
+            early = BoundReached(r, first, self.curvature, 0.5 * float(target))
+        y, _, ok, _ = pcg(A, r, M=precondition, rtol=self.rtol, maxiter=2000, callback=early,
+                          callback_residual=True)
+        bound = self._solve_bound(A, r, y, first, ok)
+        if early is not None and early.reached and not bound <= target:  # the true residual disagreed: go on
+            y, _, ok, _ = pcg(A, r, x0=y, M=precondition, rtol=self.rtol, maxiter=2000)
+            bound = self._solve_bound(A, r, y, first, ok)
+        return bound
+
+    def _solve_bound(self, A, r, y, first, ok):
+        """``first + ¼ (yᵀ(r + e) + ‖e‖² / λ)`` with ``e = r − A y`` (``λ`` the curvature bound; without one, the
+        error term is left out and NaN is returned for a solve that did not converge)."""
         e = r - A @ y
-        r += e  # r + e
-        quad = dot(y, r)  # = 2yᵀr − yᵀAy
+        quad = dot(y, r) + dot(y, e)  # = 2yᵀr − yᵀAy
         if self.proven:
             quad += dot(e, e) / self.curvature
         elif not ok:
@@ -380,6 +400,31 @@ class Certificate:
             c -= q[rows] * t_k
             total += float(np.sum(np.maximum(c, 0.0, out=c)))
         return total
+
+
+class BoundReached:
+    r"""A PCG callback that stops the certificate's solve ``A y = r`` once its bound is at most ``target``.
+
+    Called with the iterate ``y`` and the recursive residual ``e ≈ r − A y``; raises ``StopIteration`` when
+    ``first + ¼ (yᵀ(r + e) + ‖e‖² / λ) <= target``, the bound :meth:`Certificate.gap` computes (there with the true
+    residual), and sets :attr:`reached`.
+
+    Notes
+    -----
+    For any ``y``, ``rᵀA⁻¹r = 2yᵀr − yᵀAy + (r − Ay)ᵀA⁻¹(r − Ay) <= yᵀ(r + e) + ‖e‖² / λ_min(A)`` with
+    ``e = r − A y``, so the bound holds at every iterate, not only at the end of the solve; it decreases toward
+    ``rᵀA⁻¹r`` as CG converges.
+    """
+
+    def __init__(self, r, first, curvature, target):
+        self.r, self.first, self.curvature, self.target = r, float(first), float(curvature), float(target)
+        self.reached = False
+
+    def __call__(self, y, e):
+        quad = dot(y, self.r) + dot(y, e) + dot(e, e) / self.curvature
+        if self.first + 0.25 * max(quad, 0.0) <= self.target:
+            self.reached = True
+            raise StopIteration
 
 
 def _norm_sq(v):

@@ -347,7 +347,7 @@ def certify(objective, z, solver, options, *, bounds=None, cheap=False, value=No
     for box in boxes:
         certificate = Certificate(objective, bounds=box, rtol=rtol, preconditioner=shared)  # one hierarchy of A
         bound = certificate.cheap_gap(z)
-        bound = bound if cheap or bound <= threshold else certificate.gap(z, eps=eps)
+        bound = bound if cheap or bound <= threshold else certificate.gap(z, eps=eps, target=threshold)
         gap = bound if np.isnan(gap) else min(gap, bound)
         shared = certificate.preconditioner
         if gap <= threshold:
