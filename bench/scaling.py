@@ -24,10 +24,10 @@ What is measured
   divided by the pixel count and reported as a ratio to the 640x480 time
   per pixel of the same mode.  BLAS runs on one thread
   (:func:`bench.blas.one_blas_thread`).
-* *Where the default mode's time goes.*  One more call per size with the
-  parts timed: the geodesic fill (:func:`sparsedepth.grid.geodesic.geodesic_fill`,
-  a Dijkstra search) inside the objective's assembly, the normal equations,
-  the multigrid set-up, the CG iterations and the certificate.
+* *Where the default mode's time goes.*  One more call per size timed by
+  :func:`sparsedepth.profiling.phase_times`: the exclusive time of each
+  phase (the prior fill, the assembly, the multigrid set-up, the iterations,
+  the certificate, ...).
 * *Peak memory.*  One ``complete_depth`` call per mode on the frame resized to
   3264x2448 (8 megapixels) in a fresh process each (``VmHWM``: the process's
   own peak, reading and resizing the frame included), started before this
@@ -53,6 +53,7 @@ import warnings  # noqa: E402
 import numpy as np  # noqa: E402
 
 import sparsedepth as sd  # noqa: E402
+from sparsedepth.profiling import PHASES, phase_times  # noqa: E402
 
 from . import harness as H  # noqa: E402
 from . import perf  # noqa: E402
@@ -63,15 +64,6 @@ QUICK_SIZES = ((120, 160), (240, 320))
 MODES = {"default": {}, "default, stencil form at every size": {}, "fast": {"quality": "fast"}}
 #: the mode that runs the default solve with ``Objective.normal_equations`` answering in the stencil form
 STENCIL_MODE = "default, stencil form at every size"
-#: the parts of the default mode, timed by wrapping these functions where complete_depth looks them up
-PARTS = (("sparsedepth.objective.objective", "geodesic_fill", "geodesic fill"),
-         ("sparsedepth.problem", "build_objective", "objective"),
-         ("sparsedepth.objective.objective.Objective", "normal_equations", "normal equations"),
-         ("sparsedepth.solvers.quadratic", "default_hierarchy", "multigrid set-up"),
-         ("sparsedepth.solvers.quadratic", "pcg", "CG"),
-         ("sparsedepth.solvers.core", "certify", "certificate"))
-
-
 @contextlib.contextmanager
 def _stencil_form(on=True):
     """The γ = 0 solve keeps ``A`` in symmetric stencil form at every size while this is active.
@@ -124,45 +116,14 @@ def time_per_pixel(sizes, rounds):
     return rows
 
 
-@contextlib.contextmanager
-def _timed_parts(totals):
-    """Accumulate the time spent in each function of :data:`PARTS` into ``totals`` (restored afterwards)."""
-    import importlib
-
-    saved = []
-    for module, name, label in PARTS:
-        parts = module.split(".")
-        try:
-            owner = importlib.import_module(module)
-        except ModuleNotFoundError:  # a class: import its module, then get the attribute
-            owner = getattr(importlib.import_module(".".join(parts[:-1])), parts[-1])
-        original = getattr(owner, name)
-
-        def wrapper(*args, _f=original, _label=label, **kwargs):
-            start = time.perf_counter()
-            try:
-                return _f(*args, **kwargs)
-            finally:
-                totals[_label] = totals.get(_label, 0.0) + time.perf_counter() - start
-
-        saved.append((owner, name, original))
-        setattr(owner, name, wrapper)
-    try:
-        yield totals
-    finally:
-        for owner, name, original in saved:
-            setattr(owner, name, original)
-
-
 def default_parts(sizes):
-    """Seconds of each part of one default ``complete_depth`` call per size."""
+    """The exclusive seconds of each phase (:mod:`sparsedepth.profiling`) of one default call per size."""
     rows = []
     for s in sizes:
         problem = _load(s)
-        totals = {}
-        with _timed_parts(totals):
-            _, t = _complete(problem, "default")
-        rows.append(dict(shape=s, total=t, **totals))
+        with phase_times() as times:
+            _complete(problem, "default")
+        rows.append(dict(shape=s, total=times.wall, other=times.outside(), **times))
     return rows
 
 
@@ -191,14 +152,14 @@ def report(rows, parts, memory, *, command, rounds, elapsed) -> str:
         for r in (r for r in rows if r["mode"] == m):
             cells.append(f"{r['ratio']:.2f} ({r['seconds']:.2f} s, {r['iterations']} it.)")
         table.append([m, *cells])
-    part_names = [label for _, _, label in PARTS]
-    part_header = ["size", "total (s)", *(f"{p} (s)" for p in part_names), "geodesic fill per pixel"]
-    base = parts[0]["geodesic fill"] / (parts[0]["shape"][0] * parts[0]["shape"][1]) if parts else 1.0
+    part_names = [name for name in PHASES if any(name in p for p in parts)] + ["other"]
+    part_header = ["size", "total (s)", *(f"{p} (s)" for p in part_names), "prior fill per pixel"]
+    base = parts[0].get("prior fill", 0.0) / (parts[0]["shape"][0] * parts[0]["shape"][1]) if parts else 1.0
     part_rows = []
     for p in parts:
         h, w = p["shape"]
         part_rows.append([f"{w}x{h}", f"{p['total']:.2f}", *(f"{p.get(n, 0.0):.2f}" for n in part_names),
-                          f"{p.get('geodesic fill', 0.0) / (h * w) / base:.2f}"])
+                          f"{p.get('prior fill', 0.0) / (h * w) / base:.2f}" if base else "–"])
     mem_rows = [[m["mode"], f"{m['peak_mb']:.0f}" if "peak_mb" in m else m.get("error", "?"),
                  f"{m['seconds']:.1f}" if "seconds" in m else ""] for m in memory]
     lines = ["# Scaling with the image size", "",
@@ -209,9 +170,9 @@ def report(rows, parts, memory, *, command, rounds, elapsed) -> str:
              "by the pixel count, as a ratio to the time per pixel of the same mode at the smallest size (seconds "
              "and iterations in brackets). Goal: within 1.2 up to 5 megapixels.", "",
              H.markdown_table(header, table), "",
-             "Where one default call's time goes (functions timed inside `complete_depth`; the objective "
-             "includes the geodesic fill; the last column is the fill's time per pixel relative to the smallest "
-             "size):", "",
+             "Where one default call's time goes (the exclusive time of each phase of "
+             "`sparsedepth.profiling.phase_times()`; other: the time in no phase; the last column is the prior "
+             "fill's time per pixel relative to the smallest size):", "",
              H.markdown_table(part_header, part_rows), "",
              "## Peak memory at 8 megapixels", "",
              "One `complete_depth` call on the frame resized to 3264x2448, each mode in a fresh process (`VmHWM`, "
