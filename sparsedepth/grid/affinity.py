@@ -41,7 +41,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import as_float_image, check_nonnegative_real
-from .operators import StencilOperator
+from .operators import StencilOperator, _flat_images
 from ..limits import memory_limits
 
 __all__ = ["LocalLinearOperator", "local_linear_operator", "WINDOWS", "WINDOW_OFFSETS", "PINV_CUTOFF"]
@@ -105,39 +105,59 @@ def local_linear_operator(image, eps: float, *, window: str = "3x3", copy: bool 
 
 
 def _symmetric_inverse(S):
-    """Inverses of symmetric positive definite matrices stored as ``S[c, d]`` images: shape ``(C, C, h, w)``.
+    """Inverses of symmetric positive definite matrices given as planes ``S[c][d]`` (only ``c <= d`` is read).
 
-    1x1 and 3x3 (grey and colour images) by the closed form (the adjugate over the determinant).
+    Returns the inverse as a nested list of planes, ``P[c][d]`` and ``P[d][c]`` the same array.  1x1 and 3x3
+    (grey and colour images) by the closed form (the adjugate over the determinant), one whole-array operation
+    per product.
     """
-    C = S.shape[0]
+    C = len(S)
     if C == 1:
-        return 1.0 / S
+        return [[np.divide(1.0, S[0][0])]]
     if C == 3:
-        c00 = S[1, 1] * S[2, 2] - S[1, 2] * S[1, 2]
-        c01 = S[0, 2] * S[1, 2] - S[0, 1] * S[2, 2]
-        c02 = S[0, 1] * S[1, 2] - S[0, 2] * S[1, 1]
-        c11 = S[0, 0] * S[2, 2] - S[0, 2] * S[0, 2]
-        c12 = S[0, 1] * S[0, 2] - S[0, 0] * S[1, 2]
-        c22 = S[0, 0] * S[1, 1] - S[0, 1] * S[0, 1]
-        scale = 1.0 / (S[0, 0] * c00 + S[0, 1] * c01 + S[0, 2] * c02)  # 1 / det
-        out = np.empty(S.shape)
-        for (c, d), cofactor in zip(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)), (c00, c01, c02, c11, c12, c22)):
-            np.multiply(cofactor, scale, out=out[c, d])
-            out[d, c] = out[c, d]
-        return out
-    return np.moveaxis(np.linalg.inv(np.moveaxis(S, (0, 1), (-2, -1))), (-2, -1), (0, 1))
+        shape = np.shape(S[0][0])
+        cofactors = np.empty((6,) + shape)
+        c00, c01, c02, c11, c12, c22 = cofactors
+        work = np.empty(shape)
+        for cofactor, (a, b), (c, d) in ((c00, (S[1][1], S[2][2]), (S[1][2], S[1][2])),
+                                         (c01, (S[0][2], S[1][2]), (S[0][1], S[2][2])),
+                                         (c02, (S[0][1], S[1][2]), (S[0][2], S[1][1])),
+                                         (c11, (S[0][0], S[2][2]), (S[0][2], S[0][2])),
+                                         (c12, (S[0][1], S[0][2]), (S[0][0], S[1][2])),
+                                         (c22, (S[0][0], S[1][1]), (S[0][1], S[0][1]))):
+            np.multiply(a, b, out=cofactor)  # a b − c d
+            np.multiply(c, d, out=work)
+            cofactor -= work
+        determinant = np.multiply(S[0][0], c00)
+        np.multiply(S[0][1], c01, out=work)
+        determinant += work
+        np.multiply(S[0][2], c02, out=work)
+        determinant += work
+        np.divide(1.0, determinant, out=determinant)
+        cofactors *= determinant
+        return [[c00, c01, c02], [c01, c11, c12], [c02, c12, c22]]
+    full = np.moveaxis(np.array([[S[min(c, d)][max(c, d)] for d in range(C)] for c in range(C)]), (0, 1), (-2, -1))
+    inverse = np.moveaxis(np.linalg.inv(full), (-2, -1), (0, 1))
+    return [[inverse[c, d] for d in range(C)] for c in range(C)]
 
 
-def _apply(P, x):
-    """``P x`` per pixel: ``P`` of shape ``(C, C, h, w)``, ``x`` of shape ``(C, h, w)``."""
-    out = P[:, 0] * x[0]
-    for d in range(1, x.shape[0]):
-        out += P[:, d] * x[d]
+def _apply(P, x, out=None, work=None):
+    """``P x`` per pixel: ``P`` a nested list of ``C x C`` planes, ``x`` of shape ``(C, ...)`` (broadcast with the planes).
+
+    ``out`` (shape of ``x``) and ``work`` (shape ``x.shape[1:]``) are optional buffers.
+    """
+    out = np.empty(x.shape) if out is None else out
+    work = np.empty(x.shape[1:]) if work is None else work
+    for c, row in enumerate(P):
+        np.multiply(row[0], x[0], out=out[c])
+        for d in range(1, x.shape[0]):
+            np.multiply(row[d], x[d], out=work)
+            out[c] += work
     return out
 
 
 def _dot(x, y):
-    """``xᵀ y`` per pixel for ``(C, h, w)`` arrays."""
+    """``xᵀ y`` per pixel for ``(C, ...)`` arrays."""
     out = x[0] * y[0]
     for c in range(1, x.shape[0]):
         out += x[c] * y[c]
@@ -172,6 +192,7 @@ class LocalLinearOperator(StencilOperator):
         self.offsets_in_window = WINDOWS[window]
         self.size = len(self.offsets_in_window)
         self._image = np.ascontiguousarray(np.moveaxis(img, -1, 0))  # (C, H, W): whole-image planes
+        self._flat = self._image.reshape(C, H * W)  # the same planes, flat
         taps = tuple((o, float("nan")) for o in self.offsets_in_window)  # taps of every block; coefficients per pixel
         self.blocks = (taps,) * (self.size + C)
         dys, dxs = [o[0] for o in self.offsets_in_window], [o[1] for o in self.offsets_in_window]
@@ -179,13 +200,18 @@ class LocalLinearOperator(StencilOperator):
         self._span = (max(dys) - min(dys), max(dxs) - min(dxs))  # rows and columns a window covers, minus 1
         self._anchor_rows = max(0, H - self._span[0])  # the anchor rows: grid rows low .. low + anchor_rows - 1
         self._windows = H > self._span[0] and W > self._span[1]
-        self._interior = ((slice(self._low[0], self._low[0] + H - self._span[0]),
-                           slice(self._low[1], self._low[1] + W - self._span[1])) if self._windows
-                          else (slice(0, 0), slice(0, 0)))
         self._planes = None
         self._fit_cache = None
 
     # -- the fit of every window ---------------------------------------------
+    #
+    # The windows of anchor rows k0 .. k1 - 1 are computed as one flat run: window f of the run is anchored at
+    # grid row k0 + f // W (plus the first anchor row), column f % W (plus the first anchor column), so the
+    # pixel o of every window is one contiguous run of the flat image.  The run covers whole grid rows except
+    # the last one's tail; its positions with f % W >= W - span (the wrap from a row's last window to the
+    # next row's first) are no windows: they are computed like the others and dropped (set to 0) before
+    # anything is written to the grid.  NumPy works on contiguous runs several times faster than on strided
+    # two-dimensional views, and every value of a real window is the same as on the two-dimensional grid.
     def _band_rows(self):
         """Window rows per band of the band-wise computations (about ``affinity_band_pixels`` pixels).
 
@@ -193,27 +219,60 @@ class LocalLinearOperator(StencilOperator):
         """
         return max(1, memory_limits().affinity_band_pixels // self.grid_shape[1])
 
-    def _window_planes(self, k0, k1):
-        """``(μ, P)`` of the windows of anchor rows ``k0 .. k1 − 1``: shapes ``(C, k1-k0, columns)``, ``(C, C, ...)``.
+    def _run_length(self, k0, k1):
+        """Length of the flat run of the windows of anchor rows ``k0 .. k1 − 1``."""
+        return (k1 - k0) * self.grid_shape[1] - self._span[1]
 
-        Anchor row ``k`` is grid row ``k + low`` (for a 3x3 window its centre row ``k + 1``).  ``P = (Σ + ε/n ·
-        1)^{-1}`` (the pseudo-inverse for ``ε = 0``); ``M = P / n`` is the ``(G + ε)^{-1}`` of the class notes.
-        Every entry depends on its own window only, so a band gives the same numbers as the whole grid.
+    def _run(self, flat, o, k0, length, origin=0):
+        """The run of window pixel ``o`` of the windows from anchor row ``k0``: a view of ``flat[..., :]``.
+
+        ``flat`` holds the flat grid from grid index ``origin`` on.
         """
-        C = self.channels
-        rows = (k0, k1)
+        start = (k0 + self._low[0] + o[0]) * self.grid_shape[1] + self._low[1] + o[1] - origin
+        return flat[..., start:start + length]
+
+    def _run_sum(self, flat, k0, length, origin=0):
+        """Σ over the window of every window of the run (:meth:`_run` summed in the order of the window's pixels)."""
+        first, second, *others = self.offsets_in_window
+        out = np.add(self._run(flat, first, k0, length, origin), self._run(flat, second, k0, length, origin))
+        for o in others:
+            out += self._run(flat, o, k0, length, origin)
+        return out
+
+    def _outside(self, k0, k1):
+        """The positions of the run of anchor rows ``k0 .. k1 − 1`` that are no window (an index array)."""
+        W, span = self.grid_shape[1], self._span[1]
+        return (np.arange(k1 - k0 - 1)[:, None] * W + np.arange(W - span, W)).reshape(-1)
+
+    def _window_planes(self, k0, k1):
+        """``(μ, P)`` of the windows of anchor rows ``k0 .. k1 − 1`` as flat runs: shapes ``(C, L)`` and ``C x C``.
+
+        ``L`` is :meth:`_run_length`; ``P`` is a nested list of planes of shape ``(L,)`` (``P[c][d]`` and
+        ``P[d][c]`` the same array).  ``P = (Σ + ε/n · 1)^{-1}`` (the pseudo-inverse for ``ε = 0``); ``M = P / n``
+        is the ``(G + ε)^{-1}`` of the class notes.  Every entry depends on its own window only, so a band
+        gives the same numbers as the whole grid.
+        """
+        C, W = self.channels, self.grid_shape[1]
         n = float(self.size)
-        mean = self._window_sum(self._image, rows) / n
-        band = self._image[:, k0:k1 + self._span[0]]  # the grid rows the windows cover
-        cov = np.empty((C, C) + mean.shape[1:])
+        length = self._run_length(k0, k1)
+        mean = self._run_sum(self._flat, k0, length)
+        mean /= n
+        first, stop = k0 * W, (k1 + self._span[0]) * W  # the grid rows the windows cover
+        product = np.empty(stop - first)
+        work = np.empty(length)
+        cov = [[None] * C for _ in range(C)]
         for c in range(C):
             for d in range(c, C):
-                cov[c, d] = self._window_sum(band[c] * band[d], (0, k1 - k0)) / n - mean[c] * mean[d]
-                cov[d, c] = cov[c, d]
+                np.multiply(self._flat[c, first:stop], self._flat[d, first:stop], out=product)
+                entry = self._run_sum(product, k0, length, origin=first)
+                entry /= n
+                np.multiply(mean[c], mean[d], out=work)
+                entry -= work
+                cov[c][d] = cov[d][c] = entry
         return mean, self._regularised_inverse(cov)
 
     def _whole_planes(self):
-        """:meth:`_window_planes` of every window, kept for the products with ``K`` and ``Kᵀ`` (15 planes).
+        """:meth:`_window_planes` of every window, kept for the products with ``K`` and ``Kᵀ`` (9 planes).
 
         Only :meth:`block_matvec` and the adjoint use them; the normal stencil and the term's value
         (:meth:`row_pieces`) work band by band and keep nothing.
@@ -223,78 +282,73 @@ class LocalLinearOperator(StencilOperator):
         return self._planes
 
     def _regularised_inverse(self, cov):
-        """``P = (Σ + ε/n · 1)^{-1}`` per window (the pseudo-inverse for ``ε = 0``), shape ``(C, C, h, w)``."""
+        """``P = (Σ + ε/n · 1)^{-1}`` per window (the pseudo-inverse for ``ε = 0``) of the nested planes ``cov``."""
         C = self.channels
         if self.eps > 0:
             for c in range(C):
-                cov[c, c] += self.eps / float(self.size)
+                cov[c][c] += self.eps / float(self.size)
             return _symmetric_inverse(cov)
-        values, vectors = np.linalg.eigh(np.moveaxis(cov, (0, 1), (-2, -1)))
+        values, vectors = np.linalg.eigh(np.moveaxis(np.array(cov), (0, 1), (-2, -1)))
         keep = values > PINV_CUTOFF
         inv_values = np.where(keep, 1.0 / np.where(keep, values, 1.0), 0.0)
-        return np.einsum("...ik,...k,...jk->ij...", vectors, inv_values, vectors)
+        inverse = np.einsum("...ik,...k,...jk->ij...", vectors, inv_values, vectors)
+        return [[inverse[c, d] for d in range(C)] for c in range(C)]
 
-    def _shifted(self, array, o, rows=None):
-        """The view of ``array`` at the window pixel ``o`` of the windows of anchor rows ``rows`` (default all)."""
-        W = self.grid_shape[1]
-        k0, k1 = (0, self._anchor_rows) if rows is None else rows
-        y, x = self._low
-        return array[..., k0 + y + o[0]:k1 + y + o[0], x + o[1]:x + W - self._span[1] + o[1]]
+    def _fit_rows(self, z, k0, k1, planes):
+        """Every block of ``K z`` on the windows of anchor rows ``k0 .. k1 − 1`` as flat runs, shape ``(n + C, L)``.
 
-    def _window_sum(self, array, rows):
-        """Σ over the window of every window of anchor rows ``rows = (k0, k1)``: :meth:`_shifted` summed over the
-        window's pixels, shape ``array.shape[:-2] + (k1 - k0, columns)``."""
-        first, *others = self.offsets_in_window
-        out = self._shifted(array, first, rows).copy()
-        for o in others:
-            out += self._shifted(array, o, rows)
-        return out
-
-    def _fit_rows(self, img, rows, planes):
-        """Every block of ``K z`` on the windows of anchor rows ``rows``, shape ``(n + C, k1 - k0, columns)``.
-
-        ``img`` is ``z`` as an ``(H, W)`` image, ``planes`` the :meth:`_window_planes` of those windows.
+        ``z`` is the flat depth (length ``H * W``), ``planes`` the :meth:`_window_planes` of those windows; the
+        positions of the run that are no window (:meth:`_outside`) are 0.
         """
         mean, inverse = planes
         C = self.channels
         n = float(self.size)
-        zbar = self._window_sum(img, rows) / n
+        length = mean.shape[1]
+        zbar = self._run_sum(z, k0, length)
+        zbar /= n
         cross = np.zeros(mean.shape)
         product = np.empty(mean.shape)
         for o in self.offsets_in_window:
-            np.multiply(self._shifted(self._image, o, rows), self._shifted(img, o, rows), out=product)
+            np.multiply(self._run(self._flat, o, k0, length), self._run(z, o, k0, length), out=product)
             cross += product
         cross /= n
         cross -= mean * zbar  # the covariance of image and depth in each window
         a = _apply(inverse, cross)
         intercept = zbar - _dot(a, mean)
-        out = np.empty((self.size + C,) + zbar.shape)
+        out = np.empty((self.size + C, length))
         for j, o in enumerate(self.offsets_in_window):
             row = out[j]
-            np.subtract(self._shifted(img, o, rows), intercept, out=row)
+            np.subtract(self._run(z, o, k0, length), intercept, out=row)
             for c in range(C):
-                np.multiply(a[c], self._shifted(self._image[c], o, rows), out=product[0])
+                np.multiply(a[c], self._run(self._flat[c], o, k0, length), out=product[0])
                 row -= product[0]
         np.multiply(a, np.sqrt(self.eps), out=out[self.size:])
+        out[:, self._outside(k0, k1)] = 0.0
         return out
 
     def _rows(self, z):
-        """Every block of ``K z`` on the anchor pixels, shape ``(n + C, rows, columns)`` (cached for the last ``z``)."""
+        """Every block of ``K z`` on the windows as one flat run, shape ``(n + C, L)`` (cached for the last ``z``)."""
         if self._fit_cache is not None and np.array_equal(self._fit_cache[0], z):
             return self._fit_cache[1]
-        rows = self._fit_rows(self._as_image(z), (0, self._anchor_rows), self._whole_planes())
+        rows = self._fit_rows(self._as_image(z).reshape(-1), 0, self._anchor_rows, self._whole_planes())
         self._fit_cache = (np.array(z, dtype=np.float64, copy=True), rows)
         return rows
+
+    def _first_anchor(self):
+        """The flat grid index of the first window's anchor pixel (where a run of all windows starts)."""
+        return self._low[0] * self.grid_shape[1] + self._low[1]
 
     # -- StencilOperator interface ---------------------------------------------
     def block_matvec(self, z, b, out=None):
         """Rows of block ``b`` of ``K z`` (length ``H * W``), into ``out`` if given."""
-        img = self._as_image(z)
-        out = np.zeros(self.grid_shape) if out is None else out.reshape(self.grid_shape)
+        z = self._as_image(z).reshape(-1)
+        out = np.zeros(z.shape[0]) if out is None else out.reshape(-1)
         out[...] = 0.0
         if self._windows:
-            out[self._interior] = self._rows(img.reshape(-1))[b]
-        return out.reshape(-1)
+            values = self._rows(z)[b]
+            start = self._first_anchor()
+            out[start:start + values.shape[0]] = values
+        return out
 
     def row_pieces(self, z):
         """``K z`` a band of grid rows at a time: ``(rows, values)``, each block's rows of the band.
@@ -302,7 +356,7 @@ class LocalLinearOperator(StencilOperator):
         The fit of a band's windows is computed for the band only (no per-pixel plane is kept), so a pass
         over ``K z`` (the term's value) needs a few band-sized arrays.
         """
-        img = self._as_image(z)
+        z = self._as_image(z).reshape(-1)
         H, W = self.grid_shape
         n = H * W
         step = self._band_rows()
@@ -311,17 +365,17 @@ class LocalLinearOperator(StencilOperator):
             y1 = min(H, y0 + step)
             # the windows anchored on grid rows y0 .. y1 - 1
             k0, k1 = max(y0 - low_y, 0), min(y1 - low_y, self._anchor_rows)
-            band = np.zeros((len(self.blocks), y1 - y0, W))
+            band = np.zeros((len(self.blocks), (y1 - y0) * W))
             if self._windows and k1 > k0:
-                rows = (k0, k1)
-                band[:, k0 + low_y - y0:k1 + low_y - y0, low_x:low_x + W - self._span[1]] = \
-                    self._fit_rows(img, rows, self._window_planes(*rows))
+                values = self._fit_rows(z, k0, k1, self._window_planes(k0, k1))
+                start = (k0 + low_y - y0) * W + low_x
+                band[:, start:start + values.shape[1]] = values
             for b in range(len(self.blocks)):
-                yield slice(b * n + y0 * W, b * n + y1 * W), band[b].reshape(-1)
+                yield slice(b * n + y0 * W, b * n + y1 * W), band[b]
 
     def block_rmatvec_add(self, out, b, v):
         """``out += K_bᵀ v`` for the rows ``v`` (length ``H * W``) of block ``b``; returns ``out``."""
-        v = np.asarray(v, dtype=np.float64).reshape(self.grid_shape)
+        v = np.asarray(v, dtype=np.float64).reshape(-1)
         rows = [None] * len(self.blocks)
         rows[b] = v
         return self._adjoint_add(out, rows)
@@ -332,31 +386,34 @@ class LocalLinearOperator(StencilOperator):
         if v.ndim != 1 or v.shape[0] != self.shape[0]:
             raise ValueError(f"expected a vector of length {self.shape[0]}, got shape {v.shape}")
         n = self.shape[1]
-        rows = [v[k * n:(k + 1) * n].reshape(self.grid_shape) for k in range(len(self.blocks))]
+        rows = [v[k * n:(k + 1) * n] for k in range(len(self.blocks))]
         return self._adjoint_add(np.zeros(n), rows)
 
     def _adjoint_add(self, out, rows):
-        """``out += Kᵀ [v_0; ...; v_(n-1); u_0; ...]`` with ``rows`` the ``n + C`` row images (None for zero rows)."""
+        """``out += Kᵀ [v_0; ...; v_(n-1); u_0; ...]`` with ``rows`` the ``n + C`` flat row vectors (None for zero rows)."""
         if not self._windows:
             return out
         mean, inverse = self._whole_planes()
-        target = out.reshape(self.grid_shape)
-        interior = self._interior
-        shape = mean.shape[1:]
+        target = out.reshape(-1)
+        length = mean.shape[1]
+        start = self._first_anchor()
         n = self.size
-        v = [np.zeros(shape) if r is None else r[interior] for r in rows[:n]]
-        u = np.stack([np.zeros(shape) if r is None else r[interior] for r in rows[n:]])
-        vsum = np.zeros(shape)
+        v = [np.zeros(length) if r is None else r[start:start + length] for r in rows[:n]]
+        u = np.stack([np.zeros(length) if r is None else r[start:start + length] for r in rows[n:]])
+        vsum = np.zeros(length)
         xv = np.zeros(mean.shape)
         for o, vj in zip(self.offsets_in_window, v):
             vsum += vj
-            xv += self._shifted(self._image, o) * vj
+            xv += self._run(self._flat, o, 0, length) * vj
         xv -= mean * vsum  # Xᵀ v
         g = _apply(inverse, np.sqrt(self.eps) * u - xv) / float(n)  # M (√ε u − Xᵀ v)
         vbar = vsum / float(n)
         offset = _dot(mean, g)
+        outside = self._outside(0, self._anchor_rows)
         for o, vj in zip(self.offsets_in_window, v):
-            self._shifted(target, o)[...] += vj - vbar - offset + _dot(self._shifted(self._image, o), g)
+            values = vj - vbar - offset + _dot(self._run(self._flat, o, 0, length), g)
+            values[outside] = 0.0  # no window: its rows are not rows of K
+            self._run(target, o, 0, length)[...] += values
         return out
 
     def offsets(self):
@@ -375,7 +432,7 @@ class LocalLinearOperator(StencilOperator):
         Parameters
         ----------
         stencil : ndarray, shape (len(offsets), H, W)
-            Updated in place.
+            Updated in place; C-contiguous.
         offsets : list of tuple of int
             The offsets of the images of ``stencil``; all of :meth:`offsets`, or with ``symmetric`` those
             ``>= (0, 0)``.
@@ -394,21 +451,25 @@ class LocalLinearOperator(StencilOperator):
         Notes
         -----
         The grid is processed a band of stencil rows at a time: the windows that touch the band get their
-        ``μ`` and ``P`` (:meth:`_window_planes`), then every pair ``(i, j)``
-        its coupling, one whole-band operation per pair.  Each stencil entry receives its terms in the order
-        of the pairs, as in one pass over the whole grid, so the images do not depend on the band height;
-        nothing per pixel is kept.
+        ``μ`` and ``P`` (:meth:`_window_planes`) and the centred colours ``I_j − μ`` of all their pixels,
+        then every pixel ``i`` its projection ``−(scale/n) P (I_i − μ)`` and, with one whole-band operation
+        per channel, its couplings with the pixels ``j >= i``.  Every window quantity is a flat run of the
+        band (see the comment above :meth:`_band_rows`) and every coupling is added to the stencil as one
+        contiguous run, its positions that are no window adding 0.  Each stencil entry receives its terms
+        in the order of the pairs, as in one pass over the whole grid, so the images do not depend on the
+        band height; nothing per pixel is kept.
         """
         if row_weights is not None:
             raise ValueError("the local-linear term takes no row_weights (its rows are the windows' fit residuals)")
         if not self._windows:
             return stencil
         H, W = self.grid_shape
+        images = _flat_images(stencil)
         slot = {o: k for k, o in enumerate(offsets)}
         C = self.channels
         window, n = self.offsets_in_window, self.size
         constant = -scale / float(n)
-        # per pair, where its coupling goes: (offset, window pixel it is written at)
+        # per pair, where its coupling goes: (image, window pixel it is written at)
         writes = {}
         for i, oi in enumerate(window):
             for j in range(i, n):
@@ -417,38 +478,44 @@ class LocalLinearOperator(StencilOperator):
                     places = [((0, 0), oi)]
                 else:
                     places = [((oj[0] - oi[0], oj[1] - oi[1]), oi), ((oi[0] - oj[0], oi[1] - oj[1]), oj)]
-                writes[i, j] = [(o, a) for o, a in places if not symmetric or o >= (0, 0)]
+                writes[i, j] = [(images[slot[o]], a) for o, a in places if not symmetric or o >= (0, 0)]
         step = self._band_rows()
-        (low_y, low_x), (span_y, span_x) = self._low, self._span
+        (low_y, low_x), span_y = self._low, self._span[0]
+        longest = self._run_length(0, min(step + span_y, self._anchor_rows))  # the longest run of a band
+        centred_all, projected_all = np.empty((2, C, n, longest))
+        couplings_all, product_all = np.empty((2, n, longest))
         for y0 in range(0, H, step):
             y1 = min(H, y0 + step)
             # the windows with a pixel on grid rows y0 .. y1 - 1 (anchor row k covers grid rows k .. k + span_y)
             k0, k1 = max(y0 - span_y, 0), min(y1, self._anchor_rows)
             if k1 <= k0:
                 continue
-            rows = (k0, k1)
-            mean, inverse = self._window_planes(*rows)
-            centred = np.empty((C,) + mean.shape[1:])
-            coupling = np.empty(mean.shape[1:])
-            product = np.empty(mean.shape[1:])
-            for i, oi in enumerate(window):
-                np.subtract(self._shifted(self._image, oi, rows), mean, out=centred)
-                projected = _apply(inverse, centred)
-                projected *= constant  # -(scale / n) P (I_i - mu)
+            mean, inverse = self._window_planes(k0, k1)
+            length = mean.shape[1]
+            outside = self._outside(k0, k1)
+            centred = centred_all[:, :, :length]  # centred[c, j]: channel c of I_j − μ
+            for j, o in enumerate(window):
+                np.subtract(self._run(self._flat, o, k0, length), mean, out=centred[:, j])
+            projected = _apply(inverse, centred, out=projected_all[:, :, :length], work=product_all[:, :length])
+            projected *= constant  # projected[:, i]: −(scale / n) P (I_i − μ)
+            for i in range(n):
+                # the couplings of i with j = i .. n − 1
+                coupling, work = couplings_all[:n - i, :length], product_all[:n - i, :length]
+                np.multiply(projected[0, i], centred[0, i:], out=coupling)
+                for c in range(1, C):
+                    np.multiply(projected[c, i], centred[c, i:], out=work)
+                    coupling += work
+                coupling[0] += constant + scale
+                coupling[1:] += constant
+                coupling[:, outside] = 0.0
                 for j in range(i, n):
-                    np.subtract(self._shifted(self._image, window[j], rows), mean, out=centred)
-                    np.multiply(projected[0], centred[0], out=coupling)
-                    for c in range(1, C):
-                        np.multiply(projected[c], centred[c], out=product)
-                        coupling += product
-                    coupling += constant + scale if i == j else constant
-                    for o, a in writes[i, j]:
-                        # windows whose pixel p + a lies on the band's rows
+                    for image, a in writes[i, j]:
+                        # windows whose pixel p + a lies on the band's rows: anchor rows lo .. hi − 1
                         lo, hi = max(k0, y0 - low_y - a[0]), min(k1, y1 - low_y - a[0])
                         if hi > lo:
-                            x = low_x + a[1]
-                            stencil[slot[o]][lo + low_y + a[0]:hi + low_y + a[0], x:x + W - span_x] += \
-                                coupling[lo - k0:hi - k0]
+                            first, stop = (lo - k0) * W, (hi - k0) * W - self._span[1]
+                            start = (lo + low_y + a[0]) * W + low_x + a[1]
+                            image[start:start + stop - first] += coupling[j - i, first:stop]
         return stencil
 
     def tocsr(self):

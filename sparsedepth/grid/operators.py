@@ -191,6 +191,13 @@ def _anchor_region(taps, shape):
     return slice(y0, y1), slice(x0, x1)
 
 
+def _flat_images(stencil):
+    """The images of ``stencil`` (shape ``(k, H, W)``) as flat views ``(k, H * W)``; the array must be C-contiguous."""
+    if not (isinstance(stencil, np.ndarray) and stencil.ndim == 3 and stencil.flags.c_contiguous):
+        raise ValueError("the stencil must be a C-contiguous ndarray of shape (len(offsets), H, W)")
+    return stencil.reshape(stencil.shape[0], -1)
+
+
 def _shifted(region, offset):
     ys, xs = region
     if ys.stop == 0:  # empty region: stays empty (no wrap-around of negative stops)
@@ -357,24 +364,61 @@ class StencilOperator:
             Write only the couplings at offsets ``>= (0, 0)`` (the stored half
             of a :class:`~sparsedepth.grid.stencil.SymmetricStencil`); the
             others are their mirrors (the pair of taps taken the other way round).
+
+        Notes
+        -----
+        The stencil is written a band of its rows at a time (about ``operator_band_values`` values, the
+        :class:`~sparsedepth.limits.MemoryLimits` field).  A pair's rows of a band are added as one contiguous
+        run of the flat image (whole grid rows, the columns outside the block's anchor region adding zeros),
+        since NumPy adds a strided two-dimensional view several times slower than a contiguous run.  The
+        weighted row :math:`(\mathrm{scale}\, c_i c_k)\, r_p` of a band (:math:`r_p = 1` without row weights)
+        is formed once per distinct value of the coefficient :math:`\mathrm{scale}\, c_i c_k` of a block (a
+        three-tap second difference has three such values for its nine pairs) and added at the place of every
+        pair with that value.  Each stencil value receives its terms in the order of the blocks and pairs, as
+        in one pass over the whole grid, so the images do not depend on the band height.
         """
         slot = {o: j for j, o in enumerate(offsets)}
         H, W = self.grid_shape
-        r = None if row_weights is None else np.asarray(row_weights, dtype=np.float64).reshape(
-            (len(self.blocks), H, W))
+        n = H * W
+        images = _flat_images(stencil)
+        weights = [None if row_weights is None else
+                   np.asarray(row_weights[b * n:(b + 1) * n], dtype=np.float64).reshape(H, W)
+                   for b in range(len(self.blocks))]
+        # per block: its anchor region, its pairs of taps (target shift, offset, coefficient) in the order of
+        # the taps, and the distinct coefficients among them
+        plans = []
         for b, (block, region) in enumerate(zip(self.blocks, self._regions)):
-            rb = None if r is None else r[b][region]
-            for oi, ci in block:
-                target = _shifted(region, oi)
-                for ok, ck in block:
-                    offset = (ok[0] - oi[0], ok[1] - oi[1])
-                    if symmetric and offset < (0, 0):
+            if region[0].stop == 0:
+                continue
+            pairs = [(oi, (ok[0] - oi[0], ok[1] - oi[1]), scale * ci * ck)
+                     for oi, ci in block for ok, ck in block
+                     if not (symmetric and (ok[0] - oi[0], ok[1] - oi[1]) < (0, 0))]
+            if pairs:
+                plans.append((weights[b], region, pairs, sorted({coefficient for _, _, coefficient in pairs})))
+        band = rows_per_band(W, memory_limits().operator_band_values)
+        for band_rows in row_bands(0, H, band):
+            y0, y1 = band_rows.start, band_rows.stop
+            for weight, (ys, xs), pairs, coefficients in plans:
+                shifts = [oi[0] for oi, _, _ in pairs]
+                # the anchor rows a0 .. a1 - 1 whose row of some pair lands on the band's rows
+                a0, a1 = max(ys.start, y0 - max(shifts)), min(ys.stop, y1 - min(shifts))
+                if a1 <= a0:
+                    continue
+                rows = np.ones((a1 - a0, W)) if weight is None else weight[a0:a1]
+                weighted = {}
+                for coefficient in coefficients:
+                    values = np.multiply(rows, coefficient)
+                    values[:, :xs.start] = 0.0  # outside the anchor columns: a zero for the flat run
+                    values[:, xs.stop:] = 0.0
+                    weighted[coefficient] = values.reshape(-1)
+                for oi, offset, coefficient in pairs:
+                    # anchor rows lo .. hi - 1 land on stencil rows lo + oi[0] .. hi - 1 + oi[0], inside the band
+                    lo, hi = max(a0, y0 - oi[0]), min(a1, y1 - oi[0])
+                    if hi <= lo:
                         continue
-                    view = stencil[slot[offset]][target]
-                    if rb is None:
-                        view += scale * ci * ck
-                    else:
-                        view += (scale * ci * ck) * rb
+                    first, stop = (lo - a0) * W + xs.start, (hi - 1 - a0) * W + xs.stop
+                    target = (lo + oi[0]) * W + xs.start + oi[1]
+                    images[slot[offset]][target:target + stop - first] += weighted[coefficient][first:stop]
         return stencil
 
     def tocsr(self):
