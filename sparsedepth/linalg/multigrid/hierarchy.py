@@ -18,13 +18,14 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..._validation import as_grid_operator, check_grid_shape
-from ...grid.stencil import SymmetricStencil, full_pattern_offsets, stencil_to_csr
+from ...grid.stencil import SymmetricStencil, full_pattern_offsets
 from .bands import BandedStencil, FullStencil
 from .galerkin import galerkin_offsets, galerkin_stencil
 from .iteration import preconditioned_cg, prepare_rhs, vcycle_iteration
 from .interpolation import bilinear_weights, operator_weights
 from .smoothers import LineGaussSeidel, gauss_seidel_backward, gauss_seidel_forward, jacobi_damping, jacobi_sweeps
-from .stencils import CollapsedSource, StencilSource, extract_stencil, fine_stencil_source
+from .stencils import (CollapsedSource, StencilSource, assemble_csr, centre_row_holds, extract_stencil,
+                       fine_stencil_source, read_full_pattern)
 from .transfer import ClassProlongation, SeparableProlongation
 from ...limits import memory_limits
 
@@ -274,8 +275,12 @@ class GridMultigrid:
             shapes.append(((h + 1) // 2, (w + 1) // 2))
         return shapes
 
+    def _keeps_stencils(self):
+        """True when the set-up holds each level's stencil as one array (grids below ``keep_stencil_pixels``)."""
+        return self.shape[0] * self.shape[1] < memory_limits().keep_stencil_pixels
+
     def _build(self, A):
-        offsets, source = fine_stencil_source(A, self.shape)
+        offsets, source = fine_stencil_source(A, self.shape, whole=self._keeps_stencils())
         if self.requested_interpolation == "auto":
             self.interpolation = "bilinear" if _wide(offsets) else "operator"
         shapes = self._shapes()
@@ -286,7 +291,7 @@ class GridMultigrid:
                 lvl.A = A
             levels.append(lvl)
         # structure: offsets of the coarse operators (their CSR form is made by
-        # stencil_to_csr in _numeric); P is made there too
+        # assemble_csr in _numeric); P is made there too
         levels[0].offsets = offsets
         for li in range(1, len(levels)):
             levels[li].offsets = galerkin_offsets(levels[li - 1].offsets)
@@ -303,7 +308,7 @@ class GridMultigrid:
         Galerkin product.
         """
         source = box.pop()
-        keep = self.shape[0] * self.shape[1] < memory_limits().keep_stencil_pixels
+        keep = self._keeps_stencils()
         if keep:
             source.read_whole()
         levels = self.levels
@@ -339,10 +344,10 @@ class GridMultigrid:
                 source = StencilSource(coarse.offsets, coarse.shape, array=coarse.A.data)
                 del S
                 continue
-            coarse.A = stencil_to_csr(coarse.offsets, S, dtype=self.coarse_dtype)
+            coarse.A = assemble_csr(coarse.offsets, S, dtype=self.coarse_dtype)
             if keep:
                 source = StencilSource(coarse.offsets, coarse.shape, array=S)
-            elif full_pattern_offsets(coarse.A, coarse.shape) == coarse.offsets:
+            elif centre_row_holds(coarse.offsets, coarse.shape):  # assembled in the full pattern: readable back
                 # read back class by class: the coarse stencil array can go
                 source = StencilSource(coarse.offsets, coarse.shape, csr=coarse.A, csr_offsets=coarse.offsets)
             else:
@@ -433,6 +438,16 @@ class GridMultigrid:
                 self._build(A)
                 return self
             source = StencilSource(offsets, self.shape, symmetric=A)
+        elif self._keeps_stencils() and (read := read_full_pattern(A, self.shape)) is not None \
+                and set(read[0]) <= set(offsets):
+            pattern, S = read
+            if pattern != offsets:  # fewer offsets than the hierarchy's: the others are zero
+                slot = {o: k for k, o in enumerate(offsets)}
+                full = np.zeros((len(offsets),) + S.shape[1:])
+                full[[slot[o] for o in pattern]] = S
+                S = full
+            source = StencilSource(offsets, self.shape, array=S)
+            del S
         elif (pattern := full_pattern_offsets(A, self.shape)) is not None and set(pattern) <= set(offsets):
             source = StencilSource(offsets, self.shape, csr=A, csr_offsets=pattern)
         else:

@@ -10,12 +10,13 @@ level's stencil to the set-up one parity class at a time
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..._validation import as_grid_operator
-from ...grid.stencil import SymmetricStencil, csr_to_stencil, full_pattern_offsets
+from ...grid.stencil import SymmetricStencil, csr_to_stencil, full_pattern_offsets, index_dtype
 
 __all__ = ["grid_stencil", "extract_stencil", "StencilSource", "CollapsedSource", "fine_stencil_source",
-           "mirrored_image"]
+           "mirrored_image", "read_full_pattern", "assemble_csr", "centre_row_holds"]
 
 
 def _square_offsets(radius):
@@ -348,8 +349,202 @@ def _pattern_offsets(A, shape, radius=None):
     return None
 
 
-def fine_stencil_source(A, shape, radius=None):
-    """Offsets and :class:`StencilSource` of a fine operator (a symmetric stencil, pattern read, else extraction)."""
+def _rows_inside(offset, shape):
+    """Slices of the pixels whose neighbour at ``offset`` lies inside the grid."""
+    h, w = shape
+    dy, dx = offset
+    return slice(max(0, -dy), max(0, min(h, h - dy))), slice(max(0, -dx), max(0, min(w, w - dx)))
+
+
+def read_full_pattern(A, shape, radius=None):
+    r"""Offsets and stencil images of a CSR matrix in the full in-grid pattern, checked while read; else None.
+
+    Parameters
+    ----------
+    A : scipy.sparse CSR matrix or array, shape (H*W, H*W)
+    shape : tuple of int
+        ``(H, W)``.
+    radius : int, optional
+        Largest stencil radius accepted (default 2).
+
+    Returns
+    -------
+    (offsets, S) or None
+        As :func:`~sparsedepth.grid.stencil.full_pattern_offsets` and
+        :func:`~sparsedepth.grid.stencil.csr_to_stencil` together: ``S`` of shape ``(len(offsets), H, W)``,
+        zero where the neighbour is outside the grid; None when ``A`` is not stored in the pattern of
+        :func:`~sparsedepth.grid.stencil.stencil_to_csr` (its ``indptr`` and ``indices`` are compared with that
+        pattern entry by entry) or reaches beyond `radius`.
+
+    Notes
+    -----
+    The offsets are read from the row of the grid's centre.  The pixels whose every neighbour is inside the
+    grid hold the ``K`` offsets in order, so their entries are a ``(rows, columns, K)`` view of ``A.data``
+    and ``A.indices`` (the row pointers checked first); they are compared and copied a band of rows at a time
+    (a few hundred kilobytes, so the transposed copy works in cache), and the few border pixels by gathers.
+    """
+    h, w = shape
+    n = h * w
+    if A.format != "csr" or A.shape != (n, n) or A.nnz == 0:
+        return None
+    indptr, indices, data = A.indptr, A.indices, A.data
+    centre = (h // 2) * w + w // 2
+    delta = indices[indptr[centre]:indptr[centre + 1]].astype(np.int64) - centre
+    dys = (delta + w // 2) // w
+    dxs = delta - dys * w
+    offsets = list(zip(dys.tolist(), dxs.tolist()))
+    largest = 2 if radius is None else int(radius)
+    if (not offsets or offsets != sorted(set(offsets)) or np.any(2 * np.abs(dxs) >= w)
+            or max(max(abs(dy), abs(dx)) for dy, dx in offsets) > largest):
+        return None
+    counts, inner = _pattern_layout(offsets, shape)
+    if int(indptr[0]) != 0 or not np.array_equal(indptr[1:], np.cumsum(counts.reshape(-1))):
+        return None
+    K = len(offsets)
+    S = np.zeros((K, h, w))
+    y0, y1, x0, x1 = inner
+    if y1 > y0 and x1 > x0:
+        values, columns = _inner_views((data, indices), indptr, counts, inner, K)
+        own = np.arange(x0, x1, dtype=np.int64)[None, :, None] + delta  # each entry's column, less its row's start
+        band = _band_rows((x1 - x0) * K)
+        for r0 in range(0, y1 - y0, band):
+            r1 = min(y1 - y0, r0 + band)
+            starts = np.arange(y0 + r0, y0 + r1, dtype=np.int64)[:, None, None] * w
+            if not np.array_equal(columns[r0:r1] - starts, np.broadcast_to(own, (r1 - r0,) + own.shape[1:])):
+                return None
+            S[:, y0 + r0:y0 + r1, x0:x1] = values[r0:r1].transpose(2, 0, 1)
+    position, k, pixel = _border_entries(offsets, shape, indptr, inner)
+    if not np.array_equal(indices[position], pixel + delta[k]):
+        return None
+    S[k, pixel // w, pixel % w] = data[position]
+    return offsets, S
+
+
+def _pattern_layout(offsets, shape):
+    """The full in-grid pattern's row lengths and its inner block (the pixels whose every neighbour is inside).
+
+    Returns ``(counts, (y0, y1, x0, x1))``: entries per pixel, an ``(H, W)`` int64 array, and the inner
+    block's rows and columns.
+    """
+    h, w = shape
+    counts = np.zeros((h, w), dtype=np.int64)
+    for offset in offsets:
+        counts[_rows_inside(offset, shape)] += 1
+    dys = [dy for dy, _ in offsets]
+    dxs = [dx for _, dx in offsets]
+    y0, y1 = max(0, -min(dys)), h - max(0, max(dys))
+    x0, x1 = max(0, -min(dxs)), w - max(0, max(dxs))
+    return counts, (y0, y1, x0, x1)
+
+
+def _inner_views(arrays, indptr, counts, inner, K):
+    """``(rows, columns, K)`` views of the inner block's entries in each of ``arrays`` (CSR values or indices)."""
+    y0, y1, x0, x1 = inner
+    w = counts.shape[1]
+    row_length = int(counts[y0].sum())
+    first = int(counts[y0, :x0].sum())
+    begin = int(indptr[y0 * w])
+    return [array[begin:begin + (y1 - y0) * row_length].reshape(y1 - y0, row_length)[:, first:first + (x1 - x0) * K]
+            .reshape(y1 - y0, x1 - x0, K) for array in arrays]
+
+
+def _border_entries(offsets, shape, indptr, inner):
+    """The entries of the pixels outside the inner block: ``(position, k, pixel)`` of each, in CSR order."""
+    h, w = shape
+    y0, y1, x0, x1 = inner
+    outside = np.ones((h, w), dtype=bool)
+    outside[y0:y1, x0:x1] = False
+    border = np.flatnonzero(outside.reshape(-1))
+    by, bx = np.divmod(border, w)
+    dys = np.array([dy for dy, _ in offsets])
+    dxs = np.array([dx for _, dx in offsets])
+    ny, nx = by[:, None] + dys[None, :], bx[:, None] + dxs[None, :]
+    valid = (ny >= 0) & (ny < h) & (nx >= 0) & (nx < w)
+    position = indptr[border].astype(np.int64)[:, None] + np.cumsum(valid, axis=1) - 1
+    which, k = np.nonzero(valid)
+    return position[which, k], k, border[which]
+
+
+def centre_row_holds(offsets, shape):
+    """True when the grid's centre pixel has every offset inside the grid, with ``2 |dx| < W``.
+
+    Then a matrix in the full in-grid pattern of these offsets (:func:`assemble_csr`) is recognised as such
+    by :func:`~sparsedepth.grid.stencil.full_pattern_offsets`, which reads the offsets from that row.
+    """
+    h, w = shape
+    cy, cx = h // 2, w // 2
+    return all(0 <= cy + dy < h and 0 <= cx + dx < w and 2 * abs(dx) < w for dy, dx in offsets)
+
+
+def _band_rows(entries_per_row):
+    """Image rows per band of the inner block's copies (about 2**16 entries, a few hundred kilobytes)."""
+    return max(1, (1 << 16) // max(1, entries_per_row))
+
+
+def assemble_csr(offsets, stencil, dtype=np.float64):
+    r"""CSR matrix of a stencil in the full in-grid pattern: :func:`~sparsedepth.grid.stencil.stencil_to_csr`'s.
+
+    Parameters
+    ----------
+    offsets : list of tuple of int
+        Distinct offsets, sorted lexicographically.
+    stencil : ndarray, shape (len(offsets), H, W)
+        Coefficient images (entries whose neighbour is outside the grid are not stored).
+    dtype : numpy dtype, default float64
+        Type of the stored values.
+
+    Returns
+    -------
+    scipy.sparse.csr_array, shape (H*W, H*W)
+        The same ``indptr``, ``indices`` and values as ``stencil_to_csr(offsets, stencil, dtype=dtype)``.
+
+    Notes
+    -----
+    The inner block's entries (``K`` per pixel, in the order of `offsets`) are a ``(rows, columns, K)`` view
+    of the CSR arrays: the values are the stencil's images transposed into it, and the column indices
+    :math:`(y + d_y) W + x + d_x`, a band of rows at a time so that the transposed copy works in cache; the
+    few border pixels are written by scatters.
+    """
+    offsets = [tuple(o) for o in offsets]
+    K, h, w = stencil.shape
+    n = h * w
+    counts, inner = _pattern_layout(offsets, (h, w))
+    itype = index_dtype(n * K)
+    indptr = np.zeros(n + 1, dtype=itype)
+    np.cumsum(counts.reshape(-1), out=indptr[1:])
+    nnz = int(indptr[-1])
+    data = np.empty(nnz, dtype=dtype)
+    indices = np.empty(nnz, dtype=itype)
+    delta = np.array([dy * w + dx for dy, dx in offsets])
+    y0, y1, x0, x1 = inner
+    if y1 > y0 and x1 > x0:
+        values, columns = _inner_views((data, indices), indptr, counts, inner, K)
+        own = np.arange(x0, x1, dtype=itype)[None, :, None] + delta.astype(itype)
+        band = _band_rows((x1 - x0) * K)
+        for r0 in range(0, y1 - y0, band):
+            r1 = min(y1 - y0, r0 + band)
+            values[r0:r1] = stencil[:, y0 + r0:y0 + r1, x0:x1].transpose(1, 2, 0)
+            np.add(own, (np.arange(y0 + r0, y0 + r1, dtype=itype) * itype(w))[:, None, None], out=columns[r0:r1])
+    position, k, pixel = _border_entries(offsets, (h, w), indptr, inner)
+    data[position] = stencil[k, pixel // w, pixel % w]
+    indices[position] = pixel + delta[k]
+    out = sp.csr_array((data, indices, indptr), shape=(n, n))
+    out.has_sorted_indices = True
+    out.has_canonical_format = True
+    return out
+
+
+def fine_stencil_source(A, shape, radius=None, *, whole=False):
+    """Offsets and :class:`StencilSource` of a fine operator (a symmetric stencil, pattern read, else extraction).
+
+    ``whole=True``: a CSR operator in the full in-grid pattern is read into one array at once
+    (:func:`read_full_pattern`) instead of being kept as a CSR source read class by class.
+    """
+    if whole and not isinstance(A, SymmetricStencil):
+        read = read_full_pattern(A, shape, radius)
+        if read is not None:
+            offsets, S = read
+            return offsets, StencilSource(offsets, shape, array=S)
     if isinstance(A, SymmetricStencil):
         largest = 2 if radius is None else int(radius)
         if any(max(abs(dy), abs(dx)) > largest for dy, dx in A.offsets):

@@ -11,6 +11,8 @@ import :mod:`sparsedepth.grid`, NumPy and SciPy.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -32,6 +34,17 @@ def _interp_matrix_1d(weights):
     vals = np.concatenate([weights[0], weights[1]])
     keep = (vals != 0) & (cols < nc)
     return sp.csr_array((vals[keep], (rows[keep], cols[keep])), shape=(n, nc))
+
+
+@functools.lru_cache(maxsize=64)
+def _axis_matrices(n):
+    """``(P, Pᵀ, Pᵀ in float32)`` of 1-D linear interpolation to ``n`` points, CSR; made once per length.
+
+    Shared by every :class:`SeparableProlongation` with an axis of that length: nothing writes to them.
+    """
+    P = _interp_matrix_1d(linear_weights_1d(n))
+    PT = P.T.tocsr()
+    return P, PT, PT.astype(np.float32)
 
 
 def _interpolate_linear_rows(X, h):
@@ -61,12 +74,9 @@ class SeparableProlongation:
 
     def __init__(self, shape):
         h, w = shape
-        self.Py = _interp_matrix_1d(linear_weights_1d(h))
-        self.Px = _interp_matrix_1d(linear_weights_1d(w))
-        self.PyT = self.Py.T.tocsr()
-        self.PxT = self.Px.T.tocsr()
+        (self.Py, self.PyT, PyT32), (self.Px, self.PxT, PxT32) = _axis_matrices(h), _axis_matrices(w)
         # the same (weights 1 and 1/2: exact in float32) for restricting float32 residuals in float32
-        self._single = (self.PyT.astype(np.float32), self.PxT.astype(np.float32))
+        self._single = (PyT32, PxT32)
         hc, wc = self.Py.shape[1], self.Px.shape[1]
         self.fine_shape, self.coarse_shape = (h, w), (hc, wc)
         self.shape = (h * w, hc * wc)
