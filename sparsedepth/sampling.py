@@ -219,7 +219,7 @@ def sample_depth(depth, *, fraction=None, count=None, seed=0, pattern="uniform",
     --------
     >>> import numpy as np
     >>> depth = np.full((4, 6), 2.0)
-    >>> sparse, mask = sample_depth(depth, pattern="scan_lines", spacing=2, seed=1)
+    >>> sparse, mask = sample_depth(depth, pattern="scan_lines", spacing=2, seed=0)
     >>> mask.sum(axis=1)
     array([0, 6, 0, 6])
     """
