@@ -26,11 +26,15 @@ ALL_SHARED = [
     "kitti/0000000005",
     "kitti/0000000050",
     "kitti/0000000100",
+    "kitti_raw_0023/0000000000",
+    "kitti_raw_0023/0000000006",
     "middlebury2014/motorcycle",
     "middlebury2003/teddy",
     "middlebury2001/tsukuba",
     "eth3d/terrace",
     "tum/0",
+    "realsense_d435/000000080",
+    "realsense_d435/000000130",
 ]
 
 # name prefix -> (units, min, max, valid fraction lo, hi), from shared/data/SOURCES.md
@@ -44,6 +48,8 @@ EXPECTED = {
     "middlebury2001": ("disparity_px", 1.0, 255 / 16, 0.70, 0.90),
     "eth3d": ("m", 2.4, 5.3, 0.50, 0.56),
     "tum": ("m", 1.4, 9.4, 0.75, 0.85),
+    "realsense_d435": ("m", 0.3, 1.1, 0.78, 0.92),
+    "kitti_raw_0023": ("m", 4.5, 80.0, 0.035, 0.045),
 }
 
 SHARED_ROOT = ds.shared_data_dir()
@@ -87,6 +93,12 @@ def _independent_ground_truth(root: Path, name: str) -> np.ndarray:
         assert raw.startswith(header)
         disp = np.frombuffer(raw[len(header):], "<f4").reshape(434, 713)[::-1].astype(np.float64)
         return _nan_where(711.499 * 59.9432 / 1000 / disp, ~np.isfinite(disp))
+    if prefix == "realsense_d435":
+        stored = np.load(root / "realsense_cleargrasp" / f"depth_{frame}.npz")["depth"].astype(np.float64)
+        return _nan_where(stored, ~(np.isfinite(stored) & (stored > 0)))
+    if prefix == "kitti_raw_0023":
+        stored = np.load(root / "kitti_raw_0023" / f"velodyne_{frame}.npz")["velodyne_depth"].astype(np.float64)
+        return _nan_where(stored, ~(stored > 0))
     raise AssertionError(name)
 
 
@@ -338,3 +350,25 @@ def test_load_nyu_labeled(tmp_path):
     assert frame.intrinsics is None  # not the 640x480 frame the NYU intrinsics belong to
     with pytest.raises(IndexError):
         ds.load_nyu_labeled(tmp_path / "nyu.mat", 2)
+
+
+def test_frames_of_one_scene_share_its_name():
+    scenes = ds.shared_frame_scenes()
+    assert set(scenes) == set(ALL_SHARED)
+    # SOURCES.md: one basement, one KITTI drive per folder, one table set-up; the other frames are scenes of their own
+    groups = {}
+    for name, scene in scenes.items():
+        groups.setdefault(scene, set()).add(name)
+    shared = {frozenset(g) for g in groups.values() if len(g) > 1}
+    assert shared == {frozenset(f"nyu_metric3d/{f}" for f in ("00000", "00050", "00100")),
+                      frozenset(f"kitti/{f}" for f in ("0000000005", "0000000050", "0000000100")),
+                      frozenset(f"kitti_raw_0023/{f}" for f in ("0000000000", "0000000006")),
+                      frozenset(f"realsense_d435/{f}" for f in ("000000080", "000000130"))}
+
+
+def test_new_frames_carry_their_intrinsics():
+    if SHARED_ROOT is None:
+        pytest.skip("../shared/data not present")
+    assert ds.load_shared_frame("realsense_d435/000000080").intrinsics == (921.0, 921.0, 642.0, 359.0)
+    fx, fy, cx, cy = ds.load_shared_frame("kitti_raw_0023/0000000006").intrinsics
+    assert (fx, fy, cx, cy) == pytest.approx((721.5377, 721.5377, 609.5593, 172.854), rel=1e-12)

@@ -11,7 +11,8 @@ Three sources:
 * :func:`load_embedded_frame` - small frames shipped in ``sparsedepth/data``
   (see ``sparsedepth/data/SOURCES.md``), always available;
 * :func:`load_shared_frame` - the frames of the ``shared/data`` folder (see its
-  ``SOURCES.md``), located by :func:`shared_data_dir`.
+  ``SOURCES.md``), located by :func:`shared_data_dir`; :func:`shared_frame_scenes`
+  says which of them show one scene.
 
 :func:`load_nyu_labeled` reads one frame of the NYU Depth V2 labeled ``.mat``.
 
@@ -29,7 +30,7 @@ May import NumPy, scikit-image, :mod:`sparsedepth.io` and
 
 from .embedded import list_embedded_frames, load_embedded_frame, load_motorcycle, load_nyu_labeled
 from .frame import MOTORCYCLE_CALIBRATION, NYU_RGB_INTRINSICS, Frame
-from .shared import list_shared_frames, load_shared_frame, shared_data_dir
+from .shared import list_shared_frames, load_shared_frame, shared_data_dir, shared_frame_scenes
 
 __all__ = [
     "Frame",
@@ -42,4 +43,5 @@ __all__ = [
     "load_nyu_labeled",
     "load_shared_frame",
     "shared_data_dir",
+    "shared_frame_scenes",
 ]

@@ -3,9 +3,10 @@
 What lives here: :func:`shared_data_dir` (the folder, from
 ``SPARSEDEPTH_DATA`` or beside the repository), one loader per source of that
 folder (see its ``SOURCES.md`` for the units), the registry of frame name ->
-files + loader, :func:`list_shared_frames` and :func:`load_shared_frame`.
+files + loader + scene, :func:`list_shared_frames`, :func:`load_shared_frame` and :func:`shared_frame_scenes`
+(which frames show one scene: a benchmark keeps a scene on one side of a tuning/report split).
 
-Imports :mod:`sparsedepth.io` and :mod:`.frame` only.
+Imports NumPy, :mod:`sparsedepth.io` and :mod:`.frame` only.
 """
 
 from __future__ import annotations
@@ -16,11 +17,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from .._validation import check_folder
 from ..io import read_calib, read_depth, read_depth_array, read_depth_png, read_image
 from .frame import MMSEG_NAME, MOTORCYCLE_CALIBRATION, Frame, as_rgb, nyu_mmseg_frame
 
-__all__ = ["list_shared_frames", "load_shared_frame", "shared_data_dir"]
+__all__ = ["list_shared_frames", "load_shared_frame", "shared_data_dir", "shared_frame_scenes"]
 
 
 def shared_data_dir() -> Path | None:
@@ -163,10 +166,59 @@ def _load_tum(root: Path) -> Frame:
     )
 
 
+def _load_realsense(root: Path, frame: str) -> Frame:
+    folder = root / "realsense_cleargrasp"
+    image_path, depth_path = folder / f"rgb_{frame}.jpg", folder / f"depth_{frame}.npz"
+    calib_path = folder / "camera_intrinsics.yaml"
+    return Frame(
+        name=f"realsense_d435/{frame}",
+        dataset="ClearGrasp (RealSense D435)",
+        image=as_rgb(read_image(image_path), image_path),
+        depth=read_depth_array(depth_path, key="depth"),
+        units="m",
+        source=f"{image_path}; {depth_path}; {calib_path}",
+        intrinsics=_key_value_intrinsics(calib_path),
+    )
+
+
+def _key_value_intrinsics(path: Path) -> tuple[float, float, float, float]:
+    """``(fx, fy, cx, cy)`` from a file of ``key: value`` lines (ClearGrasp's ``camera_intrinsics.yaml``)."""
+    values = {}
+    for line in path.read_text(encoding="utf-8").splitlines():
+        key, sep, value = line.partition("#")[0].partition(":")
+        if sep:
+            values[key.strip()] = value.strip()
+    try:
+        return tuple(float(values[k]) for k in ("fx", "fy", "cx", "cy"))
+    except (KeyError, ValueError) as exc:
+        raise ValueError(f"'{path}': expected fx, fy, cx, cy as 'key: number' lines ({exc})") from None
+
+
+def _load_kitti_raw(root: Path, frame: str) -> Frame:
+    folder = root / "kitti_raw_0023"
+    image_path, depth_path, cam_path = folder / f"rgb_{frame}.png", folder / f"velodyne_{frame}.npz", folder / "cam.txt"
+    try:
+        K = np.loadtxt(cam_path, dtype=np.float64)
+    except ValueError as exc:
+        raise ValueError(f"'{cam_path}': expected a 3x3 matrix of numbers ({exc})") from None
+    if K.shape != (3, 3):
+        raise ValueError(f"'{cam_path}': expected a 3x3 matrix, got shape {K.shape}")
+    return Frame(
+        name=f"kitti_raw_0023/{frame}",
+        dataset="KITTI raw (drive 2011_09_26_0023)",
+        image=as_rgb(read_image(image_path), image_path),
+        depth=read_depth_array(depth_path, key="velodyne_depth"),
+        units="m",
+        source=f"{image_path}; {depth_path}; {cam_path}",
+        intrinsics=(K[0, 0], K[1, 1], K[0, 2], K[1, 2]),
+    )
+
+
 @dataclass(frozen=True)
 class _Entry:
     files: tuple[str, ...]
     load: Callable[[Path], Frame]
+    scene: str
 
 
 def _registry() -> dict[str, _Entry]:
@@ -174,37 +226,49 @@ def _registry() -> dict[str, _Entry]:
     for frame in ("00000", "00050", "00100"):
         entries[f"nyu_metric3d/{frame}"] = _Entry(
             (f"nyu_metric3d/rgb_{frame}.jpg", f"nyu_metric3d/sync_depth_{frame}.png"),
-            lambda root, frame=frame: _load_nyu_metric3d(root, frame),
+            lambda root, frame=frame: _load_nyu_metric3d(root, frame), "nyu/basement",
         )
     entries["nyu_rcnn_depth/demo"] = _Entry(
         ("nyu_rcnn_depth/images.png", "nyu_rcnn_depth/depth.png", "nyu_rcnn_depth/rawdepth.png"),
-        _load_nyu_rcnn,
+        _load_nyu_rcnn, "nyu/rcnn_demo",
     )
     entries[f"nyu_mmseg_pseudo/{MMSEG_NAME}"] = _Entry(
-        (f"nyu_mmseg_pseudo/{MMSEG_NAME}.jpg", f"nyu_mmseg_pseudo/{MMSEG_NAME}.png"), _load_nyu_mmseg
+        (f"nyu_mmseg_pseudo/{MMSEG_NAME}.jpg", f"nyu_mmseg_pseudo/{MMSEG_NAME}.png"), _load_nyu_mmseg,
+        "nyu/bookstore_0001d",
     )
     for frame in ("0000000005", "0000000050", "0000000100"):
         entries[f"kitti/{frame}"] = _Entry(
             (f"kitti_metric3d/rgb_{frame}.png", f"kitti_metric3d/depth_{frame}.png"),
-            lambda root, frame=frame: _load_kitti(root, frame),
+            lambda root, frame=frame: _load_kitti(root, frame), "kitti/metric3d_drive",
+        )
+    for frame in ("0000000000", "0000000006"):
+        entries[f"kitti_raw_0023/{frame}"] = _Entry(
+            (f"kitti_raw_0023/rgb_{frame}.png", f"kitti_raw_0023/velodyne_{frame}.npz", "kitti_raw_0023/cam.txt"),
+            lambda root, frame=frame: _load_kitti_raw(root, frame), "kitti/2011_09_26_drive_0023",
         )
     entries["middlebury2014/motorcycle"] = _Entry(
         ("middlebury2014_skimage/motorcycle_left.png", "middlebury2014_skimage/motorcycle_disp.npz"),
-        _load_motorcycle_shared,
+        _load_motorcycle_shared, "middlebury/motorcycle",
     )
     entries["middlebury2003/teddy"] = _Entry(
         ("middlebury_acv/teddy/im2.png", "middlebury_acv/teddy/disp2.png"),
-        lambda root: _load_middlebury_acv(root, "teddy"),
+        lambda root: _load_middlebury_acv(root, "teddy"), "middlebury/teddy",
     )
     entries["middlebury2001/tsukuba"] = _Entry(
         ("middlebury_acv/tsukuba/im3.png", "middlebury_acv/tsukuba/disp3.pgm"),
-        lambda root: _load_middlebury_acv(root, "tsukuba"),
+        lambda root: _load_middlebury_acv(root, "tsukuba"), "middlebury/tsukuba",
     )
     entries["eth3d/terrace"] = _Entry(
         ("eth3d_twoview/terrace/im0.png", "eth3d_twoview/terrace/disp0.pfm", "eth3d_twoview/terrace/calib.txt"),
-        _load_eth3d,
+        _load_eth3d, "eth3d/terrace",
     )
-    entries["tum/0"] = _Entry(("tum_open3d/TUM_color.png", "tum_open3d/TUM_depth.png"), _load_tum)
+    entries["tum/0"] = _Entry(("tum_open3d/TUM_color.png", "tum_open3d/TUM_depth.png"), _load_tum, "tum/0")
+    for frame in ("000000080", "000000130"):
+        entries[f"realsense_d435/{frame}"] = _Entry(
+            (f"realsense_cleargrasp/rgb_{frame}.jpg", f"realsense_cleargrasp/depth_{frame}.npz",
+             "realsense_cleargrasp/camera_intrinsics.yaml"),
+            lambda root, frame=frame: _load_realsense(root, frame), "realsense/cleargrasp_table",
+        )
     return entries
 
 
@@ -249,6 +313,21 @@ def list_shared_frames(root=None) -> list[str]:
     return [name for name, entry in _SHARED.items() if all((root / f).is_file() for f in entry.files)]
 
 
+def shared_frame_scenes() -> dict[str, str]:
+    """The scene of every shared frame: frames of one scene (one room, one drive, one set-up) share a name.
+
+    A benchmark that tunes on some frames and reports on others keeps each scene on one side
+    (``../shared/data/SOURCES.md`` says which frames share a scene).
+
+    Returns
+    -------
+    dict of str to str
+        Frame name (as :func:`list_shared_frames` gives it) to scene name, e.g. ``"nyu_metric3d/00050"`` to
+        ``"nyu/basement"``; every known frame, present or not.
+    """
+    return {name: entry.scene for name, entry in _SHARED.items()}
+
+
 def load_shared_frame(name: str, root=None) -> Frame:
     """Load one frame of the shared data folder with its ground truth.
 
@@ -276,6 +355,11 @@ def load_shared_frame(name: str, root=None) -> Frame:
         * ``"eth3d/terrace"`` - PFM disparity + ``calib.txt`` -> metres
           (2.4-5.3 m, 53 % valid).
         * ``"tum/0"`` - TUM RGB-D raw depth (v / 5000 m).
+        * ``"realsense_d435/000000080"``, ``"/000000130"`` - ClearGrasp's RealSense D435 frames, 1280x720, the
+          sensor's depth in metres (NaN = no return, 9-21 %); one table set-up.
+        * ``"kitti_raw_0023/0000000000"``, ``"/0000000006"`` - a second KITTI drive: the raw Velodyne scan
+          projected into image_02 (about 4 % of the pixels), not a dense ground truth: score a completion on the
+          scan points it was not given.
 
         The unregistered NYU raw Kinect frame (``nyu_raw_open3d``) is not a
         frame here; its PGM can be read with
