@@ -481,23 +481,37 @@ class LocalLinearOperator(StencilOperator):
                 writes[i, j] = [(images[slot[o]], a) for o, a in places if not symmetric or o >= (0, 0)]
         step = self._band_rows()
         (low_y, low_x), span_y = self._low, self._span[0]
-        longest = self._run_length(0, min(step + span_y, self._anchor_rows))  # the longest run of a band
+        span_x = self._span[1]
+        longest = min(step + span_y, self._anchor_rows) * W  # the longest run of a band, and its row's tail
         centred_all, projected_all = np.empty((2, C, n, longest))
         couplings_all, product_all = np.empty((2, n, longest))
+        done = (0, 0)  # the anchor rows whose centred colours and projections the buffers hold (from position 0)
         for y0 in range(0, H, step):
             y1 = min(H, y0 + step)
             # the windows with a pixel on grid rows y0 .. y1 - 1 (anchor row k covers grid rows k .. k + span_y)
             k0, k1 = max(y0 - span_y, 0), min(y1, self._anchor_rows)
             if k1 <= k0:
                 continue
-            mean, inverse = self._window_planes(k0, k1)
-            length = mean.shape[1]
+            length = self._run_length(k0, k1)
+            fresh = k0  # the first anchor row not computed for the previous band
+            if done[0] <= k0 < done[1]:
+                fresh = done[1]
+                source, count = (k0 - done[0]) * W, (fresh - k0) * W - span_x
+                for buffer in (centred_all, projected_all):
+                    buffer[:, :, :count] = buffer[:, :, source:source + count]
+                    buffer[:, :, count:count + span_x] = 0.0  # the wrap to row `fresh`: no window
+            if fresh < k1:
+                mean, inverse = self._window_planes(fresh, k1)
+                part = slice((fresh - k0) * W, length)
+                centred = centred_all[:, :, part]  # centred[c, j]: channel c of I_j − μ
+                for j, o in enumerate(window):
+                    np.subtract(self._run(self._flat, o, fresh, mean.shape[1]), mean, out=centred[:, j])
+                projected = _apply(inverse, centred, out=projected_all[:, :, part],
+                                   work=product_all[:, :mean.shape[1]])
+                projected *= constant  # projected[:, i]: −(scale / n) P (I_i − μ)
+            done = (k0, k1)
+            centred, projected = centred_all[:, :, :length], projected_all[:, :, :length]
             outside = self._outside(k0, k1)
-            centred = centred_all[:, :, :length]  # centred[c, j]: channel c of I_j − μ
-            for j, o in enumerate(window):
-                np.subtract(self._run(self._flat, o, k0, length), mean, out=centred[:, j])
-            projected = _apply(inverse, centred, out=projected_all[:, :, :length], work=product_all[:, :length])
-            projected *= constant  # projected[:, i]: −(scale / n) P (I_i − μ)
             for i in range(n):
                 # the couplings of i with j = i .. n − 1
                 coupling, work = couplings_all[:n - i, :length], product_all[:n - i, :length]
