@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import check_count, check_nonnegative_count, check_nonnegative_real
+from .._validation import as_float_image, check_count, check_nonnegative_count, check_nonnegative_real
 from .edges import pair_distances
 from .rowbands import row_bands, rows_per_band
 from ..limits import memory_limits
@@ -220,19 +220,25 @@ def upsample_edges(coarse, shape, factor: int, axis: int) -> np.ndarray:
 
 # the numpydoc docstring (the model in Notes) is most of the length
 def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa: float, sweeps: int,
-                      dtype=np.float32) -> np.ndarray:
+                      start_factor: int = 1, dtype=np.float32) -> np.ndarray:
     r"""Red-black Gauss-Seidel sweeps on an image-weighted smoothness model, the observations held fixed.
 
     Parameters
     ----------
-    start : ndarray, shape (H, W)
-        The field to refine (e.g. a coarse solution upsampled); also the
-        model's prior.
-    image : ndarray, shape (H, W, C)
-        Floats in [0, 1] (:func:`~sparsedepth._validation.as_float_image`;
-        float32 is enough and faster).
-    depth, observed : ndarray, shape (H, W)
-        Observed values (finite where ``observed``) and where they are.
+    start : ndarray, shape (H, W), or ``coarse_shape((H, W), start_factor)``
+        The field to refine; also the model's prior.  With ``start_factor >
+        1``, a coarse field whose bilinear interpolation
+        (:func:`upsample_bilinear`) is the start, interpolated a band of rows
+        at a time (no full-size copy).
+    image : ndarray, shape (H, W, C) or (H, W)
+        Any image :func:`~sparsedepth._validation.as_float_image` takes
+        (uint8, uint16 or floats in [0, 1]), scaled to [0, 1] in float32 a
+        band of rows at a time (no float copy of the whole image).
+    depth : ndarray, shape (H, W) or (N,)
+        The observed values (finite where ``observed``), or only those
+        (``depth[observed]``, ``N`` the number of observed pixels).
+    observed : ndarray of bool, shape (H, W)
+        Where the observations are.
     smoothness : float
         ``λ >= 0`` below.
     kappa : float
@@ -240,6 +246,8 @@ def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa
     sweeps : int
         Red-black sweeps (``>= 0``; 0 returns ``start`` with the observations
         put back).
+    start_factor : int
+        1 (``start`` is on the grid) or the coarsening of ``start``.
     dtype : {numpy.float32, numpy.float64}
         The type of the returned array; the sweeps compute in float32 either
         way (float64 holds the float32 values exactly).
@@ -279,16 +287,25 @@ def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa
     if dtype not in (np.float32, np.float64):
         raise ValueError(f"dtype must be float32 or float64, got {dtype}")
     observed = np.asarray(observed, dtype=bool)
+    start_factor = check_count(start_factor, name="start_factor")
     start = np.asarray(start)
+    if observed.ndim != 2:
+        raise ValueError(f"observed must be an (H, W) array, got shape {observed.shape}")
+    if start.shape != coarse_shape(observed.shape, start_factor):
+        raise ValueError(f"start has shape {start.shape}; the {observed.shape} grid at start_factor {start_factor} "
+                         f"needs {coarse_shape(observed.shape, start_factor)}")
+    depth = np.asarray(depth)
+    samples = (depth[observed] if depth.ndim == 2 else depth).astype(np.float32)  # the samples in float32
+    if samples.shape != (np.count_nonzero(observed),):
+        raise ValueError(f"depth has shape {depth.shape}: give the grid's values, or one per observed pixel")
     if sweeps == 0 or smoothness == 0:
-        z = start.astype(np.float32)
-        np.copyto(z, np.asarray(depth), where=observed, casting="unsafe")  # the samples in float32
+        z = (start if start_factor == 1 else upsample_bilinear(start, observed.shape, start_factor)).astype(np.float32)
+        z[observed] = samples
         return z.astype(dtype, copy=False)
-    layout = _ParityLayout(*start.shape)
-    priors = layout.split(start, np.float32)
+    layout = _ParityLayout(*observed.shape)
+    priors = _parity_start(layout, start, start_factor)
     fields = priors.copy()
     held = layout.entries(observed)  # the observed pixels' entries in the flat (2 * half) parity storage
-    samples = np.asarray(depth)[observed].astype(np.float32)
     fields.reshape(-1)[held] = samples
     across, down = _parity_pair_weights(layout, image, kappa, smoothness)
     inverses = np.ones_like(priors)  # 1 + the pixel's pair weights (left, right, upper, lower), then its reciprocal
@@ -300,23 +317,44 @@ def edge_aware_sweeps(start, image, depth, observed, *, smoothness: float, kappa
         for target in (0, 1):
             _half_sweep(fields, target, priors, inverses, across, down, layout.offsets(target), chunk)
             fields.reshape(-1)[held] = samples  # the observations stay as they are
+    del priors, inverses, across, down  # freed before the result is allocated
     return layout.merge(fields, dtype)
+
+
+def _parity_start(layout, start, factor):
+    """The start split by parity in float32: ``start`` itself (``factor`` 1) or its bilinear interpolation.
+
+    The interpolation (:func:`upsample_bilinear`'s numbers) is computed and stored a band of rows at a time.
+    """
+    if factor == 1:
+        return layout.split(start, np.float32)
+    H, W = layout.shape
+    priors = np.zeros((2, layout.half), dtype=np.float32)
+    r0, r1, wr = _linear_taps(H, start.shape[0], factor)
+    columns = _linear_taps(W, start.shape[1], factor)
+    band = rows_per_band(W, memory_limits().sweep_band_values, multiple=2)  # even: bands start on even rows
+    for rows in row_bands(0, H, band):
+        layout.put(priors, _interpolate(start, (r0[rows], r1[rows], wr[rows]), columns), first_row=rows.start)
+    return priors
 
 
 def _parity_pair_weights(layout, image, kappa, smoothness):
     """``(across, down)`` split by parity: ``λ exp(−κ d)`` of each pixel's pair with its right / lower neighbour.
 
-    The pair distances (:func:`~sparsedepth.grid.edges.pair_distances`, in float32) are computed over bands of
-    rows (about ``sweep_band_values`` pair weights each) and written into the parity storage band by band; the
-    pairs beyond the last column and row have weight 0.
+    The image is scaled (:func:`~sparsedepth._validation.as_float_image`, float32) and the pair distances
+    (:func:`~sparsedepth.grid.edges.pair_distances`) computed over bands of rows (about ``sweep_band_values``
+    pair weights each), and written into the parity storage band by band; the pairs beyond the last column and
+    row have weight 0.
     """
     image = np.asarray(image)
     H, W = layout.shape
+    if image.shape[:2] != (H, W):
+        raise ValueError(f"image has shape {image.shape}; the grid is {H}x{W}")
     across, down = np.zeros((2, 2, layout.half), dtype=np.float32)
     band = rows_per_band(W, memory_limits().sweep_band_values, multiple=2)  # even: bands start on even rows
     for rows in row_bands(0, H, band):
         y0, y1 = rows.start, rows.stop
-        distance_across, distance_down = pair_distances(np.asarray(image[y0:y1 + 1], dtype=np.float32))
+        distance_across, distance_down = pair_distances(as_float_image(image[y0:y1 + 1], dtype=np.float32))
         layout.put(across, _pair_weights(distance_across[:y1 - y0], kappa, smoothness), first_row=y0)
         layout.put(down, _pair_weights(distance_down, kappa, smoothness), first_row=y0)
     return across, down
@@ -362,8 +400,8 @@ class _ParityLayout:
 
     def entries(self, mask):
         """The indices in the flattened ``(2, half)`` storage of the pixels where the ``(H, W)`` mask is True."""
-        y, x = np.nonzero(mask)
-        flat = y * self.row + x
+        pixel = np.flatnonzero(mask)  # y W + x
+        flat = pixel + (pixel // self.shape[1]) * (self.row - self.shape[1])  # y P + x
         return (flat & 1) * self.half + (flat >> 1)
 
     def split(self, values, dtype):

@@ -12,7 +12,9 @@ import time
 import numpy as np
 
 from .._validation import as_depth_and_mask, as_float_image, check_same_shape
-from ..grid.resample import block_mean, block_sample_mean, coarse_shape, edge_aware_sweeps, upsample_bilinear
+from ..grid.resample import block_mean, block_sample_mean, coarse_shape, edge_aware_sweeps
+from ..grid.rowbands import row_bands, rows_per_band
+from ..limits import memory_limits
 from ..objective.objective import DEFAULT_L1_SMOOTHING
 from ..objective.weights import DEFAULT_WEIGHTS, Weights, observed_fraction, resolve_weights
 from ..problem import CompletionProblem, checked_start, choose_solver, clamp, observed_range
@@ -94,9 +96,11 @@ def complete_fast(image, sparse_depth, mask=None, *, weights=None, l1_smoothing=
     filters': ``python -m bench.fast_mode``.
     """
     start_time = time.perf_counter()
-    fine_image = as_float_image(image, dtype=np.float32)
+    image = np.asarray(image)
+    if not _scaled_by_bands(image):
+        image = as_float_image(image, dtype=np.float32)  # a float image's values are checked over the whole image
     depth, observed = as_depth_and_mask(sparse_depth, mask)
-    check_same_shape(fine_image.shape[:2], depth.shape, "image", "sparse_depth")
+    check_same_shape(image.shape[:2], depth.shape, "image", "sparse_depth")
     if weights is None:
         weights = FAST_WEIGHTS
     elif not isinstance(weights, Weights):
@@ -110,7 +114,9 @@ def complete_fast(image, sparse_depth, mask=None, *, weights=None, l1_smoothing=
     if min(coarse_shape(shape, factor)) < 2:
         factor = 1
     coarse_depth, coarse_observed = block_sample_mean(depth, observed, factor)
-    coarse_image = np.clip(block_mean(fine_image, factor), 0.0, 1.0)  # float32 means may round past 1
+    samples = depth[observed]
+    del depth  # the full-size copy is not needed past the block means
+    coarse_image = _coarse_image(image, factor)
     # lengths in the user's pixels: a blur of edge_sigma pixels is edge_sigma / f coarse pixels, and a coarse step
     # is f pixels long, so the geodesic fill's cost per unit of image contrast is fill_contrast / f in its steps
     coarse_weights = weights.replace(edge_sigma=weights.edge_sigma / factor,
@@ -126,10 +132,11 @@ def complete_fast(image, sparse_depth, mask=None, *, weights=None, l1_smoothing=
     else:
         out, _ = problem.run(solver=name, start=start, certify=False, objective_values=False, clip=False)
         coarse_z = out.z
-    z = upsample_bilinear(coarse_z.reshape(problem.shape).astype(np.float32), shape, factor)
-    z = edge_aware_sweeps(z, fine_image, depth, observed, smoothness=FAST_SMOOTHNESS, kappa=FAST_KAPPA,
-                          sweeps=FAST_SWEEPS, dtype=np.float64)
-    depth_range = observed_range(depth[observed], clip_to_observed)
+    # the sweeps interpolate the coarse solution (bilinearly) band by band as they read it
+    z = edge_aware_sweeps(coarse_z.reshape(problem.shape).astype(np.float32), image, samples, observed,
+                          smoothness=FAST_SMOOTHNESS, kappa=FAST_KAPPA, sweeps=FAST_SWEEPS, start_factor=factor,
+                          dtype=np.float64)
+    depth_range = observed_range(samples, clip_to_observed)
     z, clamped = clamp(z, depth_range, clip_to_observed, rounding=FLOAT32_ROUNDING)
     return CompletionResult(
         depth=z,
@@ -148,3 +155,26 @@ def complete_fast(image, sparse_depth, mask=None, *, weights=None, l1_smoothing=
         gap=float("nan"),
         solver_gap=float("nan"),
     )
+
+
+def _scaled_by_bands(image) -> bool:
+    """True for a uint8 or uint16 image of a shape :func:`~sparsedepth._validation.as_float_image` takes.
+
+    Its scaling to [0, 1] checks no values, so it is done a band of rows at a time where the image is read
+    (:func:`_coarse_image`, :func:`~sparsedepth.grid.resample.edge_aware_sweeps`) instead of into a float copy of
+    the whole image; any other image is converted, and checked, whole.
+    """
+    return (image.dtype in (np.uint8, np.uint16) and image.size > 0
+            and (image.ndim == 2 or (image.ndim == 3 and image.shape[2] in (1, 3, 4))))
+
+
+def _coarse_image(image, factor):
+    """The block means (:func:`~sparsedepth.grid.resample.block_mean`) of the image scaled to [0, 1] in float32.
+
+    Scaled by :func:`~sparsedepth._validation.as_float_image` a band of rows at a time (a multiple of ``factor``
+    rows: the same blocks and sums as over the whole image); float32 means may round past 1 and are clipped.
+    """
+    channels = image.shape[2] if image.ndim == 3 else 1
+    rows = rows_per_band(image.shape[1] * channels, memory_limits().norm_band_values, multiple=factor)
+    means = [block_mean(as_float_image(image[band], dtype=np.float32), factor) for band in row_bands(0, image.shape[0], rows)]
+    return np.clip(np.concatenate(means), 0.0, 1.0)
