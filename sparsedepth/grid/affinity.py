@@ -180,6 +180,15 @@ class LocalLinearOperator(StencilOperator):
     Since ``M (G + ε) M = M``, ``‖r‖² + ε ‖a‖² = z_wᵀ (C − X M Xᵀ) z_w = z_wᵀ L_w z_w``: ``Kᵀ K = Σ_w L_w = L``.
     The adjoint of one window's rows ``(v, u)`` is ``C v + X M (√ε u − Xᵀ v)``.  All sums over a window are ``n``
     shifted whole-array operations.
+
+    The windows of anchor rows ``k0 .. k1 − 1`` are computed as one flat run of length ``(k1 − k0) W − s``
+    (``s`` the columns a window spans, minus 1): position ``f`` of the run is the window anchored ``f // W``
+    rows and ``f % W`` columns after the first window of row ``k0``, so pixel ``o`` of every window of the run
+    is one contiguous run of the flat image, which NumPy processes several times faster than a strided
+    two-dimensional view.  The positions with ``f % W >= W − s`` (the wrap from a row's last window to the
+    next row's first) are no windows: they are computed like the others and set to 0 before anything is
+    written to the grid.  Every value of a real window is computed by the same operations in the same order
+    as on the two-dimensional grid.
     """
 
     def __init__(self, image, eps, window="3x3"):
@@ -204,14 +213,6 @@ class LocalLinearOperator(StencilOperator):
         self._fit_cache = None
 
     # -- the fit of every window ---------------------------------------------
-    #
-    # The windows of anchor rows k0 .. k1 - 1 are computed as one flat run: window f of the run is anchored at
-    # grid row k0 + f // W (plus the first anchor row), column f % W (plus the first anchor column), so the
-    # pixel o of every window is one contiguous run of the flat image.  The run covers whole grid rows except
-    # the last one's tail; its positions with f % W >= W - span (the wrap from a row's last window to the
-    # next row's first) are no windows: they are computed like the others and dropped (set to 0) before
-    # anything is written to the grid.  NumPy works on contiguous runs several times faster than on strided
-    # two-dimensional views, and every value of a real window is the same as on the two-dimensional grid.
     def _band_rows(self):
         """Window rows per band of the band-wise computations (about ``affinity_band_pixels`` pixels).
 
@@ -446,18 +447,18 @@ class LocalLinearOperator(StencilOperator):
         Raises
         ------
         ValueError
-            If ``row_weights`` is given (the term has no per-row weights).
+            If ``row_weights`` is given (the term has no per-row weights), or ``stencil`` is not C-contiguous.
 
         Notes
         -----
         The grid is processed a band of stencil rows at a time: the windows that touch the band get their
-        ``μ`` and ``P`` (:meth:`_window_planes`) and the centred colours ``I_j − μ`` of all their pixels,
-        then every pixel ``i`` its projection ``−(scale/n) P (I_i − μ)`` and, with one whole-band operation
-        per channel, its couplings with the pixels ``j >= i``.  Every window quantity is a flat run of the
-        band (see the comment above :meth:`_band_rows`) and every coupling is added to the stencil as one
-        contiguous run, its positions that are no window adding 0.  Each stencil entry receives its terms
-        in the order of the pairs, as in one pass over the whole grid, so the images do not depend on the
-        band height; nothing per pixel is kept.
+        ``μ`` and ``P`` (:meth:`_window_planes`), the centred colours ``I_j − μ`` of all their pixels and the
+        projections ``−(scale/n) P (I_i − μ)`` (the windows of the rows the previous band also touched keep
+        theirs), then every pixel ``i`` its couplings with the pixels ``j >= i``, one whole-band operation per
+        channel.  Every window quantity is a flat run of the band (see the class notes) and every coupling is
+        added to the stencil as one contiguous run, its positions that are no window adding 0.  Each stencil
+        entry receives its terms in the order of the pairs, as in one pass over the whole grid, so the images
+        do not depend on the band height; nothing per pixel is kept.
         """
         if row_weights is not None:
             raise ValueError("the local-linear term takes no row_weights (its rows are the windows' fit residuals)")

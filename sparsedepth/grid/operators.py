@@ -354,16 +354,22 @@ class StencilOperator:
         ----------
         stencil : ndarray, shape (len(offsets), H, W)
             ``stencil[j, y, x]`` is the coupling of pixel ``(y, x)`` with
-            ``(y, x) + offsets[j]``; updated in place.
+            ``(y, x) + offsets[j]``; updated in place.  C-contiguous.
         offsets : list of tuple of int
             Must contain :meth:`offsets` (with ``symmetric``: those ``>= (0, 0)``).
         row_weights : ndarray, shape (n_blocks * H * W,), optional
-            ``r`` (default ones).
+            ``r`` (default ones); or an object whose slices within one block are that block's weights (the
+            lazily computed weights of :mod:`sparsedepth.grid.edges`), read a block at a time.
         scale : float
         symmetric : bool, default False
             Write only the couplings at offsets ``>= (0, 0)`` (the stored half
             of a :class:`~sparsedepth.grid.stencil.SymmetricStencil`); the
             others are their mirrors (the pair of taps taken the other way round).
+
+        Raises
+        ------
+        ValueError
+            If ``stencil`` is not a C-contiguous array.
 
         Notes
         -----
@@ -381,9 +387,13 @@ class StencilOperator:
         H, W = self.grid_shape
         n = H * W
         images = _flat_images(stencil)
-        weights = [None if row_weights is None else
-                   np.asarray(row_weights[b * n:(b + 1) * n], dtype=np.float64).reshape(H, W)
-                   for b in range(len(self.blocks))]
+        if row_weights is None:
+            weights = [None] * len(self.blocks)
+        elif isinstance(row_weights, (np.ndarray, list, tuple)):
+            weights = list(np.asarray(row_weights, dtype=np.float64).reshape((len(self.blocks), H, W)))
+        else:  # weights computed when read (grid.edges): one block at a time
+            weights = [np.asarray(row_weights[b * n:(b + 1) * n], dtype=np.float64).reshape(H, W)
+                       for b in range(len(self.blocks))]
         # per block: its anchor region, its pairs of taps (target shift, offset, coefficient) in the order of
         # the taps, and the distinct coefficients among them
         plans = []
@@ -394,7 +404,9 @@ class StencilOperator:
                      for oi, ci in block for ok, ck in block
                      if not (symmetric and (ok[0] - oi[0], ok[1] - oi[1]) < (0, 0))]
             if pairs:
-                plans.append((weights[b], region, pairs, sorted({coefficient for _, _, coefficient in pairs})))
+                # the distinct coefficients, told apart by their bits (float.hex)
+                coefficients = {coefficient.hex(): coefficient for _, _, coefficient in pairs}
+                plans.append((weights[b], region, pairs, coefficients))
         band = rows_per_band(W, memory_limits().operator_band_values)
         for band_rows in row_bands(0, H, band):
             y0, y1 = band_rows.start, band_rows.stop
@@ -406,11 +418,11 @@ class StencilOperator:
                     continue
                 rows = np.ones((a1 - a0, W)) if weight is None else weight[a0:a1]
                 weighted = {}
-                for coefficient in coefficients:
+                for key, coefficient in coefficients.items():
                     values = np.multiply(rows, coefficient)
                     values[:, :xs.start] = 0.0  # outside the anchor columns: a zero for the flat run
                     values[:, xs.stop:] = 0.0
-                    weighted[coefficient] = values.reshape(-1)
+                    weighted[key] = values.reshape(-1)
                 for oi, offset, coefficient in pairs:
                     # anchor rows lo .. hi - 1 land on stencil rows lo + oi[0] .. hi - 1 + oi[0], inside the band
                     lo, hi = max(a0, y0 - oi[0]), min(a1, y1 - oi[0])
@@ -418,7 +430,7 @@ class StencilOperator:
                         continue
                     first, stop = (lo - a0) * W + xs.start, (hi - 1 - a0) * W + xs.stop
                     target = (lo + oi[0]) * W + xs.start + oi[1]
-                    images[slot[offset]][target:target + stop - first] += weighted[coefficient][first:stop]
+                    images[slot[offset]][target:target + stop - first] += weighted[coefficient.hex()][first:stop]
         return stencil
 
     def tocsr(self):
