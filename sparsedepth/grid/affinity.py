@@ -156,6 +156,15 @@ def _apply(P, x, out=None, work=None):
     return out
 
 
+def _divide(array, count):
+    """``array /= count`` in place; by a power of two as the product with its reciprocal (exact: the same rounding)."""
+    if count & (count - 1) == 0:
+        array *= 1.0 / count
+    else:
+        array /= count
+    return array
+
+
 def _dot(x, y):
     """``xᵀ y`` per pixel for ``(C, ...)`` arrays."""
     out = x[0] * y[0]
@@ -257,7 +266,7 @@ class LocalLinearOperator(StencilOperator):
         n = float(self.size)
         length = self._run_length(k0, k1)
         mean = self._run_sum(self._flat, k0, length)
-        mean /= n
+        _divide(mean, self.size)
         first, stop = k0 * W, (k1 + self._span[0]) * W  # the grid rows the windows cover
         product = np.empty(stop - first)
         work = np.empty(length)
@@ -266,7 +275,7 @@ class LocalLinearOperator(StencilOperator):
             for d in range(c, C):
                 np.multiply(self._flat[c, first:stop], self._flat[d, first:stop], out=product)
                 entry = self._run_sum(product, k0, length, origin=first)
-                entry /= n
+                _divide(entry, self.size)
                 np.multiply(mean[c], mean[d], out=work)
                 entry -= work
                 cov[c][d] = cov[d][c] = entry
@@ -306,13 +315,13 @@ class LocalLinearOperator(StencilOperator):
         n = float(self.size)
         length = mean.shape[1]
         zbar = self._run_sum(z, k0, length)
-        zbar /= n
+        _divide(zbar, self.size)
         cross = np.zeros(mean.shape)
         product = np.empty(mean.shape)
         for o in self.offsets_in_window:
             np.multiply(self._run(self._flat, o, k0, length), self._run(z, o, k0, length), out=product)
             cross += product
-        cross /= n
+        _divide(cross, self.size)
         cross -= mean * zbar  # the covariance of image and depth in each window
         a = _apply(inverse, cross)
         intercept = zbar - _dot(a, mean)
