@@ -11,6 +11,8 @@ then the columns, computing half the offsets of each symmetric product.  May imp
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from .stencils import mirrored_image
@@ -20,6 +22,11 @@ __all__ = ["galerkin_offsets", "galerkin_stencil"]
 
 def galerkin_offsets(offsets):
     """Offsets of P^T A P for the given fine offsets (structural)."""
+    return list(_galerkin_offsets(tuple(map(tuple, offsets))))
+
+
+@functools.lru_cache(maxsize=64)
+def _galerkin_offsets(offsets):
     out = set()
     for py in (0, 1):
         for px in (0, 1):
@@ -31,7 +38,7 @@ def galerkin_offsets(offsets):
                         for fy in range(ry + 1):
                             for fx in range(rx + 1):
                                 out.add((qy + fy - ey, qx + fx - ex))
-    return sorted(out)
+    return tuple(sorted(out))
 
 
 def galerkin_stencil(offsets, source, interp, shape, coarse_offsets, *, as_list=False):
@@ -41,8 +48,8 @@ def galerkin_stencil(offsets, source, interp, shape, coarse_offsets, *, as_list=
     list of ``(hc, wc)`` images, each its own allocation (a caller that
     converts them one by one can free each once converted).
 
-    With separable (bilinear) weights, a source that holds whole images
-    (:meth:`~.stencils.StencilSource.whole_images`) and offsets closed under
+    With separable (bilinear) weights, a source that hands out its rows
+    (:meth:`~.stencils.StencilSource.row_reader`) and offsets closed under
     negation, the product is :func:`separable_galerkin_stencil`'s (the same
     coefficients up to the order of the sums); otherwise the parity-class sums
     below.
@@ -68,9 +75,9 @@ def galerkin_stencil(offsets, source, interp, shape, coarse_offsets, *, as_list=
     """
     h, w = shape
     hc, wc = (h + 1) // 2, (w + 1) // 2
-    image_of = source.whole_images() if interp.separable else None
-    if image_of is not None and _closed_under_negation(offsets) and _closed_under_negation(coarse_offsets):
-        return separable_galerkin_stencil(offsets, image_of, interp.wy, interp.wx, coarse_offsets, as_list=as_list)
+    rows_of = source.row_reader() if interp.separable else None
+    if rows_of is not None and _closed_under_negation(offsets) and _closed_under_negation(coarse_offsets):
+        return separable_galerkin_stencil(offsets, rows_of, interp.wy, interp.wx, coarse_offsets, as_list=as_list)
     radius = max(max(abs(dy), abs(dx)) for dy, dx in offsets)
     pad = (radius + 1) // 2
     slot = {d: i for i, d in enumerate(coarse_offsets)}
@@ -154,7 +161,7 @@ def _upper(dy, dx):
     return dy > 0 or (dy == 0 and dx >= 0)
 
 
-def _coarsen_rows(offsets, image_of, weights, keep, target_of):
+def _coarsen_rows(offsets, image_of, weights, keep, target_of, *, first=0, targets=None):
     r"""One axis of a bilinear Galerkin product: :math:`P_1^\top A P_1` with :math:`P_1` acting on the rows only.
 
     Parameters
@@ -163,16 +170,22 @@ def _coarsen_rows(offsets, image_of, weights, keep, target_of):
         Offsets ``(d, e)`` of the operator: ``d`` along the rows (the axis coarsened), ``e`` along the other
         axis (kept as it is).
     image_of : callable
-        ``image_of(o)``: the ``(n, m)`` coefficient image of offset ``o`` (float64, zero where the neighbour
-        is outside the grid); called at most once per offset, only for offsets that reach a kept target.
+        ``image_of(o)``: the coefficient image of offset ``o`` (float64, zero where the neighbour is outside
+        the grid) on the fine rows ``first, first + 1, ...`` (those the coarse rows in `targets` read); called
+        at most once per offset, only for offsets that reach a kept target.
     weights : ndarray, shape (2, n)
         Linear weights of the rows (:func:`~.interpolation.linear_weights_1d`): fine row ``i`` has the parents
         ``i // 2`` and ``i // 2 + 1`` with weights ``weights[0, i]`` and ``weights[1, i]``.
     keep : callable
         ``keep(D, e)``: whether the coarse offset ``(D, e)`` is wanted.
     target_of : callable
-        ``target_of(D, e)``: the ``(nc, m)`` array (``nc = (n + 1) // 2``) that the coefficients of ``(D, e)``
-        are added to.
+        ``target_of(D, e)``: the array whose row ``j`` is coarse row ``targets[0] + j``, that the coefficients
+        of ``(D, e)`` are added to.
+    first : int, default 0
+        The fine row that row 0 of the images is.
+    targets : tuple of int, optional
+        ``(Y0, Y1)``: only the coarse rows ``Y0 <= Y < Y1`` are summed (default all ``(n + 1) // 2``); they
+        read the fine rows ``2 Y0 - 2`` to ``2 Y1 - 1`` (within the grid).
 
     Notes
     -----
@@ -192,6 +205,7 @@ def _coarsen_rows(offsets, image_of, weights, keep, target_of):
     the sums differs.
     """
     n = weights.shape[1]
+    Y0, Y1 = (0, (n + 1) // 2) if targets is None else targets
     tail = 2 if n % 2 == 0 else 0
     for d, other in offsets:
         image = None
@@ -199,41 +213,58 @@ def _coarsen_rows(offsets, image_of, weights, keep, target_of):
             q, r = divmod(p + d, 2)
             n_p, n_r = len(range(p, n, 2)), len(range(r, n, 2))
             lo, hi = max(0, -q), min(n_p, n_r - q)  # class rows whose neighbour is inside the grid
-            targets = [(e, f, q + f - e) for e in range(p + 1) for f in range(r + 1) if keep(q + f - e, other)]
-            if hi <= lo or not targets:
+            end = hi - tail  # from this class row on, the weights of the axis' end
+            lo, hi = max(lo, Y0 - 1), min(hi, Y1)  # ... and that have a parent among the coarse rows summed
+            pairs = [(e, q + f - e) for e in range(p + 1) for f in range(r + 1) if keep(q + f - e, other)]
+            if hi <= lo or not pairs:
                 continue
             if image is None:
                 image = image_of((d, other))
-            rows = image[p::2]
-            mid = max(lo, hi - tail)
+            mid = max(lo, min(hi, end))
+
+            def rows(a, b):  # the image rows of the class rows a .. b - 1
+                return image[2 * a + p - first:2 * (b - 1) + p - first + 1:2]
+
             if mid > lo:
-                part = rows[lo:mid]
+                part = rows(lo, mid)
                 if p + r:
                     part = part * 0.5 ** (p + r)
-                for e, _, D in targets:
-                    target_of(D, other)[lo + e:mid + e] += part
+                for e, D in pairs:
+                    a, b = max(lo, Y0 - e), min(mid, Y1 - e)
+                    if b > a:
+                        target_of(D, other)[a + e - Y0:b + e - Y0] += part[a - lo:b - lo]
             for i in range(mid, hi):
-                for e, f, D in targets:
+                for e, D in pairs:
+                    f = D - q + e
                     weight = weights[e, 2 * i + p] * weights[f, 2 * (i + q) + r]
-                    if weight:
-                        target_of(D, other)[i + e] += weight * rows[i]
+                    if weight and Y0 <= i + e < Y1:
+                        target_of(D, other)[i + e - Y0] += weight * image[2 * i + p - first]
 
 
-def separable_galerkin_stencil(offsets, image_of, wy, wx, coarse_offsets, *, as_list=False):
+#: Fine stencil values per band of the bilinear Galerkin product (``K`` images of ``2 Y`` fine rows for ``Y``
+#: coarse rows): 16 MB of float64, a fraction of a large frame's stencil, and few enough bands that the loops'
+#: overhead stays small.
+_GALERKIN_BAND_VALUES = 1 << 21
+
+
+def separable_galerkin_stencil(offsets, rows_of, wy, wx, coarse_offsets, *, as_list=False, band_values=None):
     r"""Coarse stencil of :math:`P^\top A P` for a bilinear :math:`P = P_y \otimes P_x` and a symmetric ``A``.
 
     Parameters
     ----------
     offsets : list of tuple of int
         Offsets of ``A``'s stencil, closed under negation.
-    image_of : callable
-        ``image_of(o)``: the ``(H, W)`` float64 image of offset ``o`` (zero where the neighbour is outside).
+    rows_of : callable
+        ``rows_of(y0, y1)``: the stencil on the image rows ``y0:y1``, an array ``(len(offsets), y1 − y0, W)``
+        (float64, zero where the neighbour is outside the grid) that stays valid until the next call.
     wy, wx : ndarray, shapes (2, H) and (2, W)
         The 1-D linear weights of the rows and of the columns.
     coarse_offsets : list of tuple of int
         Offsets of the coarse stencil (:func:`galerkin_offsets`), closed under negation.
     as_list : bool, default False
         Return a list of ``(hc, wc)`` images, each its own allocation, instead of one array.
+    band_values : int, optional
+        Fine stencil values read per band (default 2**21).
 
     Returns
     -------
@@ -245,44 +276,56 @@ def separable_galerkin_stencil(offsets, image_of, wy, wx, coarse_offsets, *, as_
     :math:`P_x' = I \otimes P_x`: the rows are coarsened first (:func:`_coarsen_rows`, giving
     :math:`B = P_y'^\top A P_y'` on an ``(hc, W)`` grid), then the columns of :math:`B`.  Both products are
     symmetric when ``A`` is, so each step computes only the offsets :math:`o \ge (0, 0)` (lexicographically)
-    and reads those of :math:`-o` as mirrored images (:func:`mirrored_image`): :math:`a_{-o}(p) = a_o(p - o)`.
-    The coefficients equal those of :func:`galerkin_stencil`'s parity-class sums up to the order of the
-    additions (rounding).
+    and reads those of :math:`-o` as mirrored images (:func:`~.stencils.mirrored_image`):
+    :math:`a_{-o}(p) = a_o(p - o)`; the coarse images of the other offsets are mirrored at the end.
+    Coarse row :math:`Y` depends on the fine rows :math:`2Y - 2` to :math:`2Y + 1` only and the column step
+    keeps the rows apart, so both steps run over bands of coarse rows: a band of fine rows is read, its part
+    of :math:`B` summed and coarsened along the columns while in cache, and neither the whole fine stencil
+    nor the whole of :math:`B` is held.  The coefficients equal those of :func:`galerkin_stencil`'s
+    parity-class sums up to the order of the additions (rounding).
     """
     h, w = wy.shape[1], wx.shape[1]
     hc, wc = (h + 1) // 2, (w + 1) // 2
+    K = len(offsets)
     slot = {tuple(o): k for k, o in enumerate(coarse_offsets)}
     if as_list:
         out = [np.zeros((hc, wc)) for _ in coarse_offsets]
     else:
         out = np.zeros((len(coarse_offsets), hc, wc))
-    # rows: B = P_y'^T A P_y', its offsets (DY, dx) >= (0, 0)
-    rows_coarse = {}
+    index = {tuple(o): k for k, o in enumerate(offsets)}
+    rows_per_band = min(hc, max(1, (_GALERKIN_BAND_VALUES if band_values is None else band_values)
+                                // (2 * K * max(w, 1))))
+    partial = {}  # B's offsets (DY, dx) >= (0, 0) on the band's coarse rows, reused band after band
+    for Y0 in range(0, hc, rows_per_band):
+        Y1 = min(hc, Y0 + rows_per_band)
+        first = max(0, 2 * Y0 - 2)
+        fine = rows_of(first, min(h, 2 * Y1))
+        for image in partial.values():
+            image[...] = 0.0
 
-    def row_target(D, dx):
-        if (D, dx) not in rows_coarse:
-            rows_coarse[D, dx] = np.zeros((hc, w))
-        return rows_coarse[D, dx]
+        def row_target(D, dx):
+            if (D, dx) not in partial:
+                partial[D, dx] = np.zeros((rows_per_band, w))
+            return partial[D, dx][:Y1 - Y0]
 
-    _coarsen_rows(list(offsets), image_of, wy, _upper, row_target)
+        _coarsen_rows(offsets, lambda o: fine[index[o]], wy, _upper, row_target, first=first, targets=(Y0, Y1))
 
-    # columns: C = P_x'^T B P_x' on the transposed images, offsets (DX, DY) with (DY, DX) >= (0, 0)
-    def column_image(o):
-        dx, dy = o
-        if (dy, dx) in rows_coarse:
-            return rows_coarse[dy, dx].T
-        if (-dy, -dx) in rows_coarse:
-            return mirrored_image(rows_coarse[-dy, -dx], (-dy, -dx)).T
-        return np.zeros((w, hc))
+        def column_image(o):  # the transposed image of B's offset (DY, dx) = (o[1], o[0]) on the band
+            dx, dy = o
+            if (dy, dx) in partial:
+                return partial[dy, dx][:Y1 - Y0].T
+            if (-dy, -dx) in partial:
+                return mirrored_image(partial[-dy, -dx][:Y1 - Y0], (-dy, -dx)).T
+            return np.zeros((w, Y1 - Y0))
 
-    def column_target(DX, DY):
-        if (DY, DX) not in slot:
-            raise ValueError(f"the Galerkin product reaches the offset {(DY, DX)}, not in the coarse offsets")
-        return out[slot[DY, DX]].T
+        def column_target(DX, DY):
+            if (DY, DX) not in slot:
+                raise ValueError(f"the Galerkin product reaches the offset {(DY, DX)}, not in the coarse offsets")
+            return out[slot[DY, DX]][Y0:Y1].T
 
-    column_offsets = sorted({(dx, dy) for dy, dx in rows_coarse} | {(-dx, -dy) for dy, dx in rows_coarse})
-    _coarsen_rows(column_offsets, column_image, wx, lambda DX, DY: _upper(DY, DX), column_target)
-    del rows_coarse
+        column_offsets = sorted({(dx, dy) for dy, dx in partial} | {(-dx, -dy) for dy, dx in partial})
+        _coarsen_rows(column_offsets, column_image, wx, lambda DX, DY: _upper(DY, DX), column_target)
+    del partial
     for (dy, dx), k in slot.items():
         if not _upper(dy, dx):
             mirrored_image(out[slot[-dy, -dx]], (-dy, -dx), out=out[k])

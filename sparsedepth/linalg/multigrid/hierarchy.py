@@ -18,14 +18,15 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..._validation import as_grid_operator, check_grid_shape
-from ...grid.stencil import SymmetricStencil, full_pattern_offsets
+from ...grid.stencil import SymmetricStencil
 from .bands import BandedStencil, FullStencil
 from .galerkin import galerkin_offsets, galerkin_stencil
 from .iteration import preconditioned_cg, prepare_rhs, vcycle_iteration
 from .interpolation import bilinear_weights, operator_weights
-from .smoothers import LineGaussSeidel, gauss_seidel_backward, gauss_seidel_forward, jacobi_damping, jacobi_sweeps
+from .smoothers import (LINE_OFFSETS, LineGaussSeidel, gauss_seidel_backward, gauss_seidel_forward, jacobi_damping,
+                        jacobi_sweeps)
 from .stencils import (CollapsedSource, StencilSource, assemble_csr, centre_row_holds, extract_stencil,
-                       fine_stencil_source, read_full_pattern)
+                       fine_stencil_source, verify_full_pattern)
 from .transfer import ClassProlongation, SeparableProlongation
 from ...limits import memory_limits
 
@@ -280,7 +281,7 @@ class GridMultigrid:
         return self.shape[0] * self.shape[1] < memory_limits().keep_stencil_pixels
 
     def _build(self, A):
-        offsets, source = fine_stencil_source(A, self.shape, whole=self._keeps_stencils())
+        offsets, source = fine_stencil_source(A, self.shape)
         if self.requested_interpolation == "auto":
             self.interpolation = "bilinear" if _wide(offsets) else "operator"
         shapes = self._shapes()
@@ -309,12 +310,16 @@ class GridMultigrid:
         """
         source = box.pop()
         keep = self._keeps_stencils()
-        if keep:
+        if keep and self.interpolation == "operator":  # the weights and the products read it class by class
             source.read_whole()
         levels = self.levels
         line_images = None
         if self.smoother == "line_gauss_seidel" and source.array is not None:
             line_images = dict(zip(source.offsets, source.array))
+        elif self.smoother == "line_gauss_seidel" and source.csr is not None:
+            # the bilinear product reads the stencil a band of rows at a time: the line smoother's images are
+            # copied as they pass (used only if every row was read)
+            line_images = source.keep_images(LINE_OFFSETS)
         for li in range(len(levels) - 1):
             fine, coarse = levels[li], levels[li + 1]
             if self.interpolation == "operator":
@@ -373,6 +378,8 @@ class GridMultigrid:
         if self.smoother == "line_gauss_seidel" and len(levels) > 1:
             # a stencil swept band by band: the line steps gather its rows from the stencil itself
             fine = self._fine_cycle_A if sp.issparse(self._fine_cycle_A) else A
+            if line_images is not None and not isinstance(line_images, dict):
+                line_images = line_images.images if line_images.complete else None
             self._line = LineGaussSeidel(fine, self.shape, images=line_images, anisotropy=self.line_anisotropy)
         del line_images
         self._factor_coarsest()
@@ -438,17 +445,7 @@ class GridMultigrid:
                 self._build(A)
                 return self
             source = StencilSource(offsets, self.shape, symmetric=A)
-        elif self._keeps_stencils() and (read := read_full_pattern(A, self.shape)) is not None \
-                and set(read[0]) <= set(offsets):
-            pattern, S = read
-            if pattern != offsets:  # fewer offsets than the hierarchy's: the others are zero
-                slot = {o: k for k, o in enumerate(offsets)}
-                full = np.zeros((len(offsets),) + S.shape[1:])
-                full[[slot[o] for o in pattern]] = S
-                S = full
-            source = StencilSource(offsets, self.shape, array=S)
-            del S
-        elif (pattern := full_pattern_offsets(A, self.shape)) is not None and set(pattern) <= set(offsets):
+        elif (pattern := verify_full_pattern(A, self.shape)) is not None and set(pattern) <= set(offsets):
             source = StencilSource(offsets, self.shape, csr=A, csr_offsets=pattern)
         else:
             S = extract_stencil(A, self.shape, offsets)

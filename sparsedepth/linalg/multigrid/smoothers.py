@@ -15,7 +15,7 @@ from pyamg import amg_core
 from ...grid.stencil import SymmetricStencil, index_dtype
 from ...limits import memory_limits
 
-__all__ = ["gauss_seidel_forward", "gauss_seidel_backward", "jacobi_damping", "jacobi_sweeps", "LineGaussSeidel",
+__all__ = ["LINE_OFFSETS", "gauss_seidel_forward", "gauss_seidel_backward", "jacobi_damping", "jacobi_sweeps", "LineGaussSeidel",
            "anisotropic_pixels", "stencil_rows_product"]
 
 
@@ -65,6 +65,10 @@ def jacobi_sweeps(A, x, b, diag_inv, omega, sweeps):
         x += omega * diag_inv * (b - A @ x)
 
 
+#: The offsets of a stencil that :class:`LineGaussSeidel` reads (the couplings along rows and columns).
+LINE_OFFSETS = ((0, 0), (0, 1), (0, 2), (1, 0), (2, 0))
+
+
 def _line_bands(A, shape, images):
     """``{offset: image}`` of the couplings ``(0, 0)``, ``(0, 1)``, ``(0, 2)``, ``(1, 0)``, ``(2, 0)`` of ``A``.
 
@@ -76,10 +80,9 @@ def _line_bands(A, shape, images):
     n = h * w
     if isinstance(A, SymmetricStencil):  # every offset >= (0, 0) is stored: its images, no copy
         images = dict(zip(A.upper, A.images))
-        return {o: images[o] if o in images else np.zeros(shape, dtype=A.dtype)
-                for o in ((0, 0), (0, 1), (0, 2), (1, 0), (2, 0))}
+        return {o: images[o] if o in images else np.zeros(shape, dtype=A.dtype) for o in LINE_OFFSETS}
     out = {}
-    for dy, dx in ((0, 0), (0, 1), (0, 2), (1, 0), (2, 0)):
+    for dy, dx in LINE_OFFSETS:
         if images is not None and (dy, dx) in images:
             out[dy, dx] = np.asarray(images[dy, dx])
             continue
@@ -180,17 +183,24 @@ def anisotropic_pixels(bands, anisotropy):
     :math:`s_x(y, x) = \sum_{d = \pm 1, \pm 2} |a_{(y, x), (y, x + d)}|` and :math:`s_y` likewise along
     :math:`y`; the couplings at negative offsets are those of the neighbour at the positive one (symmetry).
     """
+    h, w = bands[0, 0].shape
+    a = np.empty((h, w))
     strength = []
     for offsets in (((0, 1), (0, 2)), ((1, 0), (2, 0))):
-        total = np.zeros(bands[0, 0].shape)
+        total = None
         for dy, dx in offsets:
-            a = np.abs(bands[dy, dx])
-            h, w = a.shape
-            total += a
+            np.abs(bands[dy, dx], out=a)
+            if total is None:
+                total = a.copy()  # the sum starts from 0: 0 + |a| is |a|
+            else:
+                total += a
             total[dy:, dx:] += a[:h - dy, :w - dx]
         strength.append(total)
     sx, sy = strength
-    return sx > anisotropy * sy, sy > anisotropy * sx
+    np.multiply(sy, anisotropy, out=a)
+    along_x = sx > a
+    np.multiply(sx, anisotropy, out=a)
+    return along_x, sy > a
 
 
 class LineGaussSeidel:

@@ -16,7 +16,8 @@ from ..._validation import as_grid_operator
 from ...grid.stencil import SymmetricStencil, csr_to_stencil, full_pattern_offsets, index_dtype
 
 __all__ = ["grid_stencil", "extract_stencil", "StencilSource", "CollapsedSource", "fine_stencil_source",
-           "mirrored_image", "read_full_pattern", "assemble_csr", "centre_row_holds"]
+           "mirrored_image", "read_full_pattern", "verify_full_pattern", "PatternRows", "assemble_csr",
+           "centre_row_holds"]
 
 
 def _square_offsets(radius):
@@ -229,7 +230,8 @@ class StencilSource:
     ``keep_stencil_pixels`` (:class:`~sparsedepth.limits.MemoryLimits`) read it whole once (:meth:`read_whole`).
     """
 
-    def __init__(self, offsets, shape, *, array=None, csr=None, csr_offsets=None, symmetric=None):
+    def __init__(self, offsets, shape, *, array=None, csr=None, csr_offsets=None, symmetric=None, layout=None):
+        self.layout = layout  # a CSR source's pattern layout, when already computed (verify_full_pattern)
         self.offsets = list(offsets)
         self.shape = tuple(shape)
         self.array = array
@@ -267,35 +269,83 @@ class StencilSource:
             return _ClassImages(self.symmetric, py, px)
         return self.parity_class(py, px)
 
-    def whole_images(self):
-        """``image_of(offset)``: the whole ``(H, W)`` float64 image of an offset, or None for a CSR source.
+    def row_reader(self):
+        """``rows_of(y0, y1)``: the stencil on the image rows ``y0:y1``, ``(len(offsets), y1 − y0, W)`` float64.
 
-        An array source hands out its images (views when float64); a symmetric one the stored images of the
-        offsets ``>= (0, 0)`` and mirrored copies of the others
-        (:func:`mirrored_image`).  A CSR source (read class by class to
-        keep the memory low) has none: None.
+        An array source hands out views of its rows (copies when not float64), a symmetric one
+        :meth:`~sparsedepth.grid.stencil.SymmetricStencil.full_rows`, a CSR one (in the full in-grid pattern of
+        ``csr_offsets``, as the set-up makes or checks it) reads them by position (:class:`PatternRows`); the
+        offsets it lacks read as zero.
         """
         if self.array is not None:
-            slot = {o: k for k, o in enumerate(self.offsets)}
-            return lambda offset: np.asarray(self.array[slot[offset]], dtype=np.float64)
-        if self.symmetric is not None and self.csr_offsets == self.offsets:
-            stored = dict(zip(self.symmetric.upper, self.symmetric.images))
+            read = lambda y0, y1: np.asarray(self.array[:, y0:y1], dtype=np.float64)  # noqa: E731
+        elif self.symmetric is not None:
+            read = lambda y0, y1: self.symmetric.full_rows(y0, y1).astype(np.float64, copy=False)  # noqa: E731
+        else:
+            read = PatternRows(self.csr, self.csr_offsets, self.shape, self.layout)
+        if self.array is not None or self.csr_offsets == self.offsets:
+            rows_of = read
+        else:
+            slots = [self.offsets.index(o) for o in self.csr_offsets]
 
-            def image_of(offset):
-                if offset in stored:
-                    return stored[offset].astype(np.float64, copy=False)
-                dy, dx = offset
-                return mirrored_image(stored[-dy, -dx], (-dy, -dx))
+            def rows_of(y0, y1):
+                out = np.zeros((len(self.offsets), y1 - y0, self.shape[1]))
+                out[slots] = read(y0, y1)
+                return out
+        kept = getattr(self, "_kept", None)
+        if kept is None:
+            return rows_of
+        slots = [self.offsets.index(o) for o in kept.images]
 
-            return image_of
-        return None
+        def rows_kept(y0, y1):
+            rows = rows_of(y0, y1)
+            kept.add(rows[slots], y0, y1)
+            return rows
+
+        return rows_kept
+
+    def keep_images(self, offsets):
+        """Copy the images of ``offsets`` (those the source has) as :meth:`row_reader` hands out their rows.
+
+        Returns a :class:`KeptImages`: its ``images`` (``{offset: (H, W) array}``) are complete once every
+        row was read (``complete``).
+        """
+        self._kept = KeptImages([o for o in offsets if o in self.offsets], self.shape)
+        return self._kept
 
     def read_whole(self):
         """Read a CSR source into one array now (the set-up asks for most classes twice)."""
         if self.array is None:
-            self.array = self.parity_class(None, None)
+            self.array = (self.row_reader()(0, self.shape[0]) if self.symmetric is None
+                          else self.parity_class(None, None))
             self.csr = self.symmetric = None
         return self
+
+
+class KeptImages:
+    """Whole images of some offsets, filled band by band as a :class:`StencilSource`'s rows are read.
+
+    Attributes
+    ----------
+    images : dict
+        ``{offset: (H, W) float64 array}``.
+    complete : bool
+        True once every row has been read.
+    """
+
+    def __init__(self, offsets, shape):
+        self.images = {tuple(o): np.empty(shape) for o in offsets}  # every row is written before it is used
+        self._read = np.zeros(shape[0], dtype=bool)
+
+    def add(self, rows, y0, y1):
+        """Copy ``rows`` (``(len(images), y1 − y0, W)``, in the order of ``images``) into the images."""
+        for image, part in zip(self.images.values(), rows):
+            image[y0:y1] = part
+        self._read[y0:y1] = True
+
+    @property
+    def complete(self):
+        return bool(self._read.all())
 
 
 def _towards(offset):
@@ -356,70 +406,6 @@ def _rows_inside(offset, shape):
     return slice(max(0, -dy), max(0, min(h, h - dy))), slice(max(0, -dx), max(0, min(w, w - dx)))
 
 
-def read_full_pattern(A, shape, radius=None):
-    r"""Offsets and stencil images of a CSR matrix in the full in-grid pattern, checked while read; else None.
-
-    Parameters
-    ----------
-    A : scipy.sparse CSR matrix or array, shape (H*W, H*W)
-    shape : tuple of int
-        ``(H, W)``.
-    radius : int, optional
-        Largest stencil radius accepted (default 2).
-
-    Returns
-    -------
-    (offsets, S) or None
-        As :func:`~sparsedepth.grid.stencil.full_pattern_offsets` and
-        :func:`~sparsedepth.grid.stencil.csr_to_stencil` together: ``S`` of shape ``(len(offsets), H, W)``,
-        zero where the neighbour is outside the grid; None when ``A`` is not stored in the pattern of
-        :func:`~sparsedepth.grid.stencil.stencil_to_csr` (its ``indptr`` and ``indices`` are compared with that
-        pattern entry by entry) or reaches beyond `radius`.
-
-    Notes
-    -----
-    The offsets are read from the row of the grid's centre.  The pixels whose every neighbour is inside the
-    grid hold the ``K`` offsets in order, so their entries are a ``(rows, columns, K)`` view of ``A.data``
-    and ``A.indices`` (the row pointers checked first); they are compared and copied a band of rows at a time
-    (a few hundred kilobytes, so the transposed copy works in cache), and the few border pixels by gathers.
-    """
-    h, w = shape
-    n = h * w
-    if A.format != "csr" or A.shape != (n, n) or A.nnz == 0:
-        return None
-    indptr, indices, data = A.indptr, A.indices, A.data
-    centre = (h // 2) * w + w // 2
-    delta = indices[indptr[centre]:indptr[centre + 1]].astype(np.int64) - centre
-    dys = (delta + w // 2) // w
-    dxs = delta - dys * w
-    offsets = list(zip(dys.tolist(), dxs.tolist()))
-    largest = 2 if radius is None else int(radius)
-    if (not offsets or offsets != sorted(set(offsets)) or np.any(2 * np.abs(dxs) >= w)
-            or max(max(abs(dy), abs(dx)) for dy, dx in offsets) > largest):
-        return None
-    counts, inner = _pattern_layout(offsets, shape)
-    if int(indptr[0]) != 0 or not np.array_equal(indptr[1:], np.cumsum(counts.reshape(-1))):
-        return None
-    K = len(offsets)
-    S = np.zeros((K, h, w))
-    y0, y1, x0, x1 = inner
-    if y1 > y0 and x1 > x0:
-        values, columns = _inner_views((data, indices), indptr, counts, inner, K)
-        own = np.arange(x0, x1, dtype=np.int64)[None, :, None] + delta  # each entry's column, less its row's start
-        band = _band_rows((x1 - x0) * K)
-        for r0 in range(0, y1 - y0, band):
-            r1 = min(y1 - y0, r0 + band)
-            starts = np.arange(y0 + r0, y0 + r1, dtype=np.int64)[:, None, None] * w
-            if not np.array_equal(columns[r0:r1] - starts, np.broadcast_to(own, (r1 - r0,) + own.shape[1:])):
-                return None
-            S[:, y0 + r0:y0 + r1, x0:x1] = values[r0:r1].transpose(2, 0, 1)
-    position, k, pixel = _border_entries(offsets, shape, indptr, inner)
-    if not np.array_equal(indices[position], pixel + delta[k]):
-        return None
-    S[k, pixel // w, pixel % w] = data[position]
-    return offsets, S
-
-
 def _pattern_layout(offsets, shape):
     """The full in-grid pattern's row lengths and its inner block (the pixels whose every neighbour is inside).
 
@@ -427,13 +413,13 @@ def _pattern_layout(offsets, shape):
     block's rows and columns.
     """
     h, w = shape
-    counts = np.zeros((h, w), dtype=np.int64)
-    for offset in offsets:
-        counts[_rows_inside(offset, shape)] += 1
-    dys = [dy for dy, _ in offsets]
-    dxs = [dx for _, dx in offsets]
-    y0, y1 = max(0, -min(dys)), h - max(0, max(dys))
-    x0, x1 = max(0, -min(dxs)), w - max(0, max(dxs))
+    dys = np.array([dy for dy, _ in offsets])
+    dxs = np.array([dx for _, dx in offsets])
+    rows_in = ((np.arange(h)[:, None] + dys >= 0) & (np.arange(h)[:, None] + dys < h)).astype(np.float64)
+    columns_in = ((np.arange(w)[:, None] + dxs >= 0) & (np.arange(w)[:, None] + dxs < w)).astype(np.float64)
+    counts = (rows_in @ columns_in.T).astype(np.int64)  # offsets inside at (y, x): a sum of at most K ones
+    y0, y1 = max(0, -int(dys.min())), h - max(0, int(dys.max()))
+    x0, x1 = max(0, -int(dxs.min())), w - max(0, int(dxs.max()))
     return counts, (y0, y1, x0, x1)
 
 
@@ -452,9 +438,12 @@ def _border_entries(offsets, shape, indptr, inner):
     """The entries of the pixels outside the inner block: ``(position, k, pixel)`` of each, in CSR order."""
     h, w = shape
     y0, y1, x0, x1 = inner
-    outside = np.ones((h, w), dtype=bool)
-    outside[y0:y1, x0:x1] = False
-    border = np.flatnonzero(outside.reshape(-1))
+    if y1 > y0 and x1 > x0:  # the rows above, the side columns of the inner rows, the rows below: in order
+        sides = np.concatenate([np.arange(x0), np.arange(x1, w)])
+        border = np.concatenate([np.arange(y0 * w), (np.arange(y0, y1)[:, None] * w + sides).reshape(-1),
+                                 np.arange(y1 * w, h * w)])
+    else:
+        border = np.arange(h * w)
     by, bx = np.divmod(border, w)
     dys = np.array([dy for dy, _ in offsets])
     dxs = np.array([dx for _, dx in offsets])
@@ -501,9 +490,9 @@ def assemble_csr(offsets, stencil, dtype=np.float64):
     Notes
     -----
     The inner block's entries (``K`` per pixel, in the order of `offsets`) are a ``(rows, columns, K)`` view
-    of the CSR arrays: the values are the stencil's images transposed into it, and the column indices
-    :math:`(y + d_y) W + x + d_x`, a band of rows at a time so that the transposed copy works in cache; the
-    few border pixels are written by scatters.
+    of the CSR arrays: the values are the stencil's images copied into it one by one, and the column indices
+    :math:`(y + d_y) W + x + d_x` are written a band of rows at a time; the few border pixels are written by
+    scatters.
     """
     offsets = [tuple(o) for o in offsets]
     K, h, w = stencil.shape
@@ -519,11 +508,12 @@ def assemble_csr(offsets, stencil, dtype=np.float64):
     y0, y1, x0, x1 = inner
     if y1 > y0 and x1 > x0:
         values, columns = _inner_views((data, indices), indptr, counts, inner, K)
+        for k in range(K):  # one image at a time: contiguous reads (faster than a transposed copy here)
+            values[:, :, k] = stencil[k, y0:y1, x0:x1]
         own = np.arange(x0, x1, dtype=itype)[None, :, None] + delta.astype(itype)
         band = _band_rows((x1 - x0) * K)
         for r0 in range(0, y1 - y0, band):
             r1 = min(y1 - y0, r0 + band)
-            values[r0:r1] = stencil[:, y0 + r0:y0 + r1, x0:x1].transpose(1, 2, 0)
             np.add(own, (np.arange(y0 + r0, y0 + r1, dtype=itype) * itype(w))[:, None, None], out=columns[r0:r1])
     position, k, pixel = _border_entries(offsets, (h, w), indptr, inner)
     data[position] = stencil[k, pixel // w, pixel % w]
@@ -534,25 +524,158 @@ def assemble_csr(offsets, stencil, dtype=np.float64):
     return out
 
 
-def fine_stencil_source(A, shape, radius=None, *, whole=False):
-    """Offsets and :class:`StencilSource` of a fine operator (a symmetric stencil, pattern read, else extraction).
+def verify_full_pattern(A, shape, radius=None):
+    r"""Offsets of a CSR matrix stored in the full in-grid pattern (every index compared), else None.
 
-    ``whole=True``: a CSR operator in the full in-grid pattern is read into one array at once
-    (:func:`read_full_pattern`) instead of being kept as a CSR source read class by class.
+    Parameters
+    ----------
+    A : scipy.sparse CSR matrix or array, shape (H*W, H*W)
+    shape : tuple of int
+        ``(H, W)``.
+    radius : int, optional
+        Largest stencil radius accepted (default 2).
+
+    Returns
+    -------
+    list of tuple of int, or None
+        As :func:`~sparsedepth.grid.stencil.full_pattern_offsets` (the offsets read from the row of the grid's
+        centre, when ``A.indptr`` and ``A.indices`` are exactly the pattern of
+        :func:`~sparsedepth.grid.stencil.stencil_to_csr` for them), and None as well for offsets beyond
+        `radius`.
+
+    Notes
+    -----
+    The pixels whose every neighbour is inside the grid hold the ``K`` offsets in order, so their column
+    indices are a ``(rows, columns, K)`` view of ``A.indices`` (the row pointers checked first); a band of
+    rows at a time, less its first row's start, it must equal the band of the pattern's first rows.  The few
+    border pixels are compared by gathers.
     """
-    if whole and not isinstance(A, SymmetricStencil):
-        read = read_full_pattern(A, shape, radius)
-        if read is not None:
-            offsets, S = read
-            return offsets, StencilSource(offsets, shape, array=S)
+    checked = _verified_layout(A, shape, radius)
+    return None if checked is None else checked[0]
+
+
+def _verified_layout(A, shape, radius=None):
+    """:func:`verify_full_pattern`'s offsets and the pattern's layout (:func:`_pattern_layout`), or None."""
+    h, w = shape
+    n = h * w
+    if A.format != "csr" or A.shape != (n, n) or A.nnz == 0:
+        return None
+    indptr, indices = A.indptr, A.indices
+    centre = (h // 2) * w + w // 2
+    delta = indices[indptr[centre]:indptr[centre + 1]].astype(np.int64) - centre
+    dys = (delta + w // 2) // w
+    dxs = delta - dys * w
+    offsets = list(zip(dys.tolist(), dxs.tolist()))
+    largest = 2 if radius is None else int(radius)
+    if (not offsets or offsets != sorted(set(offsets)) or np.any(2 * np.abs(dxs) >= w)
+            or max(max(abs(dy), abs(dx)) for dy, dx in offsets) > largest):
+        return None
+    counts, inner = _pattern_layout(offsets, shape)
+    if int(indptr[0]) != 0 or not np.array_equal(indptr[1:], np.cumsum(counts.reshape(-1))):
+        return None
+    K = len(offsets)
+    y0, y1, x0, x1 = inner
+    if y1 > y0 and x1 > x0:
+        (columns,) = _inner_views((indices,), indptr, counts, inner, K)
+        band = min(y1 - y0, _band_rows((x1 - x0) * K))
+        if (y1 + band) * w + w >= np.iinfo(indices.dtype).max:
+            return None  # the pattern's columns would not fit the index type
+        itype = indices.dtype.type
+        # the columns of the first band's entries, less the first row's start
+        pattern = (np.arange(band, dtype=indices.dtype)[:, None, None] * itype(w)
+                   + np.arange(x0, x1, dtype=indices.dtype)[None, :, None] + (delta + y0 * w).astype(indices.dtype))
+        shifted = np.empty_like(pattern)
+        for r0 in range(0, y1 - y0, band):
+            r1 = min(y1 - y0, r0 + band)
+            part = shifted[:r1 - r0]
+            np.subtract(columns[r0:r1], itype(r0 * w), out=part)
+            if not np.array_equal(part, pattern[:r1 - r0]):
+                return None
+    position, k, pixel = _border_entries(offsets, shape, indptr, inner)
+    if not np.array_equal(indices[position], pixel + delta[k]):
+        return None
+    return offsets, (counts, inner)
+
+
+class PatternRows:
+    """The stencil images of a CSR matrix in the full in-grid pattern, read a band of image rows at a time.
+
+    Parameters
+    ----------
+    A : scipy.sparse CSR matrix or array, shape (H*W, H*W)
+        Stored in the full in-grid pattern of `offsets` (as checked by :func:`verify_full_pattern`, or as made
+        by :func:`assemble_csr`): the values are read by position, the indices are not looked at.
+    offsets : list of tuple of int
+    shape : tuple of int
+        ``(H, W)``.
+    layout : tuple, optional
+        The pattern's layout if already computed (as when checked).
+
+    Notes
+    -----
+    ``rows(y0, y1)`` gives ``(len(offsets), y1 − y0, W)`` float64 images, zero where the neighbour is outside
+    the grid: the inner pixels' values are a ``(rows, columns, K)`` view of ``A.data``, transposed into the
+    images a few hundred kilobytes at a time; the border pixels' are scattered.
+    """
+
+    def __init__(self, A, offsets, shape, layout=None):
+        self.offsets = [tuple(o) for o in offsets]
+        self.shape = tuple(shape)
+        h, w = self.shape
+        self._data = A.data
+        counts, self._inner = _pattern_layout(self.offsets, self.shape) if layout is None else layout
+        y0, y1, x0, x1 = self._inner
+        self._values = (_inner_views((A.data,), A.indptr, counts, self._inner, len(self.offsets))[0]
+                        if y1 > y0 and x1 > x0 else None)
+        self._position, self._k, self._pixel = _border_entries(self.offsets, self.shape, A.indptr, self._inner)
+
+    def __call__(self, y0, y1):
+        """The images on rows ``y0:y1``, a new ``(K, y1 − y0, W)`` float64 array."""
+        h, w = self.shape
+        K = len(self.offsets)
+        out = np.empty((K, y1 - y0, w))
+        iy0, iy1, x0, x1 = self._inner
+        a, b = max(y0, iy0), min(y1, iy1)
+        # zero outside the inner block (the border pixels' entries outside the grid stay so)
+        out[:, :max(0, a - y0)] = 0.0
+        out[:, max(0, b - y0):] = 0.0
+        out[:, max(0, a - y0):max(0, b - y0), :x0] = 0.0
+        out[:, max(0, a - y0):max(0, b - y0), x1:] = 0.0
+        if self._values is not None and b > a:
+            band = _band_rows((x1 - x0) * K)
+            for r0 in range(a, b, band):
+                r1 = min(b, r0 + band)
+                out[:, r0 - y0:r1 - y0, x0:x1] = self._values[r0 - iy0:r1 - iy0].transpose(2, 0, 1)
+        lo, hi = np.searchsorted(self._pixel, (y0 * w, y1 * w))  # border entries in CSR order: by pixel
+        pixel, k = self._pixel[lo:hi], self._k[lo:hi]
+        out[k, pixel // w - y0, pixel % w] = self._data[self._position[lo:hi]]
+        return out
+
+
+def read_full_pattern(A, shape, radius=None):
+    """Offsets and stencil images ``(len(offsets), H, W)`` of a CSR matrix in the full in-grid pattern, else None.
+
+    :func:`verify_full_pattern`, then :class:`PatternRows` for all rows: the results of
+    :func:`~sparsedepth.grid.stencil.full_pattern_offsets` and :func:`~sparsedepth.grid.stencil.csr_to_stencil`.
+    """
+    checked = _verified_layout(A, shape, radius)
+    if checked is None:
+        return None
+    offsets, layout = checked
+    return offsets, PatternRows(A, offsets, shape, layout)(0, shape[0])
+
+
+def fine_stencil_source(A, shape, radius=None):
+    """Offsets and :class:`StencilSource` of a fine operator (a symmetric stencil, pattern read, else extraction)."""
     if isinstance(A, SymmetricStencil):
         largest = 2 if radius is None else int(radius)
         if any(max(abs(dy), abs(dx)) > largest for dy, dx in A.offsets):
             raise ValueError(f"`A` couples pixels farther apart than a stencil of radius {largest}: offsets "
                              f"{A.offsets}")
         return list(A.offsets), StencilSource(A.offsets, shape, symmetric=A)
-    offsets = _pattern_offsets(A, shape, radius)
-    if offsets is not None:
-        return offsets, StencilSource(offsets, shape, csr=A, csr_offsets=offsets)
+    checked = _verified_layout(A, shape, radius)
+    if checked is not None:
+        offsets, layout = checked
+        return offsets, StencilSource(offsets, shape, csr=A, csr_offsets=offsets, layout=layout)
     offsets, S = _stencil_of(A, shape, radius)
     return offsets, StencilSource(offsets, shape, array=S)
