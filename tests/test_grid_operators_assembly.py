@@ -225,3 +225,26 @@ def test_local_linear_products_are_those_of_K(set_limits, window):
         np.testing.assert_allclose(op.block_matvec(z, b), Kz[b * n:(b + 1) * n], rtol=0, atol=tolerance)
         op.block_rmatvec_add(total, b, v[b * n:(b + 1) * n])
     np.testing.assert_allclose(total, KTv, rtol=0, atol=1e-11 * np.abs(KTv).max())
+
+
+@pytest.mark.parametrize("window", sorted(WINDOW_PIXELS))
+@pytest.mark.parametrize("shape", [(2, 2), (3, 2), (2, 5), (5, 3), (1, 6), (4, 1)])
+@pytest.mark.parametrize("band_pixels", [1, 1 << 15], ids=["row bands", "one band"])
+def test_local_linear_on_grids_a_window_or_two_wide(set_limits, band_pixels, shape, window):
+    """Grids with one or two window columns or rows (or none): every row of a run is its last."""
+    set_limits(affinity_band_pixels=band_pixels)
+    rng = np.random.default_rng(shape[0] * 10 + shape[1])
+    image = rng.random(shape + (3,))
+    op = local_linear_operator(image, 0.1, window=window)
+    K = _local_linear_by_loop(image, 0.1, window)
+    expected = (K.T @ K).toarray()
+    for symmetric in (False, True):
+        stored, stencil = _assemble(op, op.offsets(), None, 1.0, symmetric)
+        np.testing.assert_allclose(_matrix_of_stencil(stored, stencil, symmetric=symmetric), expected,
+                                   rtol=0, atol=1e-11 * max(1.0, np.abs(expected).max()))
+    z = rng.standard_normal(K.shape[1])
+    pieced = np.full(K.shape[0], np.nan)
+    for rows, values in op.row_pieces(z):
+        pieced[rows] = values
+    np.testing.assert_allclose(pieced, K @ z, rtol=0, atol=1e-11 * max(1.0, np.abs(K @ z).max()))
+    np.testing.assert_allclose(op.rmatvec(np.ones(K.shape[0])), K.T @ np.ones(K.shape[0]), rtol=0, atol=1e-10)
