@@ -16,10 +16,11 @@ Methods, on the same seeded samples (``sample_depth(..., fraction, seed)``) of e
   :data:`bench.frames.TUNE_FRAMES` (mean ratio over 1, 5 and 10 %), never on the frames reported.
 
 Accuracy is the RMSE on the valid pixels that were not observed divided by the nearest fill's on the same input
-(mean over frames × seeds).  Times are the best of ``--repeat`` calls of each method on each input, every method
-timed in this one process with one BLAS thread and one OpenCV thread (FGS's time is that of its two filter calls
-and the division, without the nearest fill it gives the pixels no sample reaches); ``fast / FGS`` is the mean
-over inputs of the per-input ratio of the two times, the number to compare across machines.
+(mean over frames × seeds).  Times are the best of ``--repeat`` calls of each method on each input, the methods'
+calls taking turns (:func:`interleaved_best_of`), every method timed in this one process with one BLAS thread and
+one OpenCV thread (FGS's time is that of its two filter calls and the division, without the nearest fill it gives
+the pixels no sample reaches); ``fast / FGS`` is the mean over inputs of the per-input ratio of the two times, the
+number to compare across machines.
 
 May import :mod:`sparsedepth`, numpy, scikit-image, :mod:`bench.frames`, :mod:`bench.blas`, :mod:`bench.fast_peers`
 and :mod:`bench.harness`.
@@ -157,20 +158,35 @@ def measure(frames_, fractions, seeds, repeat, fgs_setting):
         rec["default"] = _ratio(default(frame.image, sparse, mask), frame, mask, nearest_rmse)
         rec["t_default"] = time.perf_counter() - t0
         rec["fast"] = _ratio(fast(frame.image, sparse, mask), frame, mask, nearest_rmse)
-        rec["t_fast"] = H.best_of(repeat, fast, frame.image, sparse, mask)
-        rec["t_nearest"] = H.best_of(repeat, sd.nearest_fill, sparse, mask)
+        timed = {"t_fast": lambda: fast(frame.image, sparse, mask), "t_nearest": lambda: sd.nearest_fill(sparse, mask)}
         if fgs_setting is not None:
             lam, sigma = fgs_setting
             rec["fgs"] = _ratio(fgs_fill(frame.image, sparse, mask, lam=lam, sigma=sigma), frame, mask, nearest_rmse)
             # timed without the nearest fill of the pixels no sample reaches: the two filter calls and the division
-            rec["t_fgs"] = H.best_of(repeat, fast_peers.fgs_fill, frame.image, sparse, mask, lam=lam, sigma_color=sigma,
-                                     fill=False)
+            timed["t_fgs"] = lambda: fast_peers.fgs_fill(frame.image, sparse, mask, lam=lam, sigma_color=sigma,
+                                                         fill=False)
+        rec.update(interleaved_best_of(repeat, timed))
         records.append(rec)
         print(f"  {frame.name} {fraction:.0%} seed {seed}: default {rec['default']:.3f}, fast {rec['fast']:.3f}"
               + (f", FGS {rec['fgs']:.3f}" if "fgs" in rec else "")
               + f"; fast {rec['t_fast'] * 1e3:.0f} ms" + (f", FGS {rec['t_fgs'] * 1e3:.0f} ms" if "t_fgs" in rec else ""),
               file=sys.stderr, flush=True)
     return records
+
+
+def interleaved_best_of(repeat, calls):
+    """``{name: seconds}``: the shortest wall time of ``repeat`` calls of each function in ``calls``.
+
+    The calls take turns (one of each, ``repeat`` times), so that a change of the machine's load in between
+    reaches every method alike.
+    """
+    best = dict.fromkeys(calls, float("inf"))
+    for _ in range(repeat):
+        for name, fn in calls.items():
+            start = time.perf_counter()
+            fn()
+            best[name] = min(best[name], time.perf_counter() - start)
+    return best
 
 
 def summary_table(records, label):
@@ -214,7 +230,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="two tiny frames, one seed, prints only (a smoke test)")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
-    p.add_argument("--repeat", type=int, default=3, help="timed calls per method and input (best is kept)")
+    p.add_argument("--repeat", type=int, default=5, help="timed calls per method and input (best is kept)")
     p.add_argument("--write", action="store_true", help="write docs/fast_mode.md (default without --quick)")
     args = p.parse_args(argv)
     start = time.perf_counter()

@@ -18,6 +18,7 @@ from ..limits import memory_limits
 from ..objective.objective import DEFAULT_L1_SMOOTHING
 from ..objective.weights import DEFAULT_WEIGHTS, Weights, observed_fraction, resolve_weights
 from ..problem import CompletionProblem, checked_start, choose_solver, clamp, observed_range
+from ..profiling import phase
 from ..result import CompletionResult
 from ..solvers.common import Recorder
 from ..solvers.quadratic import single_precision_cg
@@ -132,12 +133,13 @@ def complete_fast(image, sparse_depth, mask=None, *, weights=None, l1_smoothing=
     else:
         out, _ = problem.run(solver=name, start=start, certify=False, objective_values=False, clip=False)
         coarse_z = out.z
-    # the sweeps interpolate the coarse solution (bilinearly) band by band as they read it
-    z = edge_aware_sweeps(coarse_z.reshape(problem.shape).astype(np.float32), image, samples, observed,
-                          smoothness=FAST_SMOOTHNESS, kappa=FAST_KAPPA, sweeps=FAST_SWEEPS, start_factor=factor,
-                          dtype=np.float64)
+    with phase("upsampling and sweeps"):  # the sweeps interpolate the coarse solution band by band as they read it
+        z = edge_aware_sweeps(coarse_z.reshape(problem.shape).astype(np.float32), image, samples, observed,
+                              smoothness=FAST_SMOOTHNESS, kappa=FAST_KAPPA, sweeps=FAST_SWEEPS, start_factor=factor,
+                              dtype=np.float64)
     depth_range = observed_range(samples, clip_to_observed)
-    z, clamped = clamp(z, depth_range, clip_to_observed, rounding=FLOAT32_ROUNDING)
+    with phase("clamp"):
+        z, clamped = clamp(z, depth_range, clip_to_observed, rounding=FLOAT32_ROUNDING)
     return CompletionResult(
         depth=z,
         objective=float("nan"),
