@@ -4,8 +4,10 @@ import warnings
 
 import numpy as np
 import pytest
+from scipy import spatial
 
 import sparsedepth as sd
+from sparsedepth import uncertainty
 from sparsedepth.uncertainty import (MIN_OBSERVED, NOVELTY_WEIGHT, TARGET_COVERAGE, colour_novelty, error_cues,
                                      estimate_uncertainty, fit_calibration, split_samples)
 
@@ -114,6 +116,101 @@ def test_colour_novelty_against_a_brute_force_search():
         low = distances[d2 <= kth].min()                      # ties at the k-th distance: any of them may count
         high = distances[d2 < kth].min() if np.any(d2 < kth) else np.inf
         assert low - 1e-12 <= got[i, j] <= high + 1e-12
+
+
+def _kd_tree_novelty(image, observed, k):
+    """The least RGB distance to the k nearest samples, one KD-tree query per pixel (as scipy picks among ties)."""
+    colours = sd._validation.as_float_image(image)
+    samples = np.argwhere(observed)
+    k = min(k, len(samples))
+    _, nearest = spatial.KDTree(samples).query(np.argwhere(np.ones(observed.shape, bool)), k=k)
+    nearest = samples[nearest.reshape(observed.size, k)]
+    flat = colours.reshape(observed.size, -1)
+    distance = np.linalg.norm(flat[:, None, :] - colours[nearest[..., 0], nearest[..., 1]], axis=-1)
+    return distance.min(axis=1).reshape(observed.shape)
+
+
+def _novelty_frames():
+    """Images (uint8 RGB, RGBA, grey; float RGB) with samples at random, on a lattice (many equally near samples),
+    around a large gap, and fewer than a block's candidates."""
+    rng = np.random.default_rng(8)
+    shape = (47, 83)  # not a multiple of the block side
+    rgb = rng.integers(0, 256, shape + (3,), dtype=np.uint8)
+    rgb[rng.random(shape) < 0.5] = (40, 90, 200)  # repeated colours: ties in colour too
+    lattice = np.zeros(shape, bool)
+    lattice[1::4, 2::3] = True
+    gap = rng.random(shape) < 0.2
+    gap[5:40, 10:70] = False
+    few = np.zeros(shape, bool)
+    few.flat[rng.choice(few.size, 11, replace=False)] = True
+    yield rgb, rng.random(shape) < 0.06
+    yield rgb, lattice
+    yield rgb, gap
+    yield rgb, few
+    yield np.concatenate([rgb, np.full(shape + (1,), 7, np.uint8)], axis=-1), lattice
+    yield rgb[..., 1], rng.random(shape) < 0.1
+    yield rgb.astype(float) / 255, lattice
+    yield rng.random(shape + (3,)), rng.random(shape) < 0.3
+
+
+@pytest.mark.parametrize("neighbours", [1, 3, 8, 20])
+def test_colour_novelty_is_the_per_pixel_kd_tree_query(neighbours):
+    for image, observed in _novelty_frames():
+        depth = np.full(observed.shape, 2.0)
+        expected = NOVELTY_WEIGHT * depth * _kd_tree_novelty(image, observed, neighbours)
+        np.testing.assert_allclose(colour_novelty(depth, image, observed, neighbours=neighbours), expected,
+                                   rtol=1e-12, atol=1e-15)
+
+
+def test_colour_novelty_blocks_decide_most_pixels():
+    image, observed = next(_novelty_frames())
+    colours = sd._validation.as_float_image(image)
+    samples = np.argwhere(observed)
+    decided = uncertainty._nearest_sample_colour_distance(image, colours, samples, spatial.KDTree(samples), 8)
+    assert np.mean(np.isfinite(decided)) > 0.5
+    reference = _kd_tree_novelty(image, observed, 8)
+    np.testing.assert_allclose(decided[np.isfinite(decided)], reference[np.isfinite(decided)], rtol=1e-12, atol=1e-15)
+
+
+def test_quantile_map_is_interpolation_at_the_sorted_values():
+    rng = np.random.default_rng(5)
+    values = rng.integers(0, 40, (30, 20)).astype(float)  # many equal values
+    reference = rng.random((30, 20))
+    where = rng.random((30, 20)) < 0.7
+    expected = np.interp(values, np.sort(values[where]), np.sort(reference[where]))[where]
+    np.testing.assert_array_equal(uncertainty._quantile_map(values, reference, where), expected)
+    values[3, 4] = np.nan
+    where[3, 4] = True
+    expected = np.interp(values, np.sort(values[where]), np.sort(reference[where]))[where]
+    np.testing.assert_array_equal(uncertainty._quantile_map(values, reference, where), expected)
+
+
+def test_covered_counts_the_ratios_below_each_slope():
+    rng = np.random.default_rng(6)
+    slopes = np.geomspace(0.1, 3.0, 50)
+    ratios = np.concatenate([rng.normal(1.0, 1.0, 500), slopes[::7], [np.inf, -np.inf]])  # some exactly on a slope
+    expected = np.array([np.count_nonzero(ratios <= slope) for slope in slopes]) / ratios.size
+    np.testing.assert_array_equal(uncertainty._covered(ratios, slopes), expected)
+
+
+@pytest.mark.parametrize("shape", [(17, 23), (2, 9), (9, 2)])
+def test_error_cues_at_pixels_are_the_map_there(shape):
+    rng = np.random.default_rng(2)
+    depth = 2 + rng.random(shape).cumsum(axis=1) / 10
+    observed = rng.random(shape) < 0.2
+    observed.flat[[0, -1]] = True
+    sparse = np.where(observed, depth + 0.05 * rng.standard_normal(shape), np.nan)
+    pixels = np.flatnonzero(rng.random(shape) < 0.5)
+    np.testing.assert_array_equal(uncertainty._error_cues_at(depth, sparse, observed, pixels),
+                                  error_cues(depth, sparse, observed).ravel()[pixels])
+
+
+@pytest.mark.parametrize("radius", [0.5, 2.3, 30.0])
+def test_local_range_at_pixels_is_the_filtered_range_there(radius):
+    image = np.random.default_rng(3).random((13, 21))
+    rows, cols = np.divmod(np.arange(image.size), image.shape[1])
+    np.testing.assert_array_equal(uncertainty._local_range_at(image, radius, rows, cols),
+                                  uncertainty._local_range(image, radius).ravel())
 
 
 @pytest.mark.parametrize("tail", ["laplace", "student3"])
