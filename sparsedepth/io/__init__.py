@@ -13,6 +13,7 @@ One module per responsibility:
 * :mod:`.nyu` - the NYU Depth V2 files;
 * :mod:`.depth` - depth scales, :func:`read_depth`, :func:`read_mask`;
 * :mod:`.pointcloud` - :func:`depth_to_points` (pinhole back-projection) and PLY files;
+* :mod:`.colmap` - COLMAP sparse models (cameras, images, 3-D points; text and binary) and each view's sparse depth;
 * :mod:`.writing` - :func:`write_depth`, :func:`depth_writer` and the uncertainty writers.
 
 Conventions shared by every function:
