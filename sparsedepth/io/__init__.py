@@ -38,6 +38,7 @@ Imports NumPy, imageio, Pillow, tifffile, h5py and :mod:`sparsedepth._validation
 """
 
 from .calibration import KINECT_NYU, KinectDisparity, StereoCalibration, disparity_to_depth, read_calib
+from .colmap import ColmapModel, read_colmap_model, view_depth, view_observations, write_colmap_model
 from .formats import read_depth_array
 from .depth import DEPTH_SCALES, read_depth, read_depth_png, read_mask, resolve_scale  # noqa: F401 - resolve_scale for the CLI
 from .files import MAX_PIXELS, atomic_target, create_temporary, fsync  # noqa: F401 - atomic writes for the CLI and batch runs
@@ -47,6 +48,7 @@ from .pfm import read_pfm, write_pfm
 from .pointcloud import depth_to_points, ply_writer, read_ply, write_ply  # noqa: F401 - ply_writer for the CLI
 from .writing import depth_writer, write_depth  # noqa: F401 - depth_writer for the CLI
 
-__all__ = ["DEPTH_SCALES", "KINECT_NYU", "KinectDisparity", "MAX_PIXELS", "NYUDepthV2Labeled", "StereoCalibration",
-           "depth_to_points", "disparity_to_depth", "read_calib", "read_depth", "read_depth_array", "read_depth_png", "read_image",
-           "read_mask", "read_nyu_h5", "read_pfm", "read_ply", "write_depth", "write_pfm", "write_ply"]
+__all__ = ["ColmapModel", "DEPTH_SCALES", "KINECT_NYU", "KinectDisparity", "MAX_PIXELS", "NYUDepthV2Labeled",
+           "StereoCalibration", "depth_to_points", "disparity_to_depth", "read_calib", "read_depth", "read_depth_array", "read_depth_png", "read_image",
+           "read_colmap_model", "read_mask", "read_nyu_h5", "read_pfm", "read_ply", "view_depth", "view_observations",
+           "write_colmap_model", "write_depth", "write_pfm", "write_ply"]
