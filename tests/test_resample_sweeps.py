@@ -119,3 +119,20 @@ def test_fast_mode_of_a_uint8_image_and_of_its_float_scaling_agree():
     np.testing.assert_allclose(from_uint8, from_float, rtol=1e-4)
     with pytest.raises(ValueError, match="must lie in"):
         sd.complete_depth(image / 128.0, sparse, mask, quality="fast")
+
+
+@pytest.mark.parametrize("dtype, low, high", [(np.uint8, 0, 256), (bool, 0, 2), (np.uint16, 0, 65536),
+                                              (np.int16, -32768, 32768), (np.int32, -2**31, 2**31)])
+@pytest.mark.parametrize("factor", [1, 3, 16, 17])
+def test_block_mean_of_integers_is_exact(dtype, low, high, factor):
+    rng = np.random.default_rng(10)
+    values = rng.integers(low, high, size=(37, 35, 2), dtype=np.int64).astype(dtype)
+    if dtype in (np.uint8, bool):
+        values[:17, :17] = high - 1  # full 17 x 17 blocks of the largest value: past a uint16 sum at f = 17
+    got = block_mean(values, factor)
+    h, w = coarse_shape((37, 35), factor)
+    for y in range(h):
+        for x in range(w):
+            block = values[y * factor:(y + 1) * factor, x * factor:(x + 1) * factor].astype(np.int64)
+            for c in range(2):
+                assert got[y, x, c] == int(block[..., c].sum()) / block[..., c].size  # exact sum, one rounding

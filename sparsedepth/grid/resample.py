@@ -38,20 +38,20 @@ def coarse_shape(shape, factor: int) -> tuple[int, int]:
     return -(-int(shape[0]) // factor), -(-int(shape[1]) // factor)
 
 
-def _block_sums(values, factor, where=None):
+def _block_sums(values, factor, where=None, dtype=None):
     """Sums over each ``f x f`` block (the partial blocks of the last row and column included), leading axes ``(h, w)``.
 
     Strided adds (faster than a reduction over a middle axis): the rows ``y ≡ o (mod f)`` are added offset by
     offset, then the columns; an offset with one row or column fewer adds to all blocks but the last.  ``where``
     (a boolean ``(H, W)`` array): only those values are summed (the others count as 0), masked a row offset at a
-    time.
+    time.  ``dtype``: the type summed in (default that of ``values``).
     """
     def rows_at(offset):
         part = values[offset::factor]
         return part if where is None else np.where(where[offset::factor], part, 0.0)
 
     rows = rows_at(0)
-    rows = rows.copy() if where is None else rows
+    rows = rows.astype(dtype) if dtype is not None else rows.copy() if where is None else rows
     for offset in range(1, factor):
         part = rows_at(offset)
         rows[:part.shape[0]] += part
@@ -77,13 +77,19 @@ def block_mean(values, factor: int) -> np.ndarray:
     Returns
     -------
     ndarray, shape ``coarse_shape((H, W), f)`` (plus the channel axis), float64
-        Summed in the precision of ``values`` (float32 stays float32 until the division).
+        Summed in the precision of ``values`` (float32 stays float32 until the division); integers of up to 32
+        bits and booleans exactly, in an integer type wide enough (uint16 for 8-bit values and ``f <= 16``).
     """
     values = np.asarray(values)
-    if not np.issubdtype(values.dtype, np.floating):
-        values = values.astype(np.float64)
     counts = _block_counts(values.shape[:2], factor)
-    sums = _block_sums(values, factor).astype(np.float64)
+    if np.issubdtype(values.dtype, np.floating):
+        sums = _block_sums(values, factor)
+    elif values.dtype.itemsize <= 4 and (values.dtype.kind in "biu"):
+        small = values.dtype.itemsize == 1 and values.dtype.kind in "bu" and factor <= 16  # f² · 255 < 2¹⁶
+        sums = _block_sums(values, factor, dtype=np.uint16 if small else np.int64)
+    else:
+        sums = _block_sums(values.astype(np.float64), factor)
+    sums = sums.astype(np.float64)
     return sums / (counts if values.ndim == 2 else counts[..., None])
 
 

@@ -13,8 +13,6 @@ import numpy as np
 
 from .._validation import as_depth_and_mask, as_float_image, check_same_shape
 from ..grid.resample import block_mean, block_sample_mean, coarse_shape, edge_aware_sweeps
-from ..grid.rowbands import row_bands, rows_per_band
-from ..limits import memory_limits
 from ..objective.objective import DEFAULT_L1_SMOOTHING
 from ..objective.weights import DEFAULT_WEIGHTS, Weights, observed_fraction, resolve_weights
 from ..problem import CompletionProblem, checked_start, choose_solver, clamp, observed_range
@@ -162,21 +160,22 @@ def complete_fast(image, sparse_depth, mask=None, *, weights=None, l1_smoothing=
 def _scaled_by_bands(image) -> bool:
     """True for a uint8 or uint16 image of a shape :func:`~sparsedepth._validation.as_float_image` takes.
 
-    Its scaling to [0, 1] checks no values, so it is done a band of rows at a time where the image is read
-    (:func:`_coarse_image`, :func:`~sparsedepth.grid.resample.edge_aware_sweeps`) instead of into a float copy of
-    the whole image; any other image is converted, and checked, whole.
+    Its scaling to [0, 1] checks no values, so it is not made into a float copy of the whole image: its block means
+    are taken of the integers (:func:`_coarse_image`) and the sweeps scale it a band of rows at a time
+    (:func:`~sparsedepth.grid.resample.edge_aware_sweeps`); any other image is converted, and checked, whole.
     """
     return (image.dtype in (np.uint8, np.uint16) and image.size > 0
             and (image.ndim == 2 or (image.ndim == 3 and image.shape[2] in (1, 3, 4))))
 
 
 def _coarse_image(image, factor):
-    """The block means (:func:`~sparsedepth.grid.resample.block_mean`) of the image scaled to [0, 1] in float32.
+    """The block means (:func:`~sparsedepth.grid.resample.block_mean`) of the image scaled to [0, 1].
 
-    Scaled by :func:`~sparsedepth._validation.as_float_image` a band of rows at a time (a multiple of ``factor``
-    rows: the same blocks and sums as over the whole image); float32 means may round past 1 and are clipped.
+    A uint8 or uint16 image: the means of its integers (summed exactly) divided by 255 or 65535, its channels as
+    :func:`~sparsedepth._validation.as_float_image` takes them (a grey image one channel, alpha dropped); a float
+    image (already scaled): its block means, clipped to [0, 1] (float32 means may round past 1).
     """
-    channels = image.shape[2] if image.ndim == 3 else 1
-    rows = rows_per_band(image.shape[1] * channels, memory_limits().norm_band_values, multiple=factor)
-    means = [block_mean(as_float_image(image[band], dtype=np.float32), factor) for band in row_bands(0, image.shape[0], rows)]
-    return np.clip(np.concatenate(means), 0.0, 1.0)
+    if image.dtype in (np.uint8, np.uint16):
+        channels = image[..., :3] if image.ndim == 3 else image[..., None]
+        return block_mean(channels, factor) / np.iinfo(image.dtype).max
+    return np.clip(block_mean(image, factor), 0.0, 1.0)
