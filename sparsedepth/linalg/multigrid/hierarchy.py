@@ -38,8 +38,10 @@ _SMOOTHERS = ("gauss_seidel", "jacobi", "line_gauss_seidel")
 # single_coarse_pixels (fine grids from it keep their coarse levels in float32, coarse_precision="auto"),
 # single_fine_values (fine operators with at most that many non-zeros are smoothed on a float32 copy,
 # fine_precision="auto"; larger ones in float64, as the copy would weigh on the peak memory),
-# keep_stencil_pixels (below it every level's stencil is kept as one (K, H, W) array during the set-up instead of
-# being read back from the CSR one parity class at a time) and banded_coarse_pixels (with a fine SymmetricStencil
+# keep_stencil_pixels (below it every coarse level's stencil is kept as one (K, H, W) array during the set-up
+# instead of being read back from its CSR form, and the line smoother's images of a fine CSR operator are copied
+# as the Galerkin product reads its rows; the bilinear product reads any level a band of rows at a time, the
+# operator-dependent one a parity class at a time) and banded_coarse_pixels (with a fine SymmetricStencil
 # smoothed in float64, coarse levels of at least that many pixels are float32 stencils swept band by band,
 # :mod:`.bands`; smaller ones stay CSR).
 
@@ -316,9 +318,9 @@ class GridMultigrid:
         line_images = None
         if self.smoother == "line_gauss_seidel" and source.array is not None:
             line_images = dict(zip(source.offsets, source.array))
-        elif self.smoother == "line_gauss_seidel" and source.csr is not None:
+        elif self.smoother == "line_gauss_seidel" and source.csr is not None and keep:
             # the bilinear product reads the stencil a band of rows at a time: the line smoother's images are
-            # copied as they pass (used only if every row was read)
+            # copied as they pass (used only if every row was read); larger grids read them from the matrix
             line_images = source.keep_images(LINE_OFFSETS)
         for li in range(len(levels) - 1):
             fine, coarse = levels[li], levels[li + 1]
