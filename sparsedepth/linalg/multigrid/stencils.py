@@ -209,13 +209,20 @@ def mirrored_image(image, offset, out=None):
     """
     dy, dx = offset
     h, w = image.shape
+    ty, tx = slice(max(0, dy), min(h, h + dy)), slice(max(0, dx), min(w, w + dx))
+    if ty.start >= ty.stop or tx.start >= tx.stop:
+        if out is None:
+            return np.zeros((h, w))
+        out[...] = 0.0
+        return out
     if out is None:
         out = np.zeros((h, w))
-    else:
-        out[...] = 0.0
-    ty, tx = slice(max(0, dy), min(h, h + dy)), slice(max(0, dx), min(w, w + dx))
-    if ty.start < ty.stop and tx.start < tx.stop:
-        out[ty, tx] = image[ty.start - dy:ty.stop - dy, tx.start - dx:tx.stop - dx]
+    else:  # zero the strips outside the copied block only
+        out[:ty.start] = 0.0
+        out[ty.stop:] = 0.0
+        out[ty, :tx.start] = 0.0
+        out[ty, tx.stop:] = 0.0
+    out[ty, tx] = image[ty.start - dy:ty.stop - dy, tx.start - dx:tx.stop - dx]
     return out
 
 
