@@ -13,12 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
 
 from .._validation import as_depth_and_mask, as_float_image, check_nonnegative_real, check_same_shape
 from .edges import pair_distances
 
-__all__ = ["geodesic_fill", "step_costs", "grid_graph"]
+__all__ = ["geodesic_fill", "nearest_sources", "step_costs", "grid_graph"]
 
 
 def step_costs(image, contrast: float):
@@ -68,11 +67,11 @@ def geodesic_fill(image, sparse_depth, mask=None, *, contrast: float = 10.0, ret
 
     Notes
     -----
-    One multi-source Dijkstra search (``scipy.sparse.csgraph.dijkstra`` with
-    ``min_only=True``) over the 4-connected grid graph with the costs of
-    :func:`step_costs`: ``d(p) = min_s min_paths Σ cost``, and the fill takes
-    the value of the minimising source ``s``.  Ties between sources are
-    broken by the search order.  ``O(N log N)`` for ``N = H W`` pixels.
+    ``d(p) = min_s min_paths Σ cost`` over the 4-connected grid with the costs
+    of :func:`step_costs`, and the fill takes the value of the minimising
+    source ``s``: :func:`nearest_sources`, an exact multi-source shortest-path
+    search (the distances of Dijkstra's algorithm on :func:`grid_graph`).
+    Where two sources are at exactly the same path cost, either may be chosen.
 
     Examples
     --------
@@ -86,14 +85,118 @@ def geodesic_fill(image, sparse_depth, mask=None, *, contrast: float = 10.0, ret
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     img = as_float_image(image)
     check_same_shape(img.shape[:2], depth.shape, "image", "sparse_depth")
-    graph = grid_graph(*step_costs(img, contrast))
-    sources = np.flatnonzero(observed)
-    distance, _, nearest = dijkstra(graph, directed=False, indices=sources, min_only=True, return_predecessors=True)
-    del graph
-    fill = depth.ravel()[nearest].reshape(depth.shape)
+    distance, nearest = nearest_sources(*step_costs(img, contrast), observed)
+    fill = depth.ravel()[nearest]
     if return_distance:
-        return fill, distance.reshape(depth.shape)
+        return fill, distance
     return fill
+
+
+def nearest_sources(cx, cy, sources):
+    """Path cost to the nearest source and which source it is, for every pixel of a 4-connected grid.
+
+    Parameters
+    ----------
+    cx : ndarray, (H, W−1)
+        ``cx[i, j]`` is the cost of the step ``(i, j)–(i, j+1)`` (both ways).
+    cy : ndarray, (H−1, W)
+        ``cy[i, j]`` is the cost of the step ``(i, j)–(i+1, j)``.
+    sources : ndarray of bool, (H, W)
+        The pixels at distance 0; at least one.
+
+    Returns
+    -------
+    distance : ndarray, (H, W), float64
+        The least path cost from any source.
+    nearest : ndarray, (H, W), intp
+        The flat index ``i W + j`` of a source at that cost.
+
+    Raises
+    ------
+    ValueError
+        For shapes that do not fit, no source, or a cost that is not finite
+        and ``> 0``.
+
+    Notes
+    -----
+    A label-setting search in rounds (Dial's buckets, anchored at the least
+    tentative distance).  With ``δ`` the least step cost and ``m`` the least
+    tentative distance of the pixels reached but not yet final, every such
+    pixel ``p`` with ``d(p) < m + δ`` is final: a shorter path to ``p`` would
+    leave the final pixels through another reached pixel ``r``, at
+    ``d(r) >= m``, and take at least one more step, ``>= m + δ``.  One round
+    finalises all of them at once and relaxes their four neighbours with
+    array operations, one direction at a time (each direction maps distinct
+    pixels to distinct neighbours, so a scatter has no collisions):
+    ``d(q) ← min(d(q), d(p) + c_pq)``, ``s(q) ← s(p)`` where it improves.
+    Each pixel is final once and relaxed from at most four neighbours; the
+    number of rounds is about ``max d / δ``.  The distances are sums of the
+    same float64 costs along the same shortest paths as Dijkstra's; among
+    sources at exactly equal cost the first to reach a pixel keeps it.
+    """
+    sources = np.asarray(sources, dtype=bool)
+    if sources.ndim != 2:
+        raise ValueError(f"sources must be a 2-D (H, W) array, got shape {sources.shape}")
+    H, W = sources.shape
+    cx, cy = np.asarray(cx, dtype=np.float64), np.asarray(cy, dtype=np.float64)
+    if cx.shape != (H, W - 1) or cy.shape != (H - 1, W):
+        raise ValueError(f"step costs of shapes {cx.shape} and {cy.shape} do not fit a grid of shape {(H, W)}: "
+                         f"expected {(H, W - 1)} and {(H - 1, W)}")
+    least_step = min(float(cx.min(initial=np.inf)), float(cy.min(initial=np.inf)))
+    if not (np.all(np.isfinite(cx)) and np.all(np.isfinite(cy)) and least_step > 0):
+        raise ValueError("step costs must be finite and > 0")
+    if not sources.any():
+        raise ValueError("sources has no True pixel")
+    Wp = W + 2  # a frame of one pixel round the grid, never reached: no bounds checks in the rounds
+    steps = np.full((H + 2, Wp, 4), np.inf)  # per pixel: the cost to its right, left, lower, upper neighbour
+    steps[1:-1, 1:-2, 0] = cx
+    steps[1:-1, 2:-1, 1] = cx
+    steps[1:-2, 1:-1, 2] = cy
+    steps[2:-1, 1:-1, 3] = cy
+    steps = steps.reshape(-1, 4)
+    offsets = (1, -1, Wp, -Wp)
+    distance = np.full((H + 2, Wp), np.inf)
+    distance[1:-1, 1:-1][sources] = 0.0
+    nearest = np.zeros((H + 2, Wp), dtype=np.int32 if H * W < np.iinfo(np.int32).max else np.intp)
+    nearest[1:-1, 1:-1][sources] = np.flatnonzero(sources)
+    # the first round: the sources with a neighbour that is not a source (the others improve nothing)
+    open_ = np.zeros((H + 2, Wp), dtype=bool)
+    open_[1:-1, 1:-1] = ~sources
+    boundary = np.zeros((H + 2, Wp), dtype=bool)
+    inner = boundary[1:-1, 1:-1]
+    np.logical_or(open_[1:-1, 2:], open_[1:-1, :-2], out=inner)
+    inner |= open_[2:, 1:-1]
+    inner |= open_[:-2, 1:-1]
+    inner &= sources
+    del open_
+    final = np.flatnonzero(boundary.reshape(-1))
+    del boundary
+    distance = distance.reshape(-1)
+    nearest = nearest.reshape(-1)
+    reached = np.empty(0, dtype=np.intp)  # reached, not final; each pixel once
+    while final.size:
+        d = distance[final]
+        s = nearest[final]
+        c = np.take(steps, final, axis=0)
+        parts = [reached]
+        for j, offset in enumerate(offsets):
+            q = final + offset
+            candidate = c[:, j] + d
+            before = distance[q]
+            better = np.flatnonzero(candidate < before)
+            q = q[better]
+            distance[q] = candidate[better]
+            nearest[q] = s[better]
+            parts.append(q[before[better] == np.inf])
+        reached = np.concatenate(parts)
+        if not reached.size:
+            break
+        d = distance[reached]
+        now = d < d.min() + least_step
+        final = reached[np.flatnonzero(now)]
+        reached = reached[np.flatnonzero(~now)]
+    distance = distance.reshape(H + 2, Wp)[1:-1, 1:-1].copy()
+    return distance, nearest.reshape(H + 2, Wp)[1:-1, 1:-1].astype(np.intp)
 
 
 def grid_graph(cx, cy):
