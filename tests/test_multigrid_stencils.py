@@ -59,6 +59,12 @@ def test_read_full_pattern_returns_the_stencil_or_none(offsets, shape):
     assert got_offsets == expected
     np.testing.assert_array_equal(got, csr_to_stencil(A, shape, offsets=expected)[1])
     np.testing.assert_array_equal(dense_from_stencil(got_offsets, got), A.toarray())
+    # the same with 64-bit index arrays
+    wide = sp.csr_array((A.data, A.indices.astype(np.int64), A.indptr.astype(np.int64)), shape=A.shape)
+    assert wide.indices.dtype == np.int64
+    wide_offsets, wide_stencil = read_full_pattern(wide, shape)
+    assert wide_offsets == got_offsets
+    np.testing.assert_array_equal(wide_stencil, got)
 
 
 @pytest.mark.parametrize("position", ["first", "inner", "last"])
@@ -72,6 +78,10 @@ def test_read_full_pattern_rejects_a_moved_column(position):
     B.indices[entry] += 1 if position == "first" else -1  # still sorted, no longer the pattern
     assert read_full_pattern(B, shape) is None
     assert full_pattern_offsets(B, shape) is None
+    # row pointers of another pattern
+    D = A.copy()
+    D.indptr[1:-1] += 1
+    assert read_full_pattern(D, shape) is None
     # another layout of the same matrix (the entries of a row not in column order) is not read by position
     C = sp.csr_array(A.toarray())
     C.indices[:] = C.indices[::-1].copy()  # unsorted: columns no longer those of the pattern

@@ -1,10 +1,12 @@
-"""Stencils of grid operators: one coefficient image per neighbour offset, read from a CSR matrix.
+"""Stencils of grid operators: one coefficient image per neighbour offset, read from and written to CSR matrices.
 
 The multigrid set-up works on stencils, never on general sparse products;
-this module reads them from an operator (:func:`grid_stencil`) and hands a
-level's stencil to the set-up one parity class at a time
-(:class:`StencilSource`).  May import :mod:`sparsedepth.grid` and
-:mod:`sparsedepth._validation`, NumPy and SciPy.
+this module reads them from an operator (:func:`grid_stencil`; a CSR matrix
+in the full in-grid pattern is checked by :func:`verify_full_pattern` and read
+by position, :class:`PatternRows`), hands a level's stencil to the set-up one
+parity class or one band of rows at a time (:class:`StencilSource`) and
+writes the coarse levels' CSR forms (:func:`assemble_csr`).  May import
+:mod:`sparsedepth.grid` and :mod:`sparsedepth._validation`, NumPy and SciPy.
 """
 
 from __future__ import annotations
@@ -227,13 +229,13 @@ def mirrored_image(image, offset, out=None):
 
 
 class StencilSource:
-    """A level's stencil for the numeric set-up, handed out one parity class at a time.
+    """A level's stencil for the numeric set-up, handed out one parity class or one band of rows at a time.
 
     Either an array ``(K, H, W)`` (coarse levels, or a fine operator whose
-    stencil had to be extracted diagonal by diagonal) or a CSR matrix in the
+    stencil had to be extracted diagonal by diagonal), a symmetric stencil, or a CSR matrix in the
     full in-grid pattern of :func:`~sparsedepth.grid.stencil.stencil_to_csr`, read
-    class by class so that the fine stencil is never held whole (a quarter
-    of its pixels at a time).  Grids below
+    class by class (:meth:`parity_class`) or band by band (:meth:`row_reader`) so that the fine stencil is
+    never held whole.  For the class-by-class products, grids below
     ``keep_stencil_pixels`` (:class:`~sparsedepth.limits.MemoryLimits`) read it whole once (:meth:`read_whole`).
     """
 
@@ -306,7 +308,7 @@ class StencilSource:
 
         def rows_kept(y0, y1):
             rows = rows_of(y0, y1)
-            kept.add(rows[slots], y0, y1)
+            kept.add([rows[k] for k in slots], y0, y1)
             return rows
 
         return rows_kept
@@ -345,7 +347,7 @@ class KeptImages:
         self._read = np.zeros(shape[0], dtype=bool)
 
     def add(self, rows, y0, y1):
-        """Copy ``rows`` (``(len(images), y1 − y0, W)``, in the order of ``images``) into the images."""
+        """Copy ``rows`` (one ``(y1 − y0, W)`` array per image, in the order of ``images``) into the images."""
         for image, part in zip(self.images.values(), rows):
             image[y0:y1] = part
         self._read[y0:y1] = True
@@ -585,17 +587,14 @@ def _verified_layout(A, shape, radius=None):
     if y1 > y0 and x1 > x0:
         (columns,) = _inner_views((indices,), indptr, counts, inner, K)
         band = min(y1 - y0, _band_rows((x1 - x0) * K))
-        if (y1 + band) * w + w >= np.iinfo(indices.dtype).max:
-            return None  # the pattern's columns would not fit the index type
-        itype = indices.dtype.type
-        # the columns of the first band's entries, less the first row's start
-        pattern = (np.arange(band, dtype=indices.dtype)[:, None, None] * itype(w)
-                   + np.arange(x0, x1, dtype=indices.dtype)[None, :, None] + (delta + y0 * w).astype(indices.dtype))
+        # the columns of the first band's entries (int64, whatever the index type)
+        pattern = (np.arange(y0, y0 + band, dtype=np.int64)[:, None, None] * w
+                   + np.arange(x0, x1, dtype=np.int64)[None, :, None] + delta)
         shifted = np.empty_like(pattern)
         for r0 in range(0, y1 - y0, band):
             r1 = min(y1 - y0, r0 + band)
             part = shifted[:r1 - r0]
-            np.subtract(columns[r0:r1], itype(r0 * w), out=part)
+            np.subtract(columns[r0:r1], r0 * w, out=part)  # a later band less its rows' offset from the first
             if not np.array_equal(part, pattern[:r1 - r0]):
                 return None
     position, k, pixel = _border_entries(offsets, shape, indptr, inner)
