@@ -587,14 +587,15 @@ def _verified_layout(A, shape, radius=None):
     if y1 > y0 and x1 > x0:
         (columns,) = _inner_views((indices,), indptr, counts, inner, K)
         band = min(y1 - y0, _band_rows((x1 - x0) * K))
-        # the columns of the first band's entries (int64, whatever the index type)
+        # the columns of the first band's entries, in the index type (they are columns of the matrix: below N)
+        itype = indices.dtype.type
         pattern = (np.arange(y0, y0 + band, dtype=np.int64)[:, None, None] * w
-                   + np.arange(x0, x1, dtype=np.int64)[None, :, None] + delta)
+                   + np.arange(x0, x1, dtype=np.int64)[None, :, None] + delta).astype(indices.dtype)
         shifted = np.empty_like(pattern)
         for r0 in range(0, y1 - y0, band):
             r1 = min(y1 - y0, r0 + band)
             part = shifted[:r1 - r0]
-            np.subtract(columns[r0:r1], r0 * w, out=part)  # a later band less its rows' offset from the first
+            np.subtract(columns[r0:r1], itype(r0 * w), out=part)  # a later band less its rows' offset from the first
             if not np.array_equal(part, pattern[:r1 - r0]):
                 return None
     position, k, pixel = _border_entries(offsets, shape, indptr, inner)
