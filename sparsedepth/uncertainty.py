@@ -39,6 +39,7 @@ _GOOD_LOSS = 0.5
 #: samples it compares with; chosen on the tuning frames (docs/uncertainty.md scores them on the report frames).
 NOVELTY_WEIGHT = 0.8
 NOVELTY_NEIGHBOURS = 8
+#: Pixels per step of :func:`colour_novelty` (bounded memory: step x candidates floats per array).
 _NOVELTY_CHUNK = 1 << 13
 #: Side of the pixel blocks of :func:`colour_novelty` and the nearest samples of a block's centre searched for the
 #: neighbours of its pixels (see its Notes).
@@ -306,9 +307,9 @@ def colour_novelty(depth, image, observed, *, neighbours=NOVELTY_NEIGHBOURS):
     Where several samples lie at distance ``d_k`` and only some of them
     count, the KD-tree's choice decides; if that choice can change the
     minimum (a tied sample's colour is nearer than every closer sample's), or
-    the test fails (near the image border, in a large gap), the pixel is
-    queried on its own as :class:`scipy.spatial.KDTree` does.  The result is
-    the per-pixel query's, computed in about a quarter of its time.
+    the test fails (the block's candidates do not reach far enough, as in a
+    large gap), the pixel is queried on its own.  The result is that of one
+    KD-tree query per pixel.
     """
     colours = as_float_image(image)
     observed = np.asarray(observed, dtype=bool)
@@ -344,7 +345,7 @@ def _nearest_sample_colour_distance(image, colours, samples, tree, k):
     Squared distances are inner products of augmented vectors, ``|a - b|**2 =
     (a, |a|**2, 1) . (-2 b, 1, |b|**2)``, one matrix product per block: exact
     for pixel coordinates (integers; float32 while every partial sum stays
-    below 2**23) and for a uint8 ``image``'s codes (integers below 2**18 in
+    below 2**23) and for a uint8 ``image``'s codes (integers below 2**20 in
     float32; the distance is then divided by 255).  Other images are
     compared channel by channel in float64.  The arrays hold a block's
     candidates along the middle axis and its pixels along the last, so the
@@ -355,61 +356,56 @@ def _nearest_sample_colour_distance(image, colours, samples, tree, k):
     block_rows, block_cols = -(-height // block), -(-width // block)
     candidates = min(_NOVELTY_CANDIDATES, samples.shape[0])
     centre = (block - 1) / 2
-    centres = np.stack(np.meshgrid(np.arange(block_rows) * block + centre, np.arange(block_cols) * block + centre,
-                                   indexing="ij"), axis=-1).reshape(-1, 2)
-    reach, nearest = tree.query(centres, k=candidates)
+    corners = np.stack(np.meshgrid(np.arange(block_rows) * block, np.arange(block_cols) * block, indexing="ij"),
+                       axis=-1).reshape(-1, 2)
+    reach, nearest = tree.query(corners + centre, k=candidates)
     nearest = nearest.reshape(-1, candidates)
     if candidates < samples.shape[0]:
-        reach = reach.reshape(-1, candidates)[:, -1:] * (1 - 1e-12)  # a margin over rounding for the test below
+        reach = reach.reshape(-1, candidates)[:, -1] * (1 - 1e-12)  # a margin over rounding for the test below
+        farthest = float(reach.max())
     else:
-        reach = np.full((len(centres), 1), np.inf)  # every sample is a candidate
-
-    origins = np.stack(np.meshgrid(np.arange(block_rows) * block, np.arange(block_cols) * block, indexing="ij"),
-                       axis=-1).reshape(-1, 1, 2)
-    relative = samples.astype(np.int32)[nearest] - origins.astype(np.int32)       # (blocks, K, 2)
-    places = np.stack(np.divmod(np.arange(block * block), block), axis=-1)         # (block**2, 2) place in a block
+        reach, farthest = np.full(len(corners), np.inf), float(height + width)  # every sample is a candidate
+    place_type = np.float32 if (farthest + 3 * block) ** 2 < 2 ** 23 else np.float64
+    places = np.stack(np.divmod(np.arange(block * block), block), axis=-1)        # (block**2, 2) place in a block
     off_centre = np.hypot(places[:, 0] - centre, places[:, 1] - centre)
-    farthest = float(np.max(reach[np.isfinite(reach)], initial=0.0)) if np.isfinite(reach).all() else height + width
-    place_type = np.float32 if (farthest + 2 * block) ** 2 < 2 ** 23 else np.float64
-    sample_places = _augmented(relative.astype(place_type), -1)                    # (blocks, K, 4)
-    sample_places_t = np.ascontiguousarray(sample_places.swapaxes(1, 2))           # (blocks, 4, K)
-    pixel_places_t = _augmented(places.astype(place_type), 1)                      # (block**2, 4)
-    pixel_places = np.ascontiguousarray(pixel_places_t.T)                          # (4, block**2)
+    pixel_places = _augmented(places.astype(place_type), 1)                       # (block**2, 4)
+    pixel_places_t = np.ascontiguousarray(pixel_places.T)                         # (4, block**2)
+    corners = corners.astype(np.int32)[:, None, :]
+    samples = samples.astype(np.int32)
 
     codes_uint8 = np.asarray(image).dtype == np.uint8
     if codes_uint8:
         codes, unit = np.asarray(image).reshape(height, width, -1)[..., :channels].astype(np.float32), 255.0
     else:
         codes, unit = colours, 1.0
-    sample_codes = codes[samples[:, 0], samples[:, 1]][nearest]                    # (blocks, K, channels)
-    extra = 2 if codes_uint8 else 0
-    padded = np.zeros((block_rows, block, block_cols, block, channels + extra), dtype=codes.dtype)
-    padded.reshape(block_rows * block, block_cols * block, -1)[:height, :width, :channels] = codes
-    pixel_codes = padded.transpose(0, 2, 4, 1, 3).reshape(-1, channels + extra, block * block)  # (blocks, ., pixels)
-    if codes_uint8:  # (v, |v|**2, 1) along the middle axis
-        np.einsum("bcp,bcp->bp", pixel_codes[:, :channels], pixel_codes[:, :channels], out=pixel_codes[:, channels])
-        pixel_codes[:, channels + 1] = 1
-        sample_codes = _augmented(sample_codes, -1)                                # (blocks, K, channels + 2)
+    sample_codes = codes[samples[:, 0], samples[:, 1]]                            # (samples, channels)
+    padded = np.zeros((block_rows * block, block_cols * block, channels), dtype=codes.dtype)
+    padded[:height, :width] = codes
+    padded = padded.reshape(block_rows, block, block_cols, block, channels)
 
-    distance = np.empty((len(centres), block * block))
+    distance = np.empty((len(corners), block * block))
     beyond = np.asarray(4.0 * channels * unit ** 2, dtype=codes.dtype)  # added to the squared colour distance of a
-    step = max(1, _NOVELTY_CHUNK // (block * block))                   # candidate that does not count: above all
-    for start in range(0, len(centres), step):
+    step = block_cols * max(1, _NOVELTY_CHUNK // (block_cols * block * block))  # candidate that does not count
+    for start in range(0, len(corners), step):
         blocks = slice(start, start + step)
-        kth = np.partition(np.matmul(pixel_places_t, sample_places_t[blocks]), k - 1, axis=-1)[..., k - 1]
-        squared = np.matmul(sample_places[blocks], pixel_places)                   # (blocks, K, pixels)
+        found = nearest[blocks]
+        sample_places = _augmented((samples[found] - corners[blocks]).astype(place_type), -1)  # (blocks, K, 4)
+        kth = np.partition(np.matmul(pixel_places, sample_places.swapaxes(1, 2)), k - 1, axis=-1)[..., k - 1]
+        squared = np.matmul(sample_places, pixel_places_t)                       # (blocks, K, pixels)
         outside = squared > kth[:, None, :]
+        pixel_codes = padded[start // block_cols: (start + step) // block_cols].transpose(0, 2, 4, 1, 3).reshape(
+            -1, channels, block * block)                                          # (blocks, channels, pixels)
         if codes_uint8:
-            colour = np.matmul(sample_codes[blocks], pixel_codes[blocks])
+            colour = np.matmul(_augmented(sample_codes[found], -1), _augmented(pixel_codes, 1, axis=1))
         else:
             colour = np.zeros(squared.shape)
             for channel in range(channels):
-                difference = sample_codes[blocks, :, channel, None] - pixel_codes[blocks, None, channel, :]
+                difference = sample_codes[found, channel, None] - pixel_codes[:, None, channel, :]
                 colour += difference * difference
         penalised = outside * beyond
         penalised += colour
         least = penalised.min(axis=1)
-        decided = np.sqrt(kth.astype(np.float64)) + off_centre < reach[blocks]
+        decided = np.sqrt(kth.astype(np.float64)) + off_centre < reach[blocks, None]
         tied = np.nonzero(squared.shape[1] - np.add.reduce(outside.view(np.uint8), axis=1, dtype=np.uint8) > k)
         if tied[0].size:  # samples tied at the k-th distance: does the KD-tree's choice among them change the minimum?
             farther = squared[tied[0], :, tied[1]] >= kth[tied][:, None]
@@ -420,18 +416,24 @@ def _nearest_sample_colour_distance(image, colours, samples, tree, k):
         block_rows * block, block_cols * block)[:height, :width].copy()
 
 
-def _augmented(vectors, side):
-    """``(v, |v|**2, 1)`` (``side=1``) or ``(-2 v, 1, |v|**2)`` (``side=-1``) of the ``vectors`` (last axis).
+def _augmented(vectors, side, axis=-1):
+    """``(v, |v|**2, 1)`` (``side=1``) or ``(-2 v, 1, |v|**2)`` (``side=-1``) of the ``vectors`` along ``axis``.
 
     The inner product of a ``side=1`` and a ``side=-1`` augmented vector is
     the squared distance of the two vectors.
     """
-    n = vectors.shape[-1]
-    out = np.empty(vectors.shape[:-1] + (n + 2,), dtype=vectors.dtype)
+    n = vectors.shape[axis]
+    shape = list(vectors.shape)
+    shape[axis] = n + 2
+    out = np.empty(shape, dtype=vectors.dtype)
+    parts = np.moveaxis(out, axis, 0)
+    components = np.moveaxis(vectors, axis, 0)
     norm, one = (n, n + 1) if side > 0 else (n + 1, n)
-    np.einsum("...i,...i->...", vectors, vectors, out=out[..., norm])
-    np.multiply(vectors, 1 if side > 0 else -2, out=out[..., :n])
-    out[..., one] = 1
+    np.multiply(components[0], components[0], out=parts[norm])
+    for component in components[1:]:
+        parts[norm] += component * component
+    np.multiply(components, 1 if side > 0 else -2, out=parts[:n])
+    parts[one] = 1
     return out
 
 
