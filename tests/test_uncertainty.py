@@ -132,7 +132,7 @@ def _kd_tree_novelty(image, observed, k):
 
 def _novelty_frames():
     """Images (uint8 RGB, RGBA, grey; float RGB) with samples at random, on a lattice (many equally near samples),
-    around a large gap, and fewer than a block's candidates."""
+    around a large gap, fewer than a block's candidates, and thousands of pixels away."""
     rng = np.random.default_rng(8)
     shape = (47, 83)  # not a multiple of the block side
     rgb = rng.integers(0, 256, shape + (3,), dtype=np.uint8)
@@ -151,6 +151,9 @@ def _novelty_frames():
     yield rgb[..., 1], rng.random(shape) < 0.1
     yield rgb.astype(float) / 255, lattice
     yield rng.random(shape + (3,)), rng.random(shape) < 0.3
+    tall = np.zeros((3100, 4), bool)  # candidates ~3000 pixels away: the block places need float64
+    tall[:12] = rng.random((12, 4)) < 0.5
+    yield rng.integers(0, 256, tall.shape + (3,), dtype=np.uint8), tall
 
 
 @pytest.mark.parametrize("neighbours", [1, 3, 8, 20])
