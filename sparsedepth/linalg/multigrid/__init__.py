@@ -24,9 +24,11 @@ coefficient image per neighbour offset, so that
   (1-D, or two images per parity class) and applied by array slicing, never
   as an :math:`N`-row sparse matrix;
 * the Galerkin operators :math:`A^c = P^\top A P` are computed by vectorised
-  stencil arithmetic on the four parity classes of fine pixels, never by a
-  general sparse matrix product, and land in a sparsity pattern that is fixed
-  per grid shape;
+  stencil arithmetic, never by a general sparse matrix product: for the
+  bilinear :math:`P` the rows, then the columns are coarsened (half the
+  offsets of each symmetric step, a band of rows at a time), for the
+  operator-dependent one the four parity classes of fine pixels are summed;
+  they land in a sparsity pattern that is fixed per grid shape;
 * :meth:`GridMultigrid.update` therefore redoes only the numeric part for a new
   operator with the same stencil (new weights between IRLS iterations).
 
