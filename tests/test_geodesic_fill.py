@@ -174,3 +174,28 @@ def test_arguments_are_checked():
         nearest_sources(np.ones((3, 3)), np.ones((2, 4)), ~ones)
     with pytest.raises(ValueError, match="2-D"):
         nearest_sources(np.ones((3, 3)), np.ones((2, 4)), np.ones(12, dtype=bool))
+
+
+@pytest.mark.parametrize("transpose", [False, True])
+def test_long_line_hand_computed(transpose):
+    """A line of 3000 pixels, a source at one end (one round per pixel): the distance is the cumulative cost."""
+    rng = np.random.default_rng(9)
+    steps = 1.0 + rng.random((1, 2999))
+    sources = np.zeros((1, 3000), dtype=bool)
+    sources[0, 0] = True
+    expected = np.concatenate([[0.0], np.cumsum(steps)])
+    if transpose:
+        distance, nearest = nearest_sources(np.empty((3000, 0)), steps.T, sources.T)
+    else:
+        distance, nearest = nearest_sources(steps, np.empty((0, 3000)), sources)
+    np.testing.assert_allclose(distance.ravel(), expected, rtol=1e-12, atol=0)
+    assert np.all(nearest == 0)
+
+
+def test_narrow_strip_equals_dijkstra():
+    """Three pixels wide and 400 long, two sources: many rounds of few pixels."""
+    rng = np.random.default_rng(4)
+    cx, cy = 1.0 + 3.0 * rng.random((400, 2)), 1.0 + 3.0 * rng.random((399, 3))
+    sources = np.zeros((400, 3), dtype=bool)
+    sources[0, 1] = sources[-1, 0] = True
+    _check_against_dijkstra(cx, cy, sources)

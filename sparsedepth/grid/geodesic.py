@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
 
 from .._validation import as_depth_and_mask, as_float_image, check_nonnegative_real, check_same_shape
 from .edges import pair_distances
@@ -133,6 +134,13 @@ def nearest_sources(cx, cy, sources):
     number of rounds is about ``max d / δ``.  The distances are sums of the
     same float64 costs along the same shortest paths as Dijkstra's; among
     sources at exactly equal cost the first to reach a pixel keeps it.
+
+    A round costs a few dozen array calls whatever its size, so after
+    ``64 + H W / 128`` rounds (far more than an image needs, but a grid a few
+    pixels wide takes one round per step) the search starts again as one
+    multi-source Dijkstra search (``scipy.sparse.csgraph.dijkstra`` with
+    ``min_only=True``) over :func:`grid_graph`: at most about twice that
+    search's time, however thin the grid.
     """
     sources = np.asarray(sources, dtype=bool)
     if sources.ndim != 2:
@@ -174,7 +182,12 @@ def nearest_sources(cx, cy, sources):
     distance = distance.reshape(-1)
     nearest = nearest.reshape(-1)
     reached = np.empty(0, dtype=np.intp)  # reached, not final; each pixel once
+    rounds_left = 64 + H * W // 128
     while final.size:
+        rounds_left -= 1
+        if rounds_left < 0:  # rounds of a few pixels each (a thin grid): one heap-ordered search costs less
+            del steps, distance, nearest, final, reached
+            return _dijkstra_nearest_sources(cx, cy, sources)
         d = distance[final]
         s = nearest[final]
         c = np.take(steps, final, axis=0)
@@ -197,6 +210,13 @@ def nearest_sources(cx, cy, sources):
         reached = reached[np.flatnonzero(~now)]
     distance = distance.reshape(H + 2, Wp)[1:-1, 1:-1].copy()
     return distance, nearest.reshape(H + 2, Wp)[1:-1, 1:-1].astype(np.intp)
+
+
+def _dijkstra_nearest_sources(cx, cy, sources):
+    """:func:`nearest_sources` by one multi-source Dijkstra search over :func:`grid_graph`."""
+    distance, _, nearest = dijkstra(grid_graph(cx, cy), directed=False, indices=np.flatnonzero(sources),
+                                    min_only=True, return_predecessors=True)
+    return distance.reshape(sources.shape), nearest.reshape(sources.shape).astype(np.intp)
 
 
 def grid_graph(cx, cy):
