@@ -44,8 +44,12 @@ def _block_sums(values, factor, where=None, dtype=None):
     Strided adds (faster than a reduction over a middle axis): the rows ``y ≡ o (mod f)`` are added offset by
     offset, then the columns; an offset with one row or column fewer adds to all blocks but the last.  ``where``
     (a boolean ``(H, W)`` array): only those values are summed (the others count as 0), masked a row offset at a
-    time.  ``dtype``: the type summed in (default that of ``values``).
+    time.  ``dtype``: the type summed in (default that of ``values``).  A channel axis is summed channel by channel
+    (strided adds along a row of one channel are faster than of short runs of all channels).
     """
+    if values.ndim == 3:
+        return np.stack([_block_sums(values[..., c], factor, where, dtype) for c in range(values.shape[2])], axis=-1)
+
     def rows_at(offset):
         part = values[offset::factor]
         return part if where is None else np.where(where[offset::factor], part, 0.0)
