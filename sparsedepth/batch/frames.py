@@ -1,29 +1,37 @@
 """Frames of a batch: the frame types and their discovery on disk.
 
 A frame names its files (:class:`FileFrame`), one frame of an NYU Depth V2
-labeled ``.mat`` (:class:`NYUFrame`) or one preprocessed NYU ``.h5`` file
-(:class:`NYUH5Frame`); nothing is read until a worker runs it.
-:func:`find_frames`, :func:`find_frame_pairs`, :func:`nyu_h5_frames` and
-:func:`nyu_frames` build them from a folder or a file;
-:func:`absolute_frame` makes their paths absolute before they are sent to
-another process.
+labeled ``.mat`` (:class:`NYUFrame`), one preprocessed NYU ``.h5`` file
+(:class:`NYUH5Frame`) or one registered image of a COLMAP model
+(:class:`ColmapFrame`); nothing is read until a worker runs it.
+:func:`find_frames`, :func:`find_frame_pairs`, :func:`nyu_h5_frames`,
+:func:`nyu_frames` and :func:`colmap_frames` build them from a folder or a
+file; :func:`absolute_frame` makes their paths absolute before they are sent
+to another process.  For a COLMAP scene, :func:`unregistered_images` lists
+the image files the model does not know, :func:`colmap_depth_range` the
+range of the views' depths and :func:`png_depth_scale` a 16-bit PNG scale
+that holds it.
 
-Imports the standard library, :mod:`sparsedepth._validation` and
+Imports NumPy, the standard library, :mod:`sparsedepth._validation` and
 :mod:`sparsedepth.io`.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PurePosixPath
+
+import numpy as np
 
 from .._validation import check_folder, check_index
-from ..io import NYUDepthV2Labeled
+from ..io import ColmapModel, NYUDepthV2Labeled, read_colmap_model, view_depth
 from ..io.formats import DISCOVERED_DEPTH_EXTENSIONS, DISCOVERED_IMAGE_EXTENSIONS
 
-__all__ = ["FileFrame", "NYUFrame", "NYUH5Frame", "find_frames", "find_frame_pairs", "nyu_h5_frames", "nyu_frames",
+__all__ = ["FileFrame", "NYUFrame", "NYUH5Frame", "ColmapFrame", "find_frames", "find_frame_pairs", "nyu_h5_frames",
+           "nyu_frames", "colmap_frames", "unregistered_images", "colmap_depth_range", "png_depth_scale",
            "absolute_frame"]
 
 #: The files a batch discovers (the table of :mod:`sparsedepth.io.formats`): every depth format that
@@ -65,6 +73,23 @@ class NYUH5Frame:
 
     name: str
     path: str
+
+
+@dataclass(frozen=True)
+class ColmapFrame:
+    """One registered image of a COLMAP model: its image file and the model's points it observes (read in the worker).
+
+    ``name`` is the image's name in the model without its extension, its
+    sub-folders kept (``"cam1/00"`` for ``cam1/00.jpg``): the outputs are
+    ``<out_dir>/<name><out_format>``.  ``image_path`` is the file under the
+    image folder; the worker reports a missing one as the frame's error.
+    ``image_id`` is the model's ``IMAGE_ID`` of the view.
+    """
+
+    name: str
+    model_dir: str
+    image_path: str
+    image_id: int
 
 
 _SHOWN = 5  # file names quoted in a "found nothing" error
@@ -283,16 +308,186 @@ def nyu_frames(path, indices=None) -> list[NYUFrame]:
         return [NYUFrame(name=f"nyu_{i:04d}", path=str(nyu.path), index=int(i)) for i in chosen]
 
 
+def _model(model_dir, model) -> tuple[Path, ColmapModel]:
+    """(the model folder or None, the model read from it unless given)."""
+    folder = None if model_dir is None else Path(model_dir)
+    if model is None:
+        model = read_colmap_model(folder, name="model_dir")
+    elif not isinstance(model, ColmapModel):
+        raise TypeError(f"model must be a ColmapModel (read_colmap_model) or None, got {type(model).__name__}")
+    return folder, model
+
+
+def _output_name(image_name: str) -> str:
+    """The frame name of a model's image name: its path without the extension; ``ValueError`` for a name that
+    would leave the output folder (absolute, or with a ``..`` part) or has no file name."""
+    path = PurePosixPath(image_name.replace("\\", "/"))
+    if path.is_absolute() or ".." in path.parts or not path.name or path.name in (".", ".."):
+        raise ValueError(f"the COLMAP model names an image {image_name!r}, which is not a path inside the image "
+                         "folder (absolute, or with a '..' part); such a view cannot be named in the output folder")
+    return str(path.with_suffix("")) if path.suffix else str(path)
+
+
+def colmap_frames(model_dir, images_dir, *, model: ColmapModel | None = None) -> list[ColmapFrame]:
+    """One frame per registered image of a COLMAP model, its file under ``images_dir``.
+
+    Parameters
+    ----------
+    model_dir : str or os.PathLike
+        The model folder (``sparse/0``: ``cameras``, ``images`` and
+        ``points3D``, ``.bin`` or ``.txt``).
+    images_dir : str or os.PathLike
+        The folder the model's image names are relative to (COLMAP's
+        ``--image_path``).
+    model : ColmapModel, optional
+        The model of ``model_dir`` if already read; read here otherwise.
+
+    Returns
+    -------
+    list of ColmapFrame
+        Sorted by image name.  A registered image whose file is missing
+        still gets a frame, so that the batch reports it as a failed row; an
+        image file the model does not register gets none (see
+        :func:`unregistered_images`).
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``images_dir`` is not a folder, or the model folder is missing or
+        incomplete.
+    ValueError
+        If the model is malformed (:func:`~sparsedepth.io.read_colmap_model`),
+        registers no image, names an image outside ``images_dir`` (absolute,
+        ``..``), or two of its images give the same output name
+        (``a.jpg`` and ``a.png``).
+    """
+    images_dir = check_folder(images_dir, "image folder")
+    folder, model = _model(model_dir, model)
+    if not model.images:
+        raise ValueError(f"the COLMAP model '{folder}' registers no image; nothing to complete")
+    frames, seen = [], {}
+    for image in sorted(model.images.values(), key=lambda view: view.name):
+        name = _output_name(image.name)
+        if name in seen:
+            raise ValueError(f"the COLMAP model's images {seen[name]!r} and {image.name!r} would both write the "
+                             f"output '{name}'; rename one of them")
+        seen[name] = image.name
+        frames.append(ColmapFrame(name=name, model_dir=str(folder), image_path=str(images_dir / image.name),
+                                  image_id=int(image.id)))
+    return frames
+
+
+def unregistered_images(images_dir, model_dir=None, *, model: ColmapModel | None = None) -> list[str]:
+    """The image files under ``images_dir`` (searched recursively) that no registered image of the model names.
+
+    Parameters
+    ----------
+    images_dir : str or os.PathLike
+    model_dir : str or os.PathLike, optional
+        The model folder, read unless ``model`` is given.
+    model : ColmapModel, optional
+
+    Returns
+    -------
+    list of str
+        Their paths relative to ``images_dir`` (``/``-separated), sorted;
+        files of the image formats only
+        (:data:`sparsedepth.io.formats.DISCOVERED_IMAGE_EXTENSIONS`).
+    """
+    images_dir = check_folder(images_dir, "image folder")
+    if model is None and model_dir is None:
+        raise ValueError("give the model folder or the model")
+    _, model = _model(model_dir, model)
+    registered = {PurePosixPath(image.name.replace("\\", "/")).as_posix() for image in model.images.values()}
+    found = (p.relative_to(images_dir).as_posix() for p in images_dir.rglob("*")
+             if p.is_file() and p.suffix.lower() in _IMAGE_EXTENSIONS)
+    return sorted(name for name in found if name not in registered)
+
+
+def colmap_depth_range(model_dir=None, *, model: ColmapModel | None = None, max_error=None,
+                       min_track=None) -> tuple[float, float] | None:
+    """(smallest, largest) depth of the model's points over all its views, as :func:`~sparsedepth.io.view_depth`
+    places them (with the same ``max_error`` and ``min_track``); None if no view has a point.
+
+    Depths are in the model's units.  This is the range every view's
+    sparse input lies in, and (completion keeping each map within its
+    observed range by default) the range of the completed maps.
+    """
+    if model is None and model_dir is None:
+        raise ValueError("give the model folder or the model")
+    _, model = _model(model_dir, model)
+    low, high = math.inf, -math.inf
+    for image_id in model.images:
+        depth, mask, _ = view_depth(model, image_id, max_error=max_error, min_track=min_track)
+        if mask.any():
+            values = depth[mask]
+            low, high = min(low, float(values.min())), max(high, float(values.max()))
+    return None if high < low else (low, high)
+
+
+#: The headroom of :func:`png_depth_scale`: depth up to this factor times the largest observed depth is storable.
+PNG_HEADROOM = 1.05
+
+
+def png_depth_scale(max_depth: float, *, headroom: float = PNG_HEADROOM) -> float:
+    """A round 16-bit PNG scale (stored value = depth x scale) that stores depth up to ``headroom * max_depth``.
+
+    Parameters
+    ----------
+    max_depth : float > 0
+        The largest depth to store (e.g. :func:`colmap_depth_range`'s).
+    headroom : float >= 1
+
+    Returns
+    -------
+    float
+        The largest number of the form :math:`m \\cdot 10^k`, :math:`m \\in \\{1, 2, 5\\}`,
+        not above :math:`65535 / (\\mathrm{headroom} \\cdot \\mathrm{max\\_depth})`.
+
+    Raises
+    ------
+    ValueError
+        If ``max_depth`` is not a finite positive number or ``headroom < 1``.
+
+    Notes
+    -----
+    A round scale keeps the file readable by hand (depth = value / 1000
+    when the scale is 1000) at the cost of at most a factor 2.5 of the
+    resolution the 16 bits could give; the quantisation step is
+    :math:`1 / \\mathrm{scale}`, a relative step of at most
+    :math:`2.5 \\cdot \\mathrm{headroom} / 65535 \\approx 4 \\cdot 10^{-5}` of
+    ``max_depth``.
+
+    Examples
+    --------
+    >>> png_depth_scale(38.3)  # 65535 / (1.05 * 38.3) = 1629.6
+    1000.0
+    >>> png_depth_scale(6.0)  # 10402.4
+    10000.0
+    >>> png_depth_scale(10.0)  # 6241.4
+    5000.0
+    """
+    if not (isinstance(max_depth, (int, float, np.floating, np.integer)) and math.isfinite(max_depth)
+            and max_depth > 0):
+        raise ValueError(f"max_depth must be a finite number > 0, got {max_depth!r}")
+    if not (isinstance(headroom, (int, float)) and math.isfinite(headroom) and headroom >= 1):
+        raise ValueError(f"headroom must be a finite number >= 1, got {headroom!r}")
+    limit = np.iinfo(np.uint16).max / (headroom * float(max_depth))
+    exponent = math.floor(math.log10(limit))
+    candidates = [float(f"{mantissa}e{exponent + shift}") for shift in (-1, 0) for mantissa in (1, 2, 5)]
+    return max(scale for scale in candidates if scale <= limit)  # 5e(exponent-1) < 10**exponent <= limit
+
+
 def absolute_frame(source):
     """The frame with absolute paths (a worker may run in another working directory).
 
     Parameters
     ----------
-    source : FileFrame, NYUFrame or NYUH5Frame
+    source : FileFrame, NYUFrame, NYUH5Frame or ColmapFrame
 
     Returns
     -------
-    FileFrame, NYUFrame or NYUH5Frame
+    FileFrame, NYUFrame, NYUH5Frame or ColmapFrame
         A new frame of the same type, its paths resolved in this process's
         directory; ``source`` is not modified.
 
@@ -309,8 +504,11 @@ def absolute_frame(source):
         )
     if isinstance(source, (NYUFrame, NYUH5Frame)):
         return dataclasses.replace(source, path=os.path.abspath(source.path))
+    if isinstance(source, ColmapFrame):
+        return dataclasses.replace(source, model_dir=os.path.abspath(source.model_dir),
+                                   image_path=os.path.abspath(source.image_path))
     raise TypeError(
-        f"frames must be FileFrame, NYUFrame or NYUH5Frame objects, got {type(source).__name__}; "
-        "build them with find_frames, find_frame_pairs, nyu_frames or nyu_h5_frames"
+        f"frames must be FileFrame, NYUFrame, NYUH5Frame or ColmapFrame objects, got {type(source).__name__}; "
+        "build them with find_frames, find_frame_pairs, nyu_frames, nyu_h5_frames or colmap_frames"
     )
 

@@ -105,6 +105,19 @@ class BatchOptions:
         (:func:`~sparsedepth.pool_image_shifts`) and uses it for every frame;
         (0, 0) when no frame gives an estimate (too few samples).  ``None``
         (default): no shift.  A pair is stored as a tuple of ints.
+    uncertainty_dir : str, optional
+        An existing folder other than ``out_dir``: each frame's per-pixel
+        uncertainty (:func:`~sparsedepth.complete_depth`'s ``uncertainty``,
+        two more solves) is written there as ``<name><out_format>``, a PNG
+        at ``out_scale`` (saturating, see
+        :func:`~sparsedepth.io.write_uncertainty`).  Not with the
+        colorization fill or ``quality="fast"``.
+    colmap_max_error : float >= 0, optional
+    colmap_min_track : int >= 1, optional
+        For :class:`~sparsedepth.batch.ColmapFrame` frames: passed to
+        :func:`~sparsedepth.io.view_depth` as ``max_error`` (drop points
+        whose mean reprojection error in pixels is above it) and
+        ``min_track`` (drop points seen by fewer images).
 
     Raises
     ------
@@ -137,6 +150,9 @@ class BatchOptions:
     clip_to_observed: bool = True
     quality: str = "default"
     image_shift: tuple[int, int] | str | None = None
+    uncertainty_dir: str | None = None
+    colmap_max_error: float | None = None
+    colmap_min_track: int | None = None
 
     def __post_init__(self):
         if self.task not in TASKS:
@@ -203,15 +219,31 @@ class BatchOptions:
         if not isinstance(self.clip_to_observed, bool):
             raise _option_error("clip_to_observed", f"clip_to_observed must be True or False, got "
                                 f"{self.clip_to_observed!r}", TypeError)
+        if self.colmap_max_error is not None and not (is_real(self.colmap_max_error)
+                                                      and math.isfinite(self.colmap_max_error)
+                                                      and self.colmap_max_error >= 0):
+            raise _option_error("colmap_max_error", f"colmap_max_error must be a finite number >= 0 (pixels) or "
+                                f"None, got {self.colmap_max_error!r}")
+        if self.colmap_min_track is not None and (not is_int(self.colmap_min_track) or self.colmap_min_track < 1):
+            raise _option_error("colmap_min_track", f"colmap_min_track must be an integer >= 1 or None, got "
+                                f"{self.colmap_min_track!r}")
         self._check_quality()
         self._check_image_shift()
-        if self.out_dir is not None:
-            if not isinstance(self.out_dir, (str, os.PathLike)):
-                raise _option_error("out_dir", f"out_dir must be a str or os.PathLike, got "
-                                    f"{type(self.out_dir).__name__}", TypeError)
-            if not Path(self.out_dir).is_dir():
-                raise _option_error("out_dir", f"output folder '{self.out_dir}' does not exist; create it first",
-                                    FileNotFoundError)
+        for name, what in (("out_dir", "output folder"), ("uncertainty_dir", "uncertainty folder")):
+            folder = getattr(self, name)
+            if folder is None:
+                continue
+            if not isinstance(folder, (str, os.PathLike)):
+                raise _option_error(name, f"{name} must be a str or os.PathLike, got {type(folder).__name__}",
+                                    TypeError)
+            if not Path(folder).is_dir():
+                raise _option_error(name, f"{what} '{folder}' does not exist; create it first", FileNotFoundError)
+        if self.uncertainty_dir is not None:
+            if self.out_dir is None:
+                raise _option_error("uncertainty_dir", "uncertainty_dir needs out_dir (the depth maps' folder)")
+            if os.path.realpath(self.uncertainty_dir) == os.path.realpath(self.out_dir):
+                raise _option_error("uncertainty_dir", f"the uncertainty folder '{self.uncertainty_dir}' is the "
+                                    "output folder; the maps would have the depth maps' names: give another folder")
 
     def _check_image_shift(self):
         """``image_shift`` is None, ``"auto"`` or a pair of integers, stored as a tuple of ints."""
@@ -228,14 +260,16 @@ class BatchOptions:
         colorization = self.task == "fill" and self.fill_method == "colorization"
         given = [name for name, value in (("colorization", colorization), ("quality", self.quality == "fast"),
                                           ("weights", self.weights is not None), ("solver", self.solver != "auto"),
-                                          ("tol", self.tol is not None), ("max_iter", self.max_iter is not None))
+                                          ("tol", self.tol is not None), ("max_iter", self.max_iter is not None),
+                                          ("uncertainty", self.uncertainty_dir is not None))
                  if value]
         conflict = argument_conflict(given)
         if conflict is not None:
             argument, why, excluded = conflict
             named = {"colorization": "the colorization fill (task='fill', fill_method='colorization')",
-                     "quality": "quality='fast'"}
-            raise _option_error(excluded[0] if argument == "colorization" else argument,
+                     "quality": "quality='fast'", "uncertainty": "uncertainty (uncertainty_dir)"}
+            option = excluded[0] if argument == "colorization" else argument
+            raise _option_error("uncertainty_dir" if option == "uncertainty" else option,
                                 f"{named.get(argument, argument)} {why} "
                                 f"{', '.join(named.get(name, name) for name in excluded)}")
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import math
 import os
 from collections import deque
@@ -34,14 +35,15 @@ from typing import Callable, Sequence
 import numpy as np
 
 from .._validation import is_int
+from ..io import resolve_scale
 from ..registration import pool_image_shifts
 from . import csvlog
-from .frames import absolute_frame
+from .frames import ColmapFrame, absolute_frame
 from .options import BatchOptions, BatchSummary
 from .pool import default_workers, new_pool, stop_pool
-from .worker import error_text, estimate_frame_shift, process_frame, remove_temporaries
+from .worker import error_text, estimate_frame_shift, process_frame, remove_temporaries, uncertainty_path
 
-__all__ = ["run_batch", "SHIFT_FRAMES", "shift_positions"]
+__all__ = ["run_batch", "SHIFT_FRAMES", "shift_positions", "SCENE_UNITS", "colmap_scene", "write_colmap_scene"]
 
 #: With ``image_shift="auto"``, the batch's one shift is measured on this many of its frames (at most).
 SHIFT_FRAMES = 8
@@ -53,7 +55,9 @@ def _is_done(row: dict, options: BatchOptions) -> bool:
     if options.out_dir is None:
         return True
     output = row.get("output", "")
-    return bool(output) and Path(output).is_file()
+    if not (output and Path(output).is_file()):
+        return False
+    return options.uncertainty_dir is None or uncertainty_path(row.get("name", ""), options).is_file()
 
 
 class _Dispatch:
@@ -395,3 +399,136 @@ def run_batch(
             _run_frames(frames, todo, csv_path, options, executor, max_workers, max_in_flight, progress, latest)
     summary = _summary(frames, latest, csv_path, skipped=len(frames) - len(todo))
     return dataclasses.replace(summary, image_shift=shift, image_shift_frames=measured)
+
+
+#: The unit of a COLMAP model's depth maps, as ``scene.json`` states it.
+SCENE_UNITS = "model units (arbitrary SfM scale)"
+
+_SCENE_FORMAT = "sparsedepth.colmap_depth/1"
+
+
+def _relative(path, folder) -> str:
+    """``path`` relative to ``folder``, ``/``-separated (``..`` where it is outside)."""
+    return Path(os.path.relpath(path, folder)).as_posix()
+
+
+def colmap_scene(frames: Sequence, csv_path, options: BatchOptions, *, images_dir, folder=None,
+                 depth_range=None, command: str | None = None) -> dict:
+    """The ``scene.json`` of a batch of COLMAP views: what the output folder holds, as it is now.
+
+    Parameters
+    ----------
+    frames : sequence of ColmapFrame
+        The batch's frames (:func:`~sparsedepth.batch.colmap_frames`), of one model.
+    csv_path : str or os.PathLike
+        The batch's CSV: a view is listed when its row is ``ok`` and its
+        output files exist; a view with an error row is listed under
+        ``"failed"``, one without a row under ``"pending"``.
+    options : BatchOptions
+        The batch's options (``out_dir`` set).
+    images_dir : str or os.PathLike
+        The image folder (image names are given relative to it).
+    folder : str or os.PathLike, optional
+        Paths of the maps are given relative to it; default ``out_dir``
+        (where ``scene.json`` goes).
+    depth_range : (float, float), optional
+        The observed depth range of the model's views
+        (:func:`~sparsedepth.batch.colmap_depth_range`).
+    command : str, optional
+        The command line that made the maps.
+
+    Returns
+    -------
+    dict
+        JSON data: ``format``, ``sparsedepth_version``, ``command``,
+        ``model`` (the model folder), ``images``, ``units``
+        (:data:`SCENE_UNITS`), ``depth_format`` (the extension),
+        ``png_scale`` (stored value = depth x ``png_scale``, 0 = no depth;
+        None for the float formats, which store the depth itself),
+        ``observed_depth_range``, ``uncertainty`` (the folder or None),
+        ``views`` (each: ``image``, ``image_id``, ``depth``, ``uncertainty``,
+        ``width``, ``height``, ``points`` - pixels holding a model point,
+        the samples of the completion - and ``method``), ``failed`` (each:
+        ``image``, ``image_id``, ``error``) and ``pending`` (image names).
+
+    Raises
+    ------
+    ValueError
+        If a frame is not a :class:`ColmapFrame` or the frames come from
+        several models, or the CSV is not a batch CSV.
+    """
+    from .. import __version__
+
+    if options.out_dir is None:
+        raise ValueError("a COLMAP scene needs options.out_dir (the folder of the depth maps)")
+    if not frames or not all(isinstance(f, ColmapFrame) for f in frames):
+        raise ValueError("colmap_scene describes ColmapFrame frames (sparsedepth.batch.colmap_frames)")
+    models = {os.path.abspath(f.model_dir) for f in frames}
+    if len(models) != 1:
+        raise ValueError(f"the frames come from {len(models)} COLMAP models; a scene has one")
+    folder = Path(options.out_dir if folder is None else folder)
+    images_dir = os.path.abspath(images_dir)
+    latest = {}
+    if Path(csv_path).is_file():
+        _, entries = csvlog.read_log(Path(csv_path))
+        latest = {name: row for name, row, _ in entries}
+    views, failed, pending = [], [], []
+    for frame in frames:
+        image_name = _relative(frame.image_path, images_dir)
+        row = latest.get(frame.name)
+        if row is not None and _is_done(row, options):
+            sigma = None
+            if options.uncertainty_dir is not None:
+                sigma = _relative(uncertainty_path(frame.name, options), folder)
+            views.append({"image": image_name, "image_id": frame.image_id,
+                          "depth": _relative(row["output"], folder), "uncertainty": sigma,
+                          "width": int(row["width"]), "height": int(row["height"]), "points": int(row["observed"]),
+                          "method": row.get("method", "")})
+        elif row is not None and row.get("status") == "error":
+            failed.append({"image": image_name, "image_id": frame.image_id, "error": row.get("error", "")})
+        else:
+            pending.append(image_name)
+    png = options.out_format == ".png"
+    return {
+        "format": _SCENE_FORMAT,
+        "sparsedepth_version": __version__,
+        "command": command,
+        "model": models.pop(),
+        "images": images_dir,
+        "units": SCENE_UNITS,
+        "depth_format": options.out_format,
+        "png_scale": resolve_scale(options.out_scale) if png else None,
+        "observed_depth_range": None if depth_range is None else [float(depth_range[0]), float(depth_range[1])],
+        "uncertainty": None if options.uncertainty_dir is None else _relative(options.uncertainty_dir, folder),
+        "views": views,
+        "failed": failed,
+        "pending": pending,
+    }
+
+
+def write_colmap_scene(path, frames: Sequence, csv_path, options: BatchOptions, *, images_dir, depth_range=None,
+                       command: str | None = None) -> dict:
+    """Write :func:`colmap_scene` as JSON to ``path`` atomically (paths of the maps relative to its folder).
+
+    Call it after every run of the batch (also an interrupted one, and a
+    resumed one): it describes the files present then, so it stays
+    consistent with the folder.  Returns the data written.
+
+    Raises
+    ------
+    OSError
+        If the file cannot be written (its message names the file).
+    ValueError
+        As :func:`colmap_scene`.
+    """
+    path = Path(path)
+    scene = colmap_scene(frames, csv_path, options, images_dir=images_dir, folder=path.parent,
+                         depth_range=depth_range, command=command)
+    try:
+        csvlog.write_text_atomic(path, json.dumps(scene, indent=1, allow_nan=False) + "\n")
+    except OSError as exc:
+        error = OSError(f"could not write the scene file '{path}' (command line --outdir): "
+                        f"{exc.strerror or ' '.join(str(exc).split())}")
+        error.errno = exc.errno
+        raise error from exc
+    return scene

@@ -1,9 +1,10 @@
 """The worker side of a batch: one frame in, one CSV row out.
 
 :func:`process_frame` runs in a worker (a process of the pool, a thread, or
-a Dask task): it reads the frame, runs
-:func:`~sparsedepth.batch.evaluate_frame`, writes the output depth
-atomically and returns the row as a dict.  A failing frame becomes an error
+a Dask task): it reads the frame (a COLMAP view: its image and
+:func:`~sparsedepth.io.view_depth` of the model, the model read once per
+process), runs :func:`~sparsedepth.batch.evaluate_frame`, writes the output
+depth (and uncertainty) atomically and returns the row as a dict.  A failing frame becomes an error
 row, never an exception.  :func:`estimate_frame_shift` reads and samples a
 frame the same way and estimates its image shift (for a batch's
 ``image_shift="auto"``).
@@ -18,23 +19,94 @@ from __future__ import annotations
 import contextlib
 import glob
 import math
+import os
+import threading
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-from ..io import NYUDepthV2Labeled, read_depth, read_image, read_nyu_h5, write_depth
+from ..io import NYUDepthV2Labeled, read_colmap_model, read_depth, read_image, read_nyu_h5, view_depth, write_depth
+from ..io.colmap import MODEL_FILES
+from ..io.writing import uncertainty_writer
+from ..io.files import atomic_target
 from ..result import ClampWarning
 from ..registration import ImageShift, estimate_image_shift
 from .evaluate import evaluate_frame, frame_observations
-from .frames import NYUFrame, NYUH5Frame
+from .frames import ColmapFrame, NYUFrame, NYUH5Frame
 from .options import BatchOptions
 
-__all__ = ["process_frame", "estimate_frame_shift", "output_path", "remove_temporaries", "error_text", "one_line"]
+__all__ = ["process_frame", "estimate_frame_shift", "output_path", "uncertainty_path", "remove_temporaries",
+           "error_text", "one_line", "colmap_model"]
+
+_MODEL_LOCK = threading.Lock()
+_MODEL_CACHE: dict = {}  # {model folder: (its files' (size, mtime) stamps, ColmapModel)}, at most one model
+
+
+def _model_stamp(folder: str) -> tuple:
+    """(size, mtime) of every model file in ``folder`` (None for an absent one): a changed model reads anew."""
+    stamps = []
+    for stem in MODEL_FILES:
+        for ext in (".bin", ".txt"):
+            try:
+                info = os.stat(os.path.join(folder, stem + ext))
+            except OSError:
+                stamps.append(None)
+            else:
+                stamps.append((info.st_size, info.st_mtime_ns))
+    return tuple(stamps)
+
+
+def colmap_model(model_dir, *, max_pixels=None):
+    """The COLMAP model of ``model_dir``, read once per process while its files are unchanged.
+
+    A batch's workers complete many views of one model: each worker process
+    (or thread of a Dask worker) reads the model on its first view only.
+    ``max_pixels`` is passed to :func:`~sparsedepth.io.read_colmap_model`
+    (it is part of the cached entry's key).
+    """
+    folder = os.path.abspath(model_dir)
+    key = (folder, max_pixels)
+    stamp = _model_stamp(folder)
+    with _MODEL_LOCK:
+        cached = _MODEL_CACHE.get(key)
+        if cached is not None and cached[0] == stamp:
+            return cached[1]
+    model = read_colmap_model(folder, name="model_dir", max_pixels=max_pixels)
+    with _MODEL_LOCK:
+        _MODEL_CACHE.clear()
+        _MODEL_CACHE[key] = (stamp, model)
+    return model
+
+
+def _read_colmap_view(source: ColmapFrame, options: BatchOptions):
+    """(image, sparse depth in model units) of one view: the image file and the model's points it observes."""
+    if options.downsample > 1:
+        raise ValueError("downsample does not apply to COLMAP views (a strided sparse map would lose most of "
+                         "the model's points); complete them at full resolution")
+    model = colmap_model(source.model_dir, max_pixels=options.max_pixels)
+    view = model.image(source.image_id)
+    if not os.path.isfile(source.image_path):
+        raise FileNotFoundError(f"the COLMAP model registers image {view.name!r} (IMAGE_ID {source.image_id}) but "
+                                f"its file '{source.image_path}' does not exist; put it in the image folder (or "
+                                "give the folder the model was made from)")
+    depth, _, _ = view_depth(model, source.image_id, max_error=options.colmap_max_error,
+                             min_track=options.colmap_min_track)
+    image = read_image(source.image_path, max_pixels=options.max_pixels)
+    if image.shape[:2] != depth.shape:
+        camera = model.cameras[view.camera_id]
+        raise ValueError(f"image '{source.image_path}' is {image.shape[1]}x{image.shape[0]} (W x H) but camera "
+                         f"{camera.id} of the COLMAP model, which it is registered with, is "
+                         f"{camera.width}x{camera.height}; give the images the model was made from (after "
+                         "`colmap image_undistorter`, its undistorted images)")
+    return image, depth
 
 
 def _read_frame(source, options: BatchOptions):
-    """(image, depth, truth) of one frame, in metres."""
+    """(image, depth, truth) of one frame, in metres (a COLMAP view: in the model's units, no truth)."""
+    if isinstance(source, ColmapFrame):
+        image, depth = _read_colmap_view(source, options)
+        return image, depth, None
     if isinstance(source, NYUFrame):
         with NYUDepthV2Labeled(source.path) as nyu:
             image, depth, raw = nyu[source.index]
@@ -102,8 +174,17 @@ def _fmt(value):
 
 
 def output_path(name: str, options: BatchOptions) -> Path:
-    """Where the output depth of frame ``name`` goes: ``<out_dir>/<name><out_format>``."""
+    """Where the output depth of frame ``name`` goes: ``<out_dir>/<name><out_format>``.
+
+    A COLMAP view's name keeps the sub-folders of its image name
+    (``cam1/00``), which the worker creates in ``out_dir``.
+    """
     return Path(options.out_dir) / f"{name}{options.out_format}"
+
+
+def uncertainty_path(name: str, options: BatchOptions) -> Path:
+    """Where the uncertainty of frame ``name`` goes: ``<uncertainty_dir>/<name><out_format>``."""
+    return Path(options.uncertainty_dir) / f"{name}{options.out_format}"
 
 
 def process_frame(position: int, source, options: BatchOptions) -> dict:
@@ -114,7 +195,7 @@ def process_frame(position: int, source, options: BatchOptions) -> dict:
     position : int
         The frame's 0-based place in the batch: its sampling seed is
         ``numpy.random.default_rng([options.seed, position])``.
-    source : FileFrame, NYUFrame or NYUH5Frame
+    source : FileFrame, NYUFrame, NYUH5Frame or ColmapFrame
         Read here, in the worker.
     options : BatchOptions
 
@@ -128,8 +209,14 @@ def process_frame(position: int, source, options: BatchOptions) -> dict:
     -----
     The output depth (with ``options.out_dir``) is written atomically: it
     appears complete, or not at all; a failed write (a full disk) is an
-    error row naming the file and ``out_dir``.  :class:`~sparsedepth.ClampWarning` is
-    not shown: the row's ``clamped`` column carries it.
+    error row naming the file and ``out_dir``.  With
+    ``options.uncertainty_dir`` the uncertainty map is encoded first and
+    written before the depth; if the depth then cannot be written the
+    uncertainty just written is removed, so that a frame leaves both or
+    neither.  :class:`~sparsedepth.ClampWarning` is not shown: the row's
+    ``clamped`` column carries it.  A COLMAP view's depth is in the model's
+    units and has no ground truth (no metric columns); ``observed`` counts
+    the pixels holding a model point (one point per pixel, the nearest).
     """
     row = {"position": position, "name": source.name, "status": "ok"}
     try:
@@ -143,6 +230,7 @@ def process_frame(position: int, source, options: BatchOptions) -> dict:
                 fill_method=options.fill_method, weights=options.weights, solver=options.solver,
                 tol=options.tol, max_iter=options.max_iter, clip_to_observed=options.clip_to_observed,
                 quality=options.quality, image_shift=options.image_shift,
+                uncertainty=options.uncertainty_dir is not None,
             )
         row.update(height=depth.shape[0], width=depth.shape[1], observed=int(out.observed.sum()),
                    method=out.method, runtime=f"{out.runtime:.3f}",
@@ -155,24 +243,57 @@ def process_frame(position: int, source, options: BatchOptions) -> dict:
                 row["nn_" + key] = _fmt(getattr(out.nearest_metrics, key))
         if options.out_dir is not None:
             target = output_path(source.name, options)
-            _write_output(target, out.depth, options)
+            _write_outputs(target, out, source.name, options)
             row["output"] = str(target)
     except Exception as exc:  # noqa: BLE001 - a failing frame is reported, not fatal
         row.update(status="error", error=error_text(exc))
     return row
 
 
+def _write_outputs(target: Path, out, name: str, options: BatchOptions) -> None:
+    """The frame's uncertainty (with ``uncertainty_dir``), then its depth; the uncertainty is removed again if the
+    depth cannot be written."""
+    if options.uncertainty_dir is None:
+        _write_output(target, out.depth, options)
+        return
+    sigma_target = uncertainty_path(name, options)
+    writer = uncertainty_writer(sigma_target, out.uncertainty, scale=options.out_scale)
+    _make_parent(sigma_target, options.uncertainty_dir)
+    try:
+        with atomic_target(sigma_target) as tmp:
+            writer(tmp)
+    except OSError as exc:
+        raise _write_error(exc, sigma_target, "uncertainty_dir", "--uncertainty") from exc
+    try:
+        _write_output(target, out.depth, options)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            sigma_target.unlink()
+        raise
+
+
+def _make_parent(target: Path, folder) -> None:
+    """Create the sub-folders of ``folder`` that ``target`` is in (a COLMAP image name's folders)."""
+    if target.parent != Path(folder):
+        target.parent.mkdir(parents=True, exist_ok=True)
+
+
+def _write_error(exc: OSError, target: Path, option: str, flag: str) -> OSError:
+    reason = exc.strerror or one_line(exc)
+    error = OSError(f"could not write the output '{target}' (`{option}`, command line {flag}): {reason}; "
+                    f"free space (or choose another {flag}), then run the same batch again to redo this frame")
+    error.errno = exc.errno
+    return error
+
+
 def _write_output(target: Path, depth, options: BatchOptions) -> None:
     """:func:`~sparsedepth.io.write_depth` of a frame's output; an ``OSError`` (a full disk) names the file and
     the option (``out_dir``, ``--outdir`` on the command line), with the system's reason."""
     try:
+        _make_parent(target, options.out_dir)
         write_depth(target, depth, scale=options.out_scale)
     except OSError as exc:
-        reason = exc.strerror or one_line(exc)
-        error = OSError(f"could not write the output '{target}' (`out_dir`, command line --outdir): {reason}; "
-                        "free space (or choose another --outdir), then run the same batch again to redo this frame")
-        error.errno = exc.errno
-        raise error from exc
+        raise _write_error(exc, target, "out_dir", "--outdir") from exc
 
 
 def one_line(exc: BaseException) -> str:
@@ -189,9 +310,13 @@ def remove_temporaries(names, options: BatchOptions) -> None:
     """Remove the temporary output files of these frames (left by a worker that was stopped)."""
     if options.out_dir is None:
         return
-    folder = Path(options.out_dir)
     for name in names:
-        target = output_path(name, options)
-        for tmp in folder.glob(f".{glob.escape(target.name)}.*.tmp*"):
-            with contextlib.suppress(FileNotFoundError):
-                tmp.unlink()
+        targets = [output_path(name, options)]
+        if options.uncertainty_dir is not None:
+            targets.append(uncertainty_path(name, options))
+        for target in targets:
+            if not target.parent.is_dir():
+                continue
+            for tmp in target.parent.glob(f".{glob.escape(target.name)}.*.tmp*"):
+                with contextlib.suppress(FileNotFoundError):
+                    tmp.unlink()

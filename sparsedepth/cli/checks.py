@@ -25,7 +25,7 @@ from .outputs import check_distinct, check_writable
 from .report import matplotlib_classes
 from .single import input_files, plan_outputs
 
-__all__ = ["check_options", "check_frame", "cluster_address"]
+__all__ = ["check_options", "check_frame", "cluster_address", "COLMAP_CSV", "COLMAP_SCENE"]
 
 
 _OUT_EXTENSIONS = OUT_EXTENSIONS  # --out and --uncertainty: the table of sparsedepth.io.formats
@@ -42,11 +42,13 @@ def _check_output(path, allowed, what) -> Path:
 
 
 def _check_combinations(args) -> str:
-    """Check option combinations; return the mode: 'demo', 'files' or 'batch'."""
-    batch = args.batch is not None or args.nyu_mat is not None
+    """Check option combinations; return the mode: 'demo', 'files' or 'batch' (--batch, --nyu-mat or --colmap)."""
+    batch = args.batch is not None or args.nyu_mat is not None or args.colmap is not None
     files = args.image is not None or args.depth is not None
     if batch and files:
-        raise UsageError("--batch/--nyu-mat and --image/--depth are exclusive")
+        source = "--colmap" if args.colmap is not None else "--batch/--nyu-mat"
+        raise UsageError(f"{source} and --image/--depth are exclusive")
+    _check_colmap(args)
     if files and (args.image is None or args.depth is None):
         raise UsageError("--image and --depth go together")
     mode = "batch" if batch else "files" if files else "demo"
@@ -68,8 +70,10 @@ def _check_combinations(args) -> str:
     _check_edge_penalty(args)
     _check_prior(args, mode)
     if mode == "batch":
-        if args.uncertainty is not None or args.max_uncertainty is not None:
+        if args.colmap is None and (args.uncertainty is not None or args.max_uncertainty is not None):
             raise UsageError("--uncertainty and --max-uncertainty are for one frame, not a batch")
+        if args.colmap is not None and args.csv is None:
+            args.csv = str(Path(args.outdir) / COLMAP_CSV)
         if args.csv is None:
             raise UsageError("a batch needs --csv PATH for the per-frame metrics")
         if args.out or args.json or args.figure or args.mask or args.truth or args.calib:
@@ -86,7 +90,7 @@ def _check_combinations(args) -> str:
         _check_output(args.csv, (".csv",), "--csv")
     else:
         if args.csv or args.workers or args.indices is not None:
-            raise UsageError("--csv, --workers and --indices are for --batch/--nyu-mat")
+            raise UsageError("--csv, --workers and --indices are for --batch/--nyu-mat/--colmap")
         if args.out:
             _check_output(args.out, _OUT_EXTENSIONS, "--out")
         if args.uncertainty:
@@ -107,6 +111,51 @@ def _check_combinations(args) -> str:
                               "pip install 'sparsedepth[plot]' (or matplotlib)")
     _check_cluster_options(args, mode)
     return mode
+
+
+#: The CSV of a --colmap run when --csv is not given, in --outdir.
+COLMAP_CSV = "views.csv"
+
+#: The scene description a --colmap run writes in --outdir.
+COLMAP_SCENE = "scene.json"
+
+
+def _check_colmap(args) -> None:
+    """--colmap needs --images and --outdir; its samples are the model's points, so the options that read depth
+    files or simulate samples do not apply; --images and --colmap-* need --colmap."""
+    if args.colmap is None:
+        given = [flag for flag, value in (("--images", args.images), ("--colmap-max-error", args.colmap_max_error),
+                                          ("--colmap-min-track", args.colmap_min_track)) if value is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)} {'go' if len(given) > 1 else 'goes'} with --colmap DIR (the "
+                              "COLMAP model whose views are completed)")
+        return
+    if args.images is None:
+        raise UsageError(f"--colmap '{args.colmap}' needs --images DIR, the folder the model's image names are "
+                          "relative to")
+    if args.outdir is None:
+        raise UsageError(f"--colmap '{args.colmap}' needs --outdir DIR, the (existing) folder of the depth maps")
+    not_here = [flag for flag, value in (
+        ("--keep-fraction", args.keep_fraction), ("--keep-count", args.keep_count),
+        ("--fill-holes", args.fill_holes or None), ("--fill-method", args.fill_method),
+        ("--downsample", args.downsample), ("--depth-scale", args.depth_scale), ("--byteorder", args.byteorder),
+        ("--invalid-value", args.invalid_values), ("--min-depth", args.min_depth), ("--max-depth", args.max_depth),
+        ("--max-uncertainty", args.max_uncertainty), ("--truth-prefix", args.truth_prefix),
+        ("--batch-depths", args.batch_depths), ("--batch-truths", args.batch_truths)) if value is not None]
+    not_here += [flag for flag, value, default in (("--image-prefix", args.image_prefix, "rgb_"),
+                                                   ("--depth-prefix", args.depth_prefix, "depth_"))
+                 if value != default]
+    if not_here:
+        raise UsageError(f"{', '.join(not_here)} {'do' if len(not_here) > 1 else 'does'} not apply to --colmap: "
+                          "each view's samples are the model's 3-D points it observes, at full resolution, in "
+                          "the model's units (filter them with --colmap-max-error/--colmap-min-track)")
+    if args.uncertainty is not None:
+        if not Path(args.uncertainty).is_dir():
+            raise UsageError(f"--uncertainty '{args.uncertainty}': with --colmap, an existing folder for one "
+                              "uncertainty map per view; create it first")
+        if Path(args.uncertainty).resolve() == Path(args.outdir).resolve():
+            raise UsageError(f"--uncertainty '{args.uncertainty}' is --outdir: the uncertainty maps have the "
+                              "depth maps' names; give another folder")
 
 
 def _check_image_shift(args) -> None:
@@ -173,7 +222,7 @@ def _check_camera_options(args, mode) -> None:
                                       ("--camera", args.camera)) if value is not None]
     if mode == "batch" and given:
         raise UsageError(f"{', '.join(given)}: point clouds are written for one frame (--image/--depth or the "
-                          "demo), not for --batch/--nyu-mat")
+                          "demo), not for --batch/--nyu-mat/--colmap")
     explicit = "--intrinsics" if args.intrinsics is not None else "--camera" if args.camera is not None else None
     if mode == "demo" and explicit:
         raise UsageError(f"{explicit} is for --image/--depth; the demo uses the calibration of its own frame "
@@ -186,7 +235,7 @@ def _check_camera_options(args, mode) -> None:
 
 def _check_batch_flags(args, mode) -> None:
     if mode != "batch" and (args.batch_depths or args.batch_truths or args.overwrite):
-        raise UsageError("--batch-depths, --batch-truths and --overwrite are for --batch/--nyu-mat")
+        raise UsageError("--batch-depths, --batch-truths and --overwrite are for --batch/--nyu-mat/--colmap")
     if args.batch_depths is not None and args.batch is None:
         raise UsageError("--batch-depths pairs with --batch DIR (the image folder)")
     if args.batch_truths is not None and args.batch_depths is None:
@@ -210,7 +259,7 @@ def _check_cluster_options(args, mode) -> None:
     given = [name for name, value in (("--scheduler", args.scheduler), ("--scheduler-file", args.scheduler_file),
                                       ("--scheduler-timeout", args.scheduler_timeout)) if value is not None]
     if given and mode != "batch":
-        raise UsageError(f"{', '.join(given)} run a batch on a Dask cluster: they need --batch/--nyu-mat")
+        raise UsageError(f"{', '.join(given)} run a batch on a Dask cluster: they need --batch/--nyu-mat/--colmap")
     if args.workers is not None and (args.scheduler is not None or args.scheduler_file is not None):
         raise UsageError("--workers sizes the local process pool; with --scheduler/--scheduler-file the "
                           "cluster's workers run the frames")

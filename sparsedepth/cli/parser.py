@@ -96,6 +96,10 @@ examples:
       --depth-scale kitti --keep-fraction 0.05 --csv kitti.csv --outdir dense/
       a KITTI-style pair of folders (same file names); --batch on a folder of
       NYU .h5 files (rgb + depth) reads those
+  {PROG} --colmap sparse/0 --images images --outdir depth
+      dense depth for every registered view of a COLMAP model, from its 3-D
+      points: depth/00.png for images/00.jpg (16-bit, model units x the scale
+      in depth/scene.json), rows in depth/views.csv; resumable (docs/colmap.md)
 
 depth scales: stored integer value / scale = metres; presets {', '.join(f'{k} ({v:g})' for k, v in DEPTH_SCALES.items())}.
 exit codes: 0 ok; 1 batch with failed frames (rows with an error in the CSV);
@@ -129,6 +133,10 @@ COMMON_OPTIONS = (
         ("--csv", "per-frame metrics; an existing CSV of the same command resumes the run."),
         ("--workers", "worker processes."),
     )),
+    ("dense depth for every view of a COLMAP model (docs/colmap.md)", (
+        ("--colmap", "the model folder (sparse/0); its 3-D points are each view's samples."),
+        ("--images", "with --colmap: the folder of its images; writes --outdir/<image>.png and scene.json."),
+    )),
     ("outputs", (
         ("--out", f"dense depth ({', '.join(OUT_FORMATS)})."),
         ("--json", "metrics, settings and solver history."),
@@ -158,6 +166,14 @@ class _HelpAll(argparse.Action):
     def __call__(self, parser, namespace, values, option_string=None):
         parser.print_help()
         parser.exit()
+
+
+class _StoreGiven(argparse._StoreAction):
+    """Store the value and set ``<dest>_given`` (``--out-format``: its default depends on the mode)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        super().__call__(parser, namespace, values, option_string)
+        setattr(namespace, f"{self.dest}_given", True)
 
 
 class _CommonHelp(_HelpAll):
@@ -208,7 +224,9 @@ class _Parser(argparse.ArgumentParser):
 
     def parse_known_args(self, args=None, namespace=None):
         args = sys.argv[1:] if args is None else list(args)
-        return super().parse_known_args(_join_signed_pairs(args), namespace)
+        parsed, extras = super().parse_known_args(_join_signed_pairs(args), namespace)
+        parsed.command_line = [str(arg) for arg in args]  # the arguments as given (a --colmap run's scene.json)
+        return parsed, extras
 
 
 def _join_signed_pairs(args) -> list:
@@ -372,6 +390,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_method_options(parser)
     _add_output_options(parser)
     _add_batch_options(parser)
+    _add_colmap_options(parser)
     _add_cluster_options(parser)
     return parser
 
@@ -507,13 +526,17 @@ def _add_output_options(parser) -> None:
     out.add_argument("--out", metavar="PATH",
                      help=f"dense depth: {_OUT_HELP}; a PNG's scale is the input's or --out-scale.")
     out.add_argument("--out-scale", type=_scale, metavar="SCALE",
-                     help="scale of a PNG output (default: --depth-scale if given, else mm = 1000).")
+                     help="scale of a PNG output (default: --depth-scale if given, else mm = 1000; --colmap: the "
+                          "largest of 1, 2, 5 x 10^k that stores 1.05 x the largest depth of the model's points, "
+                          "written in scene.json).")
     out.add_argument("--uncertainty", metavar="PATH",
                      help="per-pixel uncertainty in metres (a standard-deviation-like error estimate, calibrated "
                           "on held-out samples; two more solves), in any --out format: .npy, .npz, .h5, .tif and "
                           ".pfm store it as it is (0 included; missing only where there is no estimate); a 16-bit "
                           "PNG stores between one unit of its scale and its largest value 65535/scale (a larger "
-                          "sigma is stored as that value: read it as 'at least'; the count is reported).")
+                          "sigma is stored as that value: read it as 'at least'; the count is reported).  With "
+                          "--colmap: an existing folder other than --outdir, one map per view named like its depth "
+                          "map (--out-format, the depth's PNG scale, model units).")
     out.add_argument("--max-uncertainty", type=_nonnegative, metavar="M",
                      help="leave the pixels whose uncertainty exceeds M metres missing in --out (0 in PNG, NaN in "
                           "float formats) instead of extrapolating; the count is reported.")
@@ -535,13 +558,14 @@ def _add_output_options(parser) -> None:
                           "installed), points.ply (if the intrinsics are known) and, with --uncertainty or "
                           "--max-uncertainty, uncertainty.npy "
                           f"here (an existing folder; the demo creates its default ./{DEMO_DIR}/); batch: one depth file "
-                          "per frame.")
+                          "per frame; --colmap: one depth map per view named after its image (00.png for 00.jpg, "
+                          "sub-folders kept), scene.json and, by default, the --csv views.csv.")
     out.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr.")
 
 
 
 def _add_batch_options(parser) -> None:
-    """--batch / --nyu-mat, the frame selection, --csv, --workers and --overwrite."""
+    """--batch / --nyu-mat / --colmap, the frame selection, --csv, --workers and --overwrite."""
     bat = parser.add_argument_group("batch")
     src = bat.add_mutually_exclusive_group()
     src.add_argument("--batch", metavar="DIR",
@@ -551,6 +575,10 @@ def _add_batch_options(parser) -> None:
     src.add_argument("--nyu-mat", metavar="FILE",
                      help="NYU Depth V2 labeled .mat (read lazily): --fill-holes fills rawDepths and scores against "
                           "depths; otherwise depths is sampled with --keep-fraction/--keep-count.")
+    src.add_argument("--colmap", metavar="DIR",
+                     help="a COLMAP sparse model folder (cameras, images, points3D; .bin or .txt; pinhole cameras, "
+                          "i.e. after `colmap image_undistorter`): complete every registered view from the model's "
+                          "3-D points it observes, in the model's units (no scoring); needs --images and --outdir.")
     bat.add_argument("--indices", type=_indices, metavar="RANGE",
                      help="frames of --nyu-mat: 5, 0:10, 0:100:10 or 1,4,7 (default all).")
     bat.add_argument("--image-prefix", default="rgb_", help="image file prefix in --batch (default rgb_).")
@@ -560,12 +588,14 @@ def _add_batch_options(parser) -> None:
                      help="per-frame metrics, one row per frame, written as frames finish.  If it exists (from the "
                           "same command) the run resumes: frames with an ok row and their output are skipped, "
                           "missing and failed ones run, and each failed row is replaced by the new one.  The "
-                          "settings are kept beside it in PATH.settings.json.")
+                          "settings are kept beside it in PATH.settings.json.  --colmap: default "
+                          "<--outdir>/views.csv.")
     bat.add_argument("--workers", type=_positive_int, metavar="N",
                      help=f"worker processes (default {default_workers()} here: half the CPUs, at least 1, "
                           "at most 8).")
-    bat.add_argument("--out-format", choices=list(OUT_FORMATS), default="npy",
-                     help="format of the per-frame outputs in --outdir (default npy).")
+    bat.add_argument("--out-format", choices=list(OUT_FORMATS), default="npy", action=_StoreGiven,
+                     help="format of the per-frame outputs in --outdir (default npy; --colmap: png, 16-bit at the "
+                          "scale of --out-scale; npy, pfm, tif and h5 store float depth as it is).")
     bat.add_argument("--batch-depths", metavar="DIR",
                      help="with --batch DIR: the depth folder, files named like the images (KITTI layout).")
     bat.add_argument("--batch-truths", metavar="DIR",
@@ -573,6 +603,21 @@ def _add_batch_options(parser) -> None:
     bat.add_argument("--overwrite", action="store_true",
                      help="start the batch afresh: replace an existing --csv (even one written with other "
                           "settings) and recompute every frame.")
+
+
+def _add_colmap_options(parser) -> None:
+    """--images, --colmap-max-error and --colmap-min-track: the views of a --colmap model."""
+    colmap = parser.add_argument_group("COLMAP views (with --colmap; docs/colmap.md)")
+    colmap.add_argument("--images", metavar="DIR",
+                        help="the folder the model's image names are relative to (COLMAP's image path; the "
+                             "undistorted images for an undistorted model).  A registered image whose file is "
+                             "missing is a failed row; image files the model does not register are skipped and "
+                             "counted.")
+    colmap.add_argument("--colmap-max-error", type=_nonnegative, metavar="PX",
+                        help="use only the 3-D points whose mean reprojection error is at most PX pixels (default: "
+                             "every point).")
+    colmap.add_argument("--colmap-min-track", type=_positive_int, metavar="N",
+                        help="use only the 3-D points seen by at least N images (default: every point).")
 
 
 def _add_cluster_options(parser) -> None:
