@@ -31,9 +31,17 @@ def step_costs(image, contrast: float):
     ValueError
         If ``contrast`` is not a finite number ``>= 0``, or for a bad image.
     """
+    return _scaled_image_step_costs(as_float_image(image), contrast)
+
+
+def _scaled_image_step_costs(image, contrast):
+    """:func:`step_costs` of an image already scaled by :func:`~sparsedepth._validation.as_float_image`."""
     contrast = check_nonnegative_real(contrast, name="contrast")
-    dx, dy = pair_distances(as_float_image(image))
-    return 1.0 + contrast * dx, 1.0 + contrast * dy
+    dx, dy = pair_distances(image)
+    for d in (dx, dy):
+        d *= contrast
+        d += 1.0
+    return dx, dy
 
 
 def geodesic_fill(image, sparse_depth, mask=None, *, contrast: float = 10.0, return_distance: bool = False):
@@ -86,7 +94,7 @@ def geodesic_fill(image, sparse_depth, mask=None, *, contrast: float = 10.0, ret
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     img = as_float_image(image)
     check_same_shape(img.shape[:2], depth.shape, "image", "sparse_depth")
-    distance, nearest = nearest_sources(*step_costs(img, contrast), observed)
+    distance, nearest = nearest_sources(*_scaled_image_step_costs(img, contrast), observed)
     fill = depth.ravel()[nearest]
     if return_distance:
         return fill, distance
@@ -196,7 +204,7 @@ def nearest_sources(cx, cy, sources):
             q = final + offset
             candidate = c[:, j] + d
             before = distance[q]
-            better = np.flatnonzero(candidate < before)
+            better = (candidate < before).nonzero()[0]
             q = q[better]
             distance[q] = candidate[better]
             nearest[q] = s[better]
@@ -206,8 +214,8 @@ def nearest_sources(cx, cy, sources):
             break
         d = distance[reached]
         now = d < d.min() + least_step
-        final = reached[np.flatnonzero(now)]
-        reached = reached[np.flatnonzero(~now)]
+        final = reached[now.nonzero()[0]]
+        reached = reached[(~now).nonzero()[0]]
     distance = distance.reshape(H + 2, Wp)[1:-1, 1:-1].copy()
     return distance, nearest.reshape(H + 2, Wp)[1:-1, 1:-1].astype(np.intp)
 
