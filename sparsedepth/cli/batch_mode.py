@@ -280,19 +280,20 @@ def _scale_text(options: BatchOptions) -> str:
     return f"{options.out_format[1:]}, float, model units"
 
 
-def _write_scene(args, scene: _ColmapScene, options: BatchOptions) -> None:
-    """Write --outdir/scene.json for the files there now (:func:`~sparsedepth.batch.write_colmap_scene`)."""
-    command = shlex.join([*PROG.split(), *getattr(args, "command_line", [])])
+def _write_scene(args, argv, scene: _ColmapScene, options: BatchOptions) -> None:
+    """Write --outdir/scene.json for the files there now (:func:`~sparsedepth.batch.write_colmap_scene`); ``argv``:
+    the command's arguments as given."""
+    command = shlex.join([*PROG.split(), *map(str, argv)])
     write_colmap_scene(Path(args.outdir) / COLMAP_SCENE, scene.frames, args.csv, options, images_dir=args.images,
                        depth_range=scene.depth_range, command=command)
 
 
-def _scene_after_stop(args, scene, options) -> None:
+def _scene_after_stop(args, argv, scene, options) -> None:
     """After an interrupted --colmap run: scene.json for the views done so far (a failure to write it is left for the
     next run, which rewrites it)."""
     if scene is not None:
         with contextlib.suppress(OSError, ValueError):
-            _write_scene(args, scene, options)
+            _write_scene(args, argv, scene, options)
 
 
 def _on_signal(signum, frame):  # noqa: ARG001 - signal handler API
@@ -304,11 +305,11 @@ def _on_signal(signum, frame):  # noqa: ARG001 - signal handler API
     raise _Terminated
 
 
-def run_batch_mode(args, stderr) -> int:
+def run_batch_mode(args, stderr, argv=()) -> int:
     """Run the batch of the options; print the summary line; return the exit code (see :mod:`sparsedepth.cli.command`).
 
-    With ``--image-shift`` a second line gives the shift the batch used.
-    SIGINT and SIGTERM stop the batch with its finished rows kept (exit codes
+    With ``--image-shift`` a second line gives the shift the batch used; ``argv`` (the arguments as given) is the
+    command a ``--colmap`` run records in its scene.json.  SIGINT and SIGTERM stop the batch with its finished rows kept (exit codes
     130 and 143); the previous signal handlers are restored at the end.
     """
     cluster = cluster_address(args)
@@ -349,12 +350,12 @@ def run_batch_mode(args, stderr) -> int:
             summary = run_batch(frames, args.csv, options=options, max_workers=args.workers, progress=reporter,
                                 overwrite=args.overwrite)
     except KeyboardInterrupt:
-        _scene_after_stop(args, scene, options)
+        _scene_after_stop(args, argv, scene, options)
         print(f"{PROG}: interrupted; the rows of finished frames are in {args.csv}: run the same command to resume",
               file=stderr)
         return 130
     except _Terminated:
-        _scene_after_stop(args, scene, options)
+        _scene_after_stop(args, argv, scene, options)
         print(f"{PROG}: terminated (SIGTERM); the rows of finished frames are in {args.csv}: run the same command "
               "to resume", file=stderr)
         return 143
@@ -363,7 +364,7 @@ def run_batch_mode(args, stderr) -> int:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     if scene is not None:
-        _write_scene(args, scene, options)
+        _write_scene(args, argv, scene, options)
         print(f"{summary.succeeded} of {summary.total} views done, {summary.failed} failed, {summary.skipped} "
               f"skipped (done before); depth in {args.outdir} ({_scale_text(options)}), described in "
               f"{Path(args.outdir) / COLMAP_SCENE}; rows in {summary.csv_path}", file=sys.stdout)

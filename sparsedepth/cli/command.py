@@ -60,7 +60,7 @@ def main(argv=None) -> int:
     try:
         mode = check_options(args)
         if mode == "batch":
-            return run_batch_mode(args, stderr)
+            return run_batch_mode(args, stderr, argv)
         return run_one(args, argv, mode, stdout, stderr)
     except UsageError as exc:
         print(f"{PROG}: error: {exc}", file=stderr)

@@ -224,9 +224,7 @@ class _Parser(argparse.ArgumentParser):
 
     def parse_known_args(self, args=None, namespace=None):
         args = sys.argv[1:] if args is None else list(args)
-        parsed, extras = super().parse_known_args(_join_signed_pairs(args), namespace)
-        parsed.command_line = [str(arg) for arg in args]  # the arguments as given (a --colmap run's scene.json)
-        return parsed, extras
+        return super().parse_known_args(_join_signed_pairs(args), namespace)
 
 
 def _join_signed_pairs(args) -> list:
