@@ -64,18 +64,26 @@ def test_absolute_frames_resolve_in_the_current_folder(tmp_path, monkeypatch):
     assert given[0].image == "rgb_a.png"  # inputs are not modified
 
 
-def test_remove_stale_outputs_removes_only_temporaries_of_the_batch(tmp_path):
-    from sparsedepth.batch.distributed import remove_stale_outputs
+def test_remove_temporaries_removes_only_temporaries_of_the_batch(tmp_path):
+    from sparsedepth.batch import BatchOptions
+    from sparsedepth.batch.worker import remove_temporaries
 
-    stale = [tmp_path / ".f1.npy.0123456789ab.tmp.npy", tmp_path / ".f2.npy.abcdefabcdef.tmp.npy"]
-    kept = [tmp_path / "f1.npy", tmp_path / ".other.npy.0123456789ab.tmp.npy",  # not a frame of the batch
-            tmp_path / ".f1.npy.0123456789ab.tmp.png",  # another format
-            tmp_path / ".f1.npy.xyz.tmp.npy", tmp_path / "notes.txt"]
+    out, sigma = tmp_path / "out", tmp_path / "sigma"
+    (out / "cam1").mkdir(parents=True)
+    sigma.mkdir()
+    stale = [out / ".f1.npy.0123456789ab.tmp.npy", out / ".f2.npy.abcdefabcdef.tmp.npy",
+             out / "cam1" / ".f4.npy.00000000abcd.tmp.npy",  # a view's sub-folder
+             sigma / ".f1.npy.0123456789ab.tmp.npy"]  # the uncertainty folder
+    kept = [out / "f1.npy", out / ".other.npy.0123456789ab.tmp.npy",  # not a frame of the batch
+            out / ".f1.npy.0123456789ab.tmp.png",  # another format
+            out / ".f1.npy.xyz.tmp.npy", out / "notes.txt", out / "cam1" / ".f1.npy.0123456789ab.tmp.npy"]
     for path in stale + kept:
         path.write_bytes(b"x")
-    removed = remove_stale_outputs(tmp_path, ["f1", "f2", "f3"], ".npy")
+    options = BatchOptions(out_dir=str(out), out_format=".npy", uncertainty_dir=str(sigma))
+    removed = remove_temporaries(["f1", "f2", "f3", "cam1/f4"], options)
     assert sorted(removed) == sorted(stale)
     assert not any(p.exists() for p in stale) and all(p.exists() for p in kept)
+    assert remove_temporaries(["f1"], BatchOptions()) == []  # no output folder: nothing to do
 
 
 def test_connect_checks_its_arguments(tmp_path, monkeypatch):

@@ -31,7 +31,7 @@ from .._validation import is_real
 from .frames import absolute_frame
 from .options import BatchOptions, BatchSummary
 from .run import run_batch
-from .worker import one_line
+from .worker import one_line, remove_temporaries
 
 __all__ = [
     "DEFAULT_TIMEOUT",
@@ -39,7 +39,6 @@ __all__ = [
     "scheduler_address",
     "cluster_threads",
     "absolute_frames",
-    "remove_stale_outputs",
     "run_batch_on_cluster",
 ]
 
@@ -335,43 +334,6 @@ def absolute_frames(frames: Sequence) -> list:
     return [absolute_frame(frame) for frame in frames]
 
 
-def remove_stale_outputs(out_dir, names, out_format: str) -> list[Path]:
-    """Delete the temporary files left by frame attempts that were killed while writing.
-
-    An output is written to ``.<name><ext>.<12 hex digits>.tmp<ext>`` and
-    then renamed onto ``<name><ext>`` (:func:`~sparsedepth.write_depth`), so
-    a worker killed mid-write leaves such a file beside the complete output
-    of the attempt that Dask ran again.  Only names of that exact form, for
-    the given frame names, are removed.
-
-    Parameters
-    ----------
-    out_dir : str or os.PathLike
-    names : iterable of str
-        Frame names (``FileFrame.name`` / ``NYUFrame.name``).
-    out_format : str
-        The extension with its dot, e.g. ``".npy"``.
-
-    Returns
-    -------
-    list of Path
-        The files removed.
-    """
-    out_dir = Path(out_dir)
-    wanted = {f"{name}{out_format}" for name in names}
-    pattern = re.compile(r"^\.(?P<target>.+)\.[0-9a-f]{12}\.tmp" + re.escape(out_format) + r"$")
-    removed = []
-    for path in out_dir.iterdir():
-        match = pattern.match(path.name)
-        if match and match.group("target") in wanted and path.is_file():
-            try:
-                path.unlink()
-            except FileNotFoundError:
-                continue
-            removed.append(path)
-    return removed
-
-
 # the numpydoc docstring is most of this function's length; its code is about 25 lines
 def run_batch_on_cluster(
     frames: Sequence,
@@ -437,14 +399,15 @@ def run_batch_on_cluster(
     error row with ``KilledWorker``).  The output of every attempt is written
     to a temporary file renamed into place, so no partial output is ever
     under a frame's name; temporary files of killed attempts are removed at
-    the end (:func:`remove_stale_outputs`).
+    the end (:func:`~sparsedepth.batch.worker.remove_temporaries`).
     """
     if client is not None and (address is not None or scheduler_file is not None):
         raise ValueError("give either a client or a scheduler address/file, not both")
     frames = absolute_frames(frames)
     options = BatchOptions() if options is None else options
-    if options.out_dir is not None:
-        options = dataclasses.replace(options, out_dir=os.path.abspath(options.out_dir))
+    folders = {key: os.path.abspath(getattr(options, key)) for key in ("out_dir", "uncertainty_dir")
+               if getattr(options, key) is not None}
+    options = dataclasses.replace(options, **folders)
     own = client is None
     if own:
         client = connect(address, scheduler_file=scheduler_file, timeout=timeout)
@@ -460,8 +423,7 @@ def run_batch_on_cluster(
             executor.shutdown(wait=False)
         if own:
             client.close()
-    if options.out_dir is not None:
-        remove_stale_outputs(options.out_dir, [frame.name for frame in frames], options.out_format)
+    remove_temporaries([frame.name for frame in frames], options)
     return summary
 
 

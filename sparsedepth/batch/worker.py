@@ -20,6 +20,7 @@ import contextlib
 import glob
 import math
 import os
+import re
 import threading
 import warnings
 from pathlib import Path
@@ -306,10 +307,29 @@ def error_text(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {one_line(exc)}"
 
 
-def remove_temporaries(names, options: BatchOptions) -> None:
-    """Remove the temporary output files of these frames (left by a worker that was stopped)."""
+def remove_temporaries(names, options: BatchOptions) -> list[Path]:
+    """Delete the temporary files that writes of these frames' outputs left (a worker stopped or killed mid-write).
+
+    An output is written to ``.<name><ext>.<12 hex digits>.tmp<ext>`` beside its target and then renamed onto
+    ``<name><ext>`` (:func:`~sparsedepth.io.files.atomic_target`); only files of that exact form, for the depth
+    and (with ``options.uncertainty_dir``) uncertainty outputs of ``names``, in each output's own folder, are
+    removed.
+
+    Parameters
+    ----------
+    names : iterable of str
+        Frame names (a COLMAP view's name may hold sub-folders).
+    options : BatchOptions
+
+    Returns
+    -------
+    list of Path
+        The files removed.
+    """
     if options.out_dir is None:
-        return
+        return []
+    suffix = re.compile(r"\.[0-9a-f]{12}\.tmp" + re.escape(options.out_format) + r"$")
+    removed = []
     for name in names:
         targets = [output_path(name, options)]
         if options.uncertainty_dir is not None:
@@ -318,5 +338,9 @@ def remove_temporaries(names, options: BatchOptions) -> None:
             if not target.parent.is_dir():
                 continue
             for tmp in target.parent.glob(f".{glob.escape(target.name)}.*.tmp*"):
+                if suffix.fullmatch(tmp.name[len(target.name) + 1:]) is None or not tmp.is_file():
+                    continue
                 with contextlib.suppress(FileNotFoundError):
                     tmp.unlink()
+                    removed.append(tmp)
+    return removed
