@@ -1,91 +1,67 @@
-"""Reading and assembling the CSR form of grid stencils in sparsedepth.linalg.multigrid.stencils."""
+"""The multigrid's stencil sources (sparsedepth.linalg.multigrid.stencils) on CSR matrices in the full in-grid pattern."""
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from sparsedepth.grid.stencil import csr_to_stencil, full_pattern_offsets, stencil_to_csr
-from sparsedepth.linalg.multigrid import GridMultigrid
-from sparsedepth.linalg.multigrid.stencils import assemble_csr, centre_row_holds, read_full_pattern
+from sparsedepth.grid.stencil import csr_to_stencil, stencil_to_csr
+from sparsedepth.linalg.multigrid import GridMultigrid, grid_stencil
+from sparsedepth.linalg.multigrid.stencils import (StencilSource, extract_stencil, fine_stencil_source,
+                                                   full_pattern_within)
 
 FIVE = [(-1, 0), (0, -1), (0, 0), (0, 1), (1, 0)]
 THIRTEEN = sorted(FIVE + [(-1, -1), (-1, 1), (1, -1), (1, 1), (-2, 0), (0, -2), (0, 2), (2, 0)])
 TWENTY_ONE = [(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3) if abs(dy) + abs(dx) < 4]
-SHAPES = [(1, 1), (1, 6), (5, 1), (2, 3), (3, 3), (4, 5), (5, 4), (6, 7), (9, 8)]
-
-
-def dense_from_stencil(offsets, S):
-    """The matrix of a stencil, entry by entry: ``A[(y, x), (y + dy, x + dx)] = S[k, y, x]`` inside the grid."""
-    _, h, w = S.shape
-    A = np.zeros((h * w, h * w))
-    for k, (dy, dx) in enumerate(offsets):
-        for y in range(h):
-            for x in range(w):
-                if 0 <= y + dy < h and 0 <= x + dx < w:
-                    A[y * w + x, (y + dy) * w + x + dx] = S[k, y, x]
-    return A
-
-
-@pytest.mark.parametrize("offsets", [[(0, 0)], FIVE, THIRTEEN, TWENTY_ONE], ids=["1", "5", "13", "21"])
-@pytest.mark.parametrize("shape", SHAPES)
-def test_assemble_csr_is_the_stencils_matrix_in_the_full_pattern(offsets, shape):
-    rng = np.random.default_rng(len(offsets) + 7 * shape[0] + shape[1])
-    S = rng.uniform(0.5, 1.5, (len(offsets),) + shape)  # no zero inside the grid: every entry is stored
-    for dtype in (np.float64, np.float32):
-        A = assemble_csr(offsets, S, dtype)
-        assert A.dtype == dtype and A.has_canonical_format
-        np.testing.assert_array_equal(A.toarray(), dense_from_stencil(offsets, S).astype(dtype))
-        # the pattern of stencil_to_csr, entry for entry
-        reference = stencil_to_csr(offsets, S, dtype=dtype)
-        np.testing.assert_array_equal(A.indptr, reference.indptr)
-        np.testing.assert_array_equal(A.indices, reference.indices)
-        np.testing.assert_array_equal(A.data, reference.data)
 
 
 @pytest.mark.parametrize("offsets", [FIVE, THIRTEEN, TWENTY_ONE], ids=["5", "13", "21"])
-@pytest.mark.parametrize("shape", SHAPES)
-def test_read_full_pattern_returns_the_stencil_or_none(offsets, shape):
+@pytest.mark.parametrize("shape", [(1, 6), (5, 1), (3, 3), (6, 7), (9, 8), (16, 13)])
+def test_a_csr_source_hands_out_what_an_array_source_does(offsets, shape):
+    """Read by position, band by band and class by class; offsets the matrix lacks read as zero."""
     rng = np.random.default_rng(len(offsets) + 5 * shape[0] + shape[1])
     S = rng.uniform(0.5, 1.5, (len(offsets),) + shape)
     A = stencil_to_csr(offsets, S)
-    read = read_full_pattern(A, shape)
-    expected = full_pattern_offsets(A, shape)
-    # read back with the offsets it was assembled from exactly when its centre row holds them all
-    assert (expected == offsets) == centre_row_holds(offsets, shape)
-    if expected is None:
-        assert read is None
-        return
-    got_offsets, got = read
-    assert got_offsets == expected
-    np.testing.assert_array_equal(got, csr_to_stencil(A, shape, offsets=expected)[1])
-    np.testing.assert_array_equal(dense_from_stencil(got_offsets, got), A.toarray())
-    # the same with 64-bit index arrays
-    wide = sp.csr_array((A.data, A.indices.astype(np.int64), A.indptr.astype(np.int64)), shape=A.shape)
-    assert wide.indices.dtype == np.int64
-    wide_offsets, wide_stencil = read_full_pattern(wide, shape)
-    assert wide_offsets == got_offsets
-    np.testing.assert_array_equal(wide_stencil, got)
+    images = csr_to_stencil(A, shape, offsets=offsets)[1]  # 0 where the neighbour is outside the grid
+    wider = sorted(set(offsets) | {(-2, -2), (2, 2)})
+    padded = np.zeros((len(wider),) + shape)
+    padded[[wider.index(o) for o in offsets]] = images
+    for hierarchy_offsets, array in ((offsets, images), (wider, padded)):
+        csr = StencilSource(hierarchy_offsets, shape, csr=A, csr_offsets=offsets)
+        dense = StencilSource(hierarchy_offsets, shape, array=array)
+        for py, px in [(None, None), (0, 0), (1, 0), (0, 1), (1, 1)]:
+            if py is None or (py < shape[0] and px < shape[1]):
+                np.testing.assert_array_equal(csr.parity_class(py, px), dense.parity_class(py, px))
+        rows = csr.row_reader()
+        for y0, y1 in [(0, shape[0]), (0, 1), (shape[0] // 2, shape[0])]:
+            np.testing.assert_array_equal(rows(y0, y1), array[:, y0:y1])
 
 
-@pytest.mark.parametrize("position", ["first", "inner", "last"])
-def test_read_full_pattern_rejects_a_moved_column(position):
-    shape = (9, 11)
-    S = np.random.default_rng(0).uniform(0.5, 1.5, (len(THIRTEEN),) + shape)
+def test_full_pattern_within_the_radius():
+    shape = (9, 10)
+    S = np.random.default_rng(1).uniform(0.5, 1.5, (len(THIRTEEN),) + shape)
     A = stencil_to_csr(THIRTEEN, S)
-    assert read_full_pattern(A, shape) is not None
-    entry = {"first": 0, "inner": A.nnz // 2, "last": A.nnz - 1}[position]
-    B = A.copy()
-    B.indices[entry] += 1 if position == "first" else -1  # still sorted, no longer the pattern
-    assert read_full_pattern(B, shape) is None
-    assert full_pattern_offsets(B, shape) is None
-    # row pointers of another pattern
-    D = A.copy()
-    D.indptr[1:-1] += 1
-    assert read_full_pattern(D, shape) is None
-    # another layout of the same matrix (the entries of a row not in column order) is not read by position
-    C = sp.csr_array(A.toarray())
-    C.indices[:] = C.indices[::-1].copy()  # unsorted: columns no longer those of the pattern
-    assert read_full_pattern(C, shape) is None
+    assert full_pattern_within(A, shape).offsets == THIRTEEN
+    assert full_pattern_within(A, shape, radius=1) is None  # (±2, 0), (0, ±2) lie beyond radius 1
+    wide = [(-3, 0), (0, 0), (3, 0)]
+    W = stencil_to_csr(wide, np.ones((3,) + shape))
+    assert full_pattern_within(W, shape) is None
+    assert full_pattern_within(W, shape, radius=3).offsets == wide
+    with pytest.raises(ValueError, match="radius 2"):
+        grid_stencil(W, shape)  # neither read by position nor extracted within radius 2
+    offsets, read = grid_stencil(W, shape, radius=3)
+    assert offsets == wide
+    np.testing.assert_array_equal(read, extract_stencil(W, shape, wide))
+    offsets, source = fine_stencil_source(A, shape)
+    assert offsets == THIRTEEN and source.csr is A and source.pattern.offsets == THIRTEEN
+
+
+@pytest.mark.parametrize("shape", [(1, 7), (6, 1), (7, 9)])
+def test_extract_stencil_reads_each_diagonal_within_the_grid(shape):
+    rng = np.random.default_rng(2)
+    S = rng.uniform(0.5, 1.5, (len(THIRTEEN),) + shape)
+    A = sp.csr_array(stencil_to_csr(THIRTEEN, S).toarray())  # not in the full pattern: read by diagonals
+    np.testing.assert_array_equal(extract_stencil(A, shape, THIRTEEN), csr_to_stencil(stencil_to_csr(THIRTEEN, S),
+                                                                                     shape, offsets=THIRTEEN)[1])
 
 
 def test_update_with_fewer_offsets_reads_them_into_the_hierarchys_stencil():

@@ -67,7 +67,11 @@ def test_product_equals_csr_and_dense(offsets, shape):
     A, dense = random_spd(offsets, shape, seed=shape[0] * 31 + shape[1])
     csr = stencil_to_csr(offsets, full_stencil(dense, offsets, shape))
     np.testing.assert_array_equal(A.tocsr().toarray(), dense)
-    np.testing.assert_array_equal(A.tocsr().indices, csr.indices)
+    for dtype in (np.float64, np.float32):  # the CSR form of stencil_to_csr, entry for entry
+        mine, full = A.tocsr(dtype=dtype), stencil_to_csr(offsets, full_stencil(dense, offsets, shape), dtype=dtype)
+        assert mine.dtype == dtype and mine.has_canonical_format
+        for name in ("indptr", "indices", "data"):
+            np.testing.assert_array_equal(getattr(mine, name), getattr(full, name))
     rng = np.random.default_rng(1)
     for _ in range(3):
         x = rng.standard_normal(A.shape[0])

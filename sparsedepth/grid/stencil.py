@@ -10,14 +10,16 @@ The normal equations of the completion objective are assembled in this form
 (:meth:`~sparsedepth.grid.operators.StencilOperator.add_normal_stencil`: one
 whole-array operation per pair of taps, no sparse products), converted once to
 CSR for the smoothers and Krylov solvers (:func:`stencil_to_csr`), and read
-back by the multigrid set-up (:func:`csr_to_stencil`) in one pass over the
-non-zeros instead of one sparse diagonal extraction per offset.
+back by the multigrid set-up (:func:`csr_to_stencil`, or a band of rows at a
+time with :meth:`FullPattern.read_rows`) by position, without one sparse
+diagonal extraction per offset.
 
-The CSR layout is the *full in-grid pattern*: row ``y*W + x`` stores every
-offset whose neighbour lies inside the grid, in lexicographic offset order
-(= increasing column), zero coefficients included.  A matrix in that layout is
-recognised exactly (its ``indptr`` and ``indices`` are compared with the
-pattern), so :func:`csr_to_stencil` never guesses.
+The CSR layout is the *full in-grid pattern* (:class:`FullPattern`): row
+``y*W + x`` stores every offset whose neighbour lies inside the grid, in
+lexicographic offset order (= increasing column), zero coefficients included.
+A matrix in that layout is recognised exactly (its ``indptr`` and ``indices``
+are compared with the pattern, :func:`full_pattern_offsets`), so
+:func:`csr_to_stencil` never guesses.
 
 May import NumPy, SciPy, :mod:`sparsedepth._validation` and :mod:`.rowbands`.
 """
@@ -30,10 +32,13 @@ import scipy.sparse as sp
 from .._validation import check_grid_shape
 from .rowbands import row_bands, rows_per_band
 
-__all__ = ["stencil_to_csr", "csr_to_stencil", "full_pattern_offsets", "index_dtype", "SymmetricStencil"]
+__all__ = ["stencil_to_csr", "csr_to_stencil", "full_pattern_offsets", "FullPattern", "index_dtype",
+           "SymmetricStencil"]
 
-#: entries per chunk of the conversions (their temporaries stay ~16 MB)
+#: entries per band of rows of the pattern's scatters and checks (their temporaries stay ~16 MB)
 _CHUNK_ENTRIES = 1 << 21
+#: entries per band of the inner block's copies and column indices (a few hundred kilobytes: they stay in cache)
+_CACHE_ENTRIES = 1 << 16
 
 
 def index_dtype(*sizes):
@@ -48,84 +53,282 @@ def _check_offsets(offsets):
     return offsets
 
 
-def _inside(offset, shape):
-    """Slices of the pixels whose neighbour at ``offset`` lies inside the grid."""
-    H, W = shape
-    dy, dx = offset
-    return slice(max(0, -dy), max(0, min(H, H - dy))), slice(max(0, -dx), max(0, min(W, W - dx)))
+def _indices_between(axis, lo, hi):
+    """``(a, b)``: the positions ``i`` of ``axis`` (a range) with ``lo <= axis[i] < hi`` are ``a:b``."""
+    start, step = axis.start, axis.step
+    a = max(0, -(-(lo - start) // step))
+    b = min(len(axis), -(-(hi - start) // step))
+    return a, max(a, b)
 
 
-def _row_starts(offsets, shape, index_dtype):
-    """``indptr`` of the full in-grid pattern (entries per row = offsets inside the grid)."""
-    H, W = shape
-    counts = np.zeros((H, W), dtype=index_dtype)
-    for offset in offsets:
-        counts[_inside(offset, shape)] += 1
-    indptr = np.zeros(H * W + 1, dtype=index_dtype)
-    np.cumsum(counts.reshape(-1), out=indptr[1:])
-    return indptr
+class FullPattern:
+    r"""The full in-grid pattern of a stencil's offsets on a grid: where its CSR form stores each entry.
 
+    Parameters
+    ----------
+    offsets : list of tuple of int
+        Distinct offsets ``(dy, dx)``, sorted lexicographically.
+    shape : tuple of int
+        The grid ``(H, W)``.
 
-def _blocks(offsets, shape, indptr):
-    """The CSR storage of the full in-grid pattern as ``(rows, columns, offsets)`` blocks.
+    Attributes
+    ----------
+    offsets : list of tuple of int
+    shape : tuple of int
+    inner : tuple of int
+        ``(y0, y1, x0, x1)``: the pixels ``y0 <= y < y1``, ``x0 <= x < x1``
+        have every offset inside the grid (none when ``y1 <= y0`` or
+        ``x1 <= x0``).
 
-    Image rows with the same set of in-grid vertical offsets (at most
-    ``2 r + 1`` groups for a stencil of radius ``r``) have the same number
-    ``L`` of entries, so their part of ``data`` is an ``(rows, L)`` array.
-    Within it, the columns ``x`` whose every such offset is in the grid hold
-    the same ``K_g`` offsets (a contiguous range of the sorted list), so
-    their entries form one ``(rows, columns, K_g)`` block; each of the few
-    border columns is a block of its own.  Yields ``(y0, y1, L, xs, ks,
-    start)``: image rows ``y0:y1``, columns ``xs`` (a slice), offset indices
-    ``ks`` (a slice or an index array) and the first position of the block in
-    the group's rows, so that ``rows[:, start:start + nx * nk]`` reshaped to
-    ``(rows, nx, nk)`` is the block.  Groups are cut into chunks of about
-    ``_CHUNK_ENTRIES`` entries so that the callers' temporaries stay small.
+    Notes
+    -----
+    Row :math:`p = yW + x` of the pattern stores, for each offset
+    :math:`k` whose neighbour is inside the grid, the column
+    :math:`(y + d_{y,k}) W + x + d_{x,k}`, in the order of `offsets`.  Two
+    in-grid neighbours of one pixel differ by less than :math:`W` in
+    :math:`x`, so that order is the order of the columns (canonical CSR).
+
+    The inner pixels hold all :math:`K` offsets, and every inner row of the
+    image holds the same number :math:`L` of entries with the inner block at
+    the same place, so the inner block's entries are a
+    ``(y1 − y0, x1 − x0, K)`` view of the CSR arrays (rows of :math:`L`
+    entries, less the ``first`` ones of the border columns ``x < x0``).  The
+    few border pixels (the rows above and below, the columns on either
+    side) are handled by scatters and gathers, a band of image rows at a
+    time; each of their entries sits at ``indptr[p]`` plus the number of
+    in-grid offsets before it.
     """
-    H, W = shape
-    dy = np.array([o[0] for o in offsets])
-    dx = np.array([o[1] for o in offsets])
-    ys = np.arange(H)[:, None] + dy[None, :]
-    ok = (ys >= 0) & (ys < H)  # (H, K): vertical offsets inside the grid, per image row
-    starts = np.concatenate([[0], 1 + np.flatnonzero(np.any(ok[1:] != ok[:-1], axis=1)), [H]])
-    for y, y1 in zip(starts[:-1].tolist(), starts[1:].tolist()):
-        rows_ok = ok[y]
-        columns = np.arange(W)[:, None] + dx[None, :]
-        present = rows_ok[None, :] & (columns >= 0) & (columns < W)  # (W, K)
-        counts = present.sum(axis=1)
-        before = np.concatenate([[0], np.cumsum(counts)[:-1]])  # first entry of column x in the row
-        L = int(counts.sum())
-        in_rows = np.flatnonzero(rows_ok)  # contiguous: offsets are sorted by dy first
-        full = np.flatnonzero(counts == in_rows.size) if in_rows.size else np.array([], dtype=int)
-        if full.size and full.size == full[-1] - full[0] + 1:
-            x_lo, x_hi = int(full[0]), int(full[-1]) + 1
+
+    def __init__(self, offsets, shape):
+        self.offsets = _check_offsets(offsets)
+        H, W = self.shape = (int(shape[0]), int(shape[1]))
+        dys = np.array([dy for dy, _ in self.offsets], dtype=np.int64)
+        dxs = np.array([dx for _, dx in self.offsets], dtype=np.int64)
+        self._delta = dys * W + dxs  # column minus row of each offset's entries
+        ys, xs = np.arange(H)[:, None] + dys, np.arange(W)[:, None] + dxs
+        self._rows_in = (ys >= 0) & (ys < H)  # (H, K): the offsets' rows inside the grid, per image row
+        self._columns_in = (xs >= 0) & (xs < W)  # (W, K)
+        if self.offsets:
+            self.inner = (max(0, -int(dys.min())), H - max(0, int(dys.max())),
+                          max(0, -int(dxs.min())), W - max(0, int(dxs.max())))
         else:
-            x_lo = x_hi = 0
-        step = max(1, _CHUNK_ENTRIES // max(L, 1))  # rows per chunk: bounded temporaries
-        for c0 in range(y, y1, step):
-            c1 = min(y1, c0 + step)
-            if x_hi > x_lo:
-                yield c0, c1, L, slice(x_lo, x_hi), slice(int(in_rows[0]), int(in_rows[-1]) + 1), int(before[x_lo])
-            for x in range(W):
-                if (x_lo <= x < x_hi) or counts[x] == 0:
-                    continue
-                yield c0, c1, L, slice(x, x + 1), np.flatnonzero(present[x]), int(before[x])
+            self.inner = (0, 0, 0, 0)
+        self._inner_row_length = int(self._columns_in.sum())  # entries of an image row with every dy inside
+        self._inner_first = int(self._columns_in[:self.inner[2]].sum())  # of them, before the inner block
 
+    @classmethod
+    def of_matrix(cls, A, shape):
+        """The full in-grid pattern a CSR matrix ``A`` on an ``(H, W)`` grid is stored in, else None.
 
-def _block_view(array, indptr, W, y0, y1, L, xs, ks, start):
-    """The ``(rows, nx, nk)`` view of one block of :func:`_blocks` into ``data`` or ``indices``."""
-    base = int(indptr[y0 * W])
-    rows = array[base:base + (y1 - y0) * L].reshape(y1 - y0, L)
-    nx = xs.stop - xs.start
-    nk = len(range(*ks.indices(1 << 30))) if isinstance(ks, slice) else len(ks)
-    return rows[:, start:start + nx * nk].reshape(y1 - y0, nx, nk)
+        The check of :func:`full_pattern_offsets`, returning the pattern
+        itself: that of the offsets read from the row of the grid's centre,
+        when ``A.indptr`` and ``A.indices`` are exactly that pattern's (every
+        index compared, a band of rows at a time); None otherwise (small
+        grids whose centre row misses an offset included, see
+        :attr:`recognisable`).
+        """
+        H, W = shape = check_grid_shape(shape)
+        n = H * W
+        if A.format != "csr" or A.shape != (n, n) or A.nnz == 0:
+            return None
+        indptr, indices = A.indptr, A.indices
+        centre = (H // 2) * W + W // 2
+        delta = indices[indptr[centre]:indptr[centre + 1]].astype(np.int64) - centre
+        dys = (delta + W // 2) // W
+        dxs = delta - dys * W
+        offsets = list(zip(dys.tolist(), dxs.tolist()))
+        if not offsets or offsets != sorted(set(offsets)) or np.any(2 * np.abs(dxs) >= W):
+            return None
+        pattern = cls(offsets, shape)
+        if not np.array_equal(indptr, pattern.indptr(np.int64)):
+            return None
+        y0, y1, x0, x1 = pattern.inner
+        if y1 > y0 and x1 > x0:
+            columns = pattern._inner_view(indices, indptr)
+            band = min(y1 - y0, pattern._inner_band_rows())
+            # the first band's columns, in the index type (they are columns of the matrix: below N)
+            first = pattern._inner_columns(y0, y0 + band, out=np.empty((band, x1 - x0, len(offsets)), indices.dtype))
+            shifted = np.empty_like(first)
+            for r0 in range(0, y1 - y0, band):
+                r1 = min(y1 - y0, r0 + band)
+                part = shifted[:r1 - r0]
+                np.subtract(columns[r0:r1], indices.dtype.type(r0 * W), out=part)  # a band less its shift
+                if not np.array_equal(part, first[:r1 - r0]):
+                    return None
+        for rows in row_bands(0, H, pattern._chunk_rows()):
+            position, k, pixel = pattern._border_entries(indptr, rows.start, rows.stop)
+            if not np.array_equal(indices[position], pixel + pattern._delta[k]):
+                return None
+        return pattern
 
+    @property
+    def recognisable(self):
+        """True when :meth:`of_matrix` recognises a matrix in this pattern as such.
 
-def _block_columns(offsets, W, y0, y1, xs, ks, dtype):
-    """Column indices of one block: ``(y + dy_k) W + x + dx_k``."""
-    delta = np.array([dy * W + dx for dy, dx in offsets], dtype=dtype)[ks]
-    return (np.arange(y0, y1, dtype=dtype)[:, None, None] * dtype.type(W)
-            + np.arange(xs.start, xs.stop, dtype=dtype)[None, :, None] + delta[None, None, :])
+        That is when the grid's centre pixel has every offset inside the grid
+        with ``2 |dx| < W``: the offsets are read from its row.
+        """
+        H, W = self.shape
+        cy, cx = H // 2, W // 2
+        return all(0 <= cy + dy < H and 0 <= cx + dx < W and 2 * abs(dx) < W for dy, dx in self.offsets)
+
+    def indptr(self, dtype):
+        """The row pointers, an ``(H W + 1,)`` array of ``dtype``."""
+        H, W = self.shape
+        # entries of pixel (y, x): the offsets inside in both directions, a sum of at most K ones
+        counts = (self._rows_in.astype(np.float64) @ self._columns_in.T.astype(np.float64)).astype(dtype)
+        indptr = np.zeros(H * W + 1, dtype=dtype)
+        np.cumsum(counts.reshape(-1), out=indptr[1:])
+        return indptr
+
+    def to_csr(self, rows_of, dtype, rows_per_read=None):
+        """The CSR matrix of a stencil handed out a band of rows at a time.
+
+        Parameters
+        ----------
+        rows_of : callable
+            ``rows_of(y0, y1)`` returns the stencil on the image rows
+            ``y0:y1``, a ``(K, y1 − y0, W)`` array (entries whose neighbour is
+            outside the grid are not read).
+        dtype : numpy dtype
+            Type of the stored values (each value is cast once, from the
+            type ``rows_of`` hands out).
+        rows_per_read : int, optional
+            Rows per call of ``rows_of``; by default about ``2**21`` entries'
+            worth (the border scatters' temporaries stay ~16 MB).
+
+        Returns
+        -------
+        scipy.sparse.csr_array, shape (H*W, H*W)
+            Canonical; index arrays int32 unless ``H W K`` needs int64.
+        """
+        H, W = self.shape
+        n, K = H * W, len(self.offsets)
+        indptr = self.indptr(index_dtype(n * K))
+        nnz = int(indptr[-1])
+        data = np.empty(nnz, dtype=dtype)
+        indices = np.empty(nnz, dtype=indptr.dtype)
+        iy0, iy1, ix0, ix1 = self.inner
+        values = None
+        if iy1 > iy0 and ix1 > ix0:
+            values, columns = self._inner_view(data, indptr), self._inner_view(indices, indptr)
+            band = self._inner_band_rows()
+            for r0 in range(iy0, iy1, band):
+                r1 = min(iy1, r0 + band)
+                self._inner_columns(r0, r1, out=columns[r0 - iy0:r1 - iy0])
+        for rows in row_bands(0, H, self._chunk_rows() if rows_per_read is None else rows_per_read):
+            y0, y1 = rows.start, rows.stop
+            stencil = rows_of(y0, y1)
+            a, b = max(y0, iy0), min(y1, iy1)
+            if values is not None and b > a:
+                values[a - iy0:b - iy0] = np.moveaxis(stencil[:, a - y0:b - y0, ix0:ix1], 0, -1)
+            position, k, pixel = self._border_entries(indptr, y0, y1)
+            data[position] = stencil[k, pixel // W - y0, pixel % W]
+            indices[position] = pixel + self._delta[k]
+        out = sp.csr_array((data, indices, indptr), shape=(n, n))
+        out.has_sorted_indices = True
+        out.has_canonical_format = True
+        return out
+
+    def read_rows(self, A, y0, y1):
+        """The stencil images of a matrix in this pattern on the image rows ``y0:y1``.
+
+        Parameters
+        ----------
+        A : scipy.sparse CSR matrix or array
+            Stored in this pattern (as :meth:`of_matrix` checks it or
+            :meth:`to_csr` makes it): the values are read by position, the
+            indices are not looked at.
+        y0, y1 : int
+            First image row and one past the last.
+
+        Returns
+        -------
+        ndarray, shape (K, y1 − y0, W), float64
+            Zero where the neighbour is outside the grid.
+        """
+        return self._read(A, range(y0, y1), range(0, self.shape[1]))
+
+    def read_class(self, A, py, px):
+        """:meth:`read_rows` for the pixels ``(py::2, px::2)`` only: shape ``(K, ny, nx)``."""
+        H, W = self.shape
+        return self._read(A, range(py, H, 2), range(px, W, 2))
+
+    def _read(self, A, ys, xs):
+        """The images on the pixels ``ys × xs`` (two ranges of one step), float64."""
+        H, W = self.shape
+        K = len(self.offsets)
+        out = np.empty((K, len(ys), len(xs)))
+        iy0, iy1, ix0, ix1 = self.inner
+        ra, rb = _indices_between(ys, iy0, iy1)
+        ca, cb = _indices_between(xs, ix0, ix1)
+        # zero outside the inner block (the border pixels' entries outside the grid stay so)
+        out[:, :ra] = 0.0
+        out[:, rb:] = 0.0
+        out[:, ra:rb, :ca] = 0.0
+        out[:, ra:rb, cb:] = 0.0
+        if rb > ra and cb > ca:
+            step = ys.step
+            values = self._inner_view(A.data, A.indptr)[ys[ra] - iy0:ys[rb - 1] - iy0 + 1:step,
+                                                         xs[ca] - ix0:xs[cb - 1] - ix0 + 1:step]
+            band = max(1, _CACHE_ENTRIES // ((cb - ca) * K))
+            for r0 in range(0, rb - ra, band):  # transposed a few hundred kilobytes at a time
+                r1 = min(rb - ra, r0 + band)
+                out[:, ra + r0:ra + r1, ca:cb] = values[r0:r1].transpose(2, 0, 1)
+        for rows in row_bands(ys.start, ys.stop, self._chunk_rows()):
+            position, k, pixel = self._border_entries(A.indptr, rows.start, rows.stop)
+            y, x = np.divmod(pixel, W)
+            if ys.step > 1:
+                mine = ((y - ys.start) % ys.step == 0) & ((x - xs.start) % xs.step == 0)
+                position, k, y, x = position[mine], k[mine], y[mine], x[mine]
+            out[k, (y - ys.start) // ys.step, (x - xs.start) // xs.step] = A.data[position]
+        return out
+
+    def _inner_view(self, array, indptr):
+        """The ``(y1 − y0, x1 − x0, K)`` view of the inner block's entries in ``array`` (CSR values or indices)."""
+        y0, y1, x0, x1 = self.inner
+        W = self.shape[1]
+        begin = int(indptr[y0 * W])
+        length, first = self._inner_row_length, self._inner_first
+        K = len(self.offsets)
+        return (array[begin:begin + (y1 - y0) * length].reshape(y1 - y0, length)[:, first:first + (x1 - x0) * K]
+                .reshape(y1 - y0, x1 - x0, K))
+
+    def _inner_band_rows(self):
+        """Image rows per band of the inner block's copies (about ``_CACHE_ENTRIES`` entries)."""
+        return rows_per_band((self.inner[3] - self.inner[2]) * len(self.offsets), _CACHE_ENTRIES)
+
+    def _chunk_rows(self):
+        """Image rows per band of the border scatters and gathers (about ``_CHUNK_ENTRIES`` entries)."""
+        return rows_per_band(self.shape[1] * max(1, len(self.offsets)), _CHUNK_ENTRIES)
+
+    def _inner_columns(self, y0, y1, out):
+        """``out[...] =`` the column indices ``(y + dy_k) W + x + dx_k`` of the inner pixels of rows ``y0:y1``.
+
+        ``out`` is a ``(y1 − y0, x1 − x0, K)`` integer array; returns it.
+        """
+        _, _, x0, x1 = self.inner
+        dtype = out.dtype
+        own = np.arange(x0, x1, dtype=dtype)[None, :, None] + self._delta.astype(dtype)
+        return np.add(own, (np.arange(y0, y1, dtype=dtype) * dtype.type(self.shape[1]))[:, None, None], out=out)
+
+    def _border_entries(self, indptr, y0, y1):
+        """The entries of the pixels of rows ``y0:y1`` outside the inner block: ``(position, k, pixel)`` of each."""
+        H, W = self.shape
+        iy0, iy1, ix0, ix1 = self.inner
+        if iy1 > iy0 and ix1 > ix0:  # the rows above, the side columns of the inner rows, the rows below
+            a, b = max(y0, iy0), min(y1, iy1)
+            sides = np.concatenate([np.arange(ix0), np.arange(ix1, W)])
+            border = np.concatenate([np.arange(y0 * W, max(y0, min(y1, iy0)) * W),
+                                     (np.arange(a, max(a, b))[:, None] * W + sides).reshape(-1),
+                                     np.arange(max(y0, iy1) * W, y1 * W)])
+        else:
+            border = np.arange(y0 * W, y1 * W)
+        by, bx = np.divmod(border, W)
+        inside = self._rows_in[by] & self._columns_in[bx]
+        position = indptr[border].astype(np.int64)[:, None] + np.cumsum(inside, axis=1) - 1
+        which, k = np.nonzero(inside)
+        return position[which, k], k, border[which]
 
 
 def stencil_to_csr(offsets, stencil, *, dtype=np.float64):
@@ -138,7 +341,6 @@ def stencil_to_csr(offsets, stencil, *, dtype=np.float64):
     stencil : ndarray, shape (len(offsets), H, W)
         Coefficient images; entries whose neighbour lies outside the grid are
         ignored.
-
     dtype : numpy dtype, default float64
         Type of the stored values (float32 for single-precision coarse levels).
 
@@ -146,6 +348,15 @@ def stencil_to_csr(offsets, stencil, *, dtype=np.float64):
     -------
     scipy.sparse.csr_array, shape (H*W, H*W)
         Canonical (sorted, no duplicates); in-grid zero coefficients are stored.
+
+    Notes
+    -----
+    The layout is that of :class:`FullPattern` (:meth:`FullPattern.to_csr`):
+    the inner pixels' values are the images copied one by one into a
+    ``(rows, columns, K)`` view of ``data``, their column indices
+    :math:`(y + d_y) W + x + d_x` are written a band of rows at a time, and
+    the border pixels' entries are scattered.  Floating-point images are
+    cast to `dtype` directly, others through float64.
 
     Examples
     --------
@@ -155,17 +366,12 @@ def stencil_to_csr(offsets, stencil, *, dtype=np.float64):
            [1., 2.]])
     """
     offsets = _check_offsets(offsets)
-    stencil = np.asarray(stencil, dtype=np.float64)
+    stencil = np.asarray(stencil)
+    if stencil.dtype not in (np.float16, np.float32, np.float64):  # these widen to float64 exactly
+        stencil = stencil.astype(np.float64)
     if stencil.ndim != 3 or stencil.shape[0] != len(offsets):
         raise ValueError(f"stencil must have shape (len(offsets), H, W) = ({len(offsets)}, H, W), got {stencil.shape}")
-    return _csr_from_rows(offsets, stencil.shape[1:], lambda y0, y1: stencil[:, y0:y1], np.dtype(dtype))
-
-
-def _offsets_of_row(A, row, W):
-    cols = A.indices[A.indptr[row]:A.indptr[row + 1]].astype(np.int64)
-    delta = cols - row
-    dy = (delta + W // 2) // W
-    return [(int(a), int(b)) for a, b in zip(dy, delta - dy * W)]
+    return FullPattern(offsets, stencil.shape[1:]).to_csr(lambda y0, y1: stencil[:, y0:y1], np.dtype(dtype))
 
 
 def full_pattern_offsets(A, shape):
@@ -182,27 +388,12 @@ def full_pattern_offsets(A, shape):
     list of tuple of int, or None
         The offsets read from a row at the grid's centre, when ``A.indptr``
         and ``A.indices`` equal exactly the pattern :func:`stencil_to_csr`
-        makes for them (checked chunk by chunk, no large temporaries);
-        ``None`` otherwise (small grids whose centre row misses an offset
-        included).
+        makes for them (checked a band of rows at a time, no large
+        temporaries: :meth:`FullPattern.of_matrix`); ``None`` otherwise
+        (small grids whose centre row misses an offset included).
     """
-    H, W = shape = check_grid_shape(shape)
-    n = H * W
-    if A.format != "csr" or A.shape != (n, n) or A.nnz == 0:
-        return None
-    centre = (H // 2) * W + W // 2
-    offsets = _offsets_of_row(A, centre, W)
-    if offsets != sorted(set(offsets)) or any(2 * abs(dx) >= W for _, dx in offsets):
-        return None
-    indptr = _row_starts(offsets, (H, W), np.int64)
-    if not np.array_equal(A.indptr, indptr):
-        return None
-    for block in _blocks(offsets, (H, W), indptr):
-        y0, y1, _, xs, ks, _ = block
-        if not np.array_equal(_block_view(A.indices, indptr, W, *block),
-                              _block_columns(offsets, W, y0, y1, xs, ks, A.indices.dtype)):
-            return None
-    return offsets
+    pattern = FullPattern.of_matrix(A, shape)
+    return None if pattern is None else pattern.offsets
 
 
 def csr_to_stencil(A, shape, *, offsets=None, parity=None):
@@ -223,31 +414,16 @@ def csr_to_stencil(A, shape, *, offsets=None, parity=None):
     -------
     (offsets, stencil) or None
         ``stencil`` has shape ``(len(offsets), H, W)`` (or the class's
-        shape); ``None`` when ``A`` is not in the layout of
+        shape), float64; ``None`` when ``A`` is not in the layout of
         :func:`stencil_to_csr` (see :func:`full_pattern_offsets`), in which
         case the caller extracts the stencil by other means.
     """
-    H, W = shape = check_grid_shape(shape)
-    if offsets is None:
-        offsets = full_pattern_offsets(A, shape)
-        if offsets is None:
-            return None
-    indptr = A.indptr
-    py, px = (0, 0) if parity is None else parity
-    step = 1 if parity is None else 2
-    stencil = np.zeros((len(offsets), len(range(py, H, step)), len(range(px, W, step))))
-    for block in _blocks(offsets, (H, W), indptr):
-        y0, y1, _, xs, ks, _ = block
-        view = _block_view(A.data, indptr, W, *block)
-        ly = (py - y0) % step
-        lx = (px - xs.start) % step
-        part = view[ly::step, lx::step]
-        if part.size == 0:
-            continue
-        r0 = (y0 + ly - py) // step
-        c0 = (xs.start + lx - px) // step
-        stencil[ks, r0:r0 + part.shape[0], c0:c0 + part.shape[1]] = np.moveaxis(part, -1, 0)
-    return offsets, stencil
+    shape = check_grid_shape(shape)
+    pattern = FullPattern.of_matrix(A, shape) if offsets is None else FullPattern(offsets, shape)
+    if pattern is None:
+        return None
+    stencil = pattern.read_rows(A, 0, shape[0]) if parity is None else pattern.read_class(A, *parity)
+    return pattern.offsets, stencil
 
 
 def _upper(offset):
@@ -531,8 +707,8 @@ class SymmetricStencil:
 
     def tocsr(self, dtype=None):
         """The CSR form in the full in-grid pattern of :func:`stencil_to_csr` (built a band of rows at a time)."""
-        return _csr_from_rows(self.offsets, self.grid_shape, self.full_rows,
-                              np.dtype(self.dtype if dtype is None else dtype))
+        return FullPattern(self.offsets, self.grid_shape).to_csr(self.full_rows,
+                                                                 np.dtype(self.dtype if dtype is None else dtype))
 
     def toarray(self):
         return self.tocsr().toarray()
@@ -547,25 +723,3 @@ def _class_range(p, n, d):
     lo = max(0, (1 - p - d) // 2)
     hi = min(len(range(p, n, 2)), (n - 1 - p - d) // 2 + 1)
     return slice(lo, hi) if hi > lo else None
-
-
-def _csr_from_rows(offsets, shape, rows_of, dtype):
-    """CSR (full in-grid pattern) of a stencil given as ``rows_of(y0, y1) -> (K, y1 − y0, W)`` chunks."""
-    H, W = shape
-    n = H * W
-    K = len(offsets)
-    indptr = _row_starts(offsets, (H, W), index_dtype(n * K))
-    nnz = int(indptr[-1])
-    data = np.empty(nnz, dtype=dtype)
-    indices = np.empty(nnz, dtype=indptr.dtype)
-    cached = (None, None)
-    for block in _blocks(offsets, (H, W), indptr):
-        y0, y1, _, xs, ks, _ = block
-        if cached[0] != (y0, y1):
-            cached = ((y0, y1), rows_of(y0, y1))
-        _block_view(data, indptr, W, *block)[...] = np.moveaxis(cached[1][ks, :, xs], 0, -1)
-        _block_view(indices, indptr, W, *block)[...] = _block_columns(offsets, W, y0, y1, xs, ks, indices.dtype)
-    out = sp.csr_array((data, indices, indptr), shape=(n, n))
-    out.has_sorted_indices = True
-    out.has_canonical_format = True
-    return out

@@ -18,15 +18,14 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..._validation import as_grid_operator, check_grid_shape
-from ...grid.stencil import SymmetricStencil
+from ...grid.stencil import FullPattern, SymmetricStencil, stencil_to_csr
 from .bands import BandedStencil, FullStencil
 from .galerkin import galerkin_offsets, galerkin_stencil
 from .iteration import preconditioned_cg, prepare_rhs, vcycle_iteration
 from .interpolation import bilinear_weights, operator_weights
 from .smoothers import (LINE_OFFSETS, LineGaussSeidel, gauss_seidel_backward, gauss_seidel_forward, jacobi_damping,
                         jacobi_sweeps)
-from .stencils import (CollapsedSource, StencilSource, assemble_csr, centre_row_holds, extract_stencil,
-                       fine_stencil_source, verify_full_pattern)
+from .stencils import CollapsedSource, StencilSource, extract_stencil, fine_stencil_source, full_pattern_within
 from .transfer import ClassProlongation, SeparableProlongation
 from ...limits import memory_limits
 
@@ -38,10 +37,11 @@ _SMOOTHERS = ("gauss_seidel", "jacobi", "line_gauss_seidel")
 # single_coarse_pixels (fine grids from it keep their coarse levels in float32, coarse_precision="auto"),
 # single_fine_values (fine operators with at most that many non-zeros are smoothed on a float32 copy,
 # fine_precision="auto"; larger ones in float64, as the copy would weigh on the peak memory),
-# keep_stencil_pixels (below it every coarse level's stencil is kept as one (K, H, W) array during the set-up
-# instead of being read back from its CSR form, and the line smoother's images of a fine CSR operator are copied
-# as the Galerkin product reads its rows; the bilinear product reads any level a band of rows at a time, the
-# operator-dependent one a parity class at a time) and banded_coarse_pixels (with a fine SymmetricStencil
+# keep_stencil_pixels (below it every CSR coarse level's stencil is kept as one (K, H, W) array during the set-up
+# instead of being read back from its CSR form, the operator-dependent interpolation reads the fine operator into
+# one such array once, and the line smoother's images of a fine CSR operator are copied as the bilinear product
+# reads its rows; the bilinear product reads any level a band of rows at a time, the operator-dependent one a
+# parity class at a time) and banded_coarse_pixels (with a fine SymmetricStencil
 # smoothed in float64, coarse levels of at least that many pixels are float32 stencils swept band by band,
 # :mod:`.bands`; smaller ones stay CSR).
 
@@ -294,7 +294,7 @@ class GridMultigrid:
                 lvl.A = A
             levels.append(lvl)
         # structure: offsets of the coarse operators (their CSR form is made by
-        # assemble_csr in _numeric); P is made there too
+        # stencil_to_csr in _numeric); P is made there too
         levels[0].offsets = offsets
         for li in range(1, len(levels)):
             levels[li].offsets = galerkin_offsets(levels[li - 1].offsets)
@@ -351,12 +351,12 @@ class GridMultigrid:
                 source = StencilSource(coarse.offsets, coarse.shape, array=coarse.A.data)
                 del S
                 continue
-            coarse.A = assemble_csr(coarse.offsets, S, dtype=self.coarse_dtype)
+            coarse.A = stencil_to_csr(coarse.offsets, S, dtype=self.coarse_dtype)
             if keep:
                 source = StencilSource(coarse.offsets, coarse.shape, array=S)
-            elif centre_row_holds(coarse.offsets, coarse.shape):  # assembled in the full pattern: readable back
-                # read back class by class: the coarse stencil array can go
-                source = StencilSource(coarse.offsets, coarse.shape, csr=coarse.A, csr_offsets=coarse.offsets)
+            elif (pattern := FullPattern(coarse.offsets, coarse.shape)).recognisable:  # smaller grids keep S
+                # read back by position, class by class or band by band: the coarse stencil array can go
+                source = StencilSource(coarse.offsets, coarse.shape, csr=coarse.A, pattern=pattern)
             else:
                 source = StencilSource(coarse.offsets, coarse.shape, array=S)
             del S
@@ -447,8 +447,8 @@ class GridMultigrid:
                 self._build(A)
                 return self
             source = StencilSource(offsets, self.shape, symmetric=A)
-        elif (pattern := verify_full_pattern(A, self.shape)) is not None and set(pattern) <= set(offsets):
-            source = StencilSource(offsets, self.shape, csr=A, csr_offsets=pattern)
+        elif (pattern := full_pattern_within(A, self.shape)) is not None and set(pattern.offsets) <= set(offsets):
+            source = StencilSource(offsets, self.shape, csr=A, pattern=pattern)
         else:
             S = extract_stencil(A, self.shape, offsets)
             if int(np.count_nonzero(S)) != int(np.count_nonzero(A.data)):

@@ -1,25 +1,24 @@
-"""Stencils of grid operators: one coefficient image per neighbour offset, read from and written to CSR matrices.
+"""Stencils of grid operators: one coefficient image per neighbour offset, read from the operators.
 
 The multigrid set-up works on stencils, never on general sparse products;
 this module reads them from an operator (:func:`grid_stencil`; a CSR matrix
-in the full in-grid pattern is checked by :func:`verify_full_pattern` and read
-by position, :class:`PatternRows`), hands a level's stencil to the set-up one
-parity class or one band of rows at a time (:class:`StencilSource`) and
-writes the coarse levels' CSR forms (:func:`assemble_csr`).  May import
+in the full in-grid pattern of :mod:`sparsedepth.grid.stencil` is recognised
+by :func:`full_pattern_within` and read by position, others diagonal by
+diagonal) and hands a level's stencil to the set-up one parity class or one
+band of rows at a time (:class:`StencilSource`).  The coarse levels' CSR
+forms are :func:`~sparsedepth.grid.stencil.stencil_to_csr`'s.  May import
 :mod:`sparsedepth.grid` and :mod:`sparsedepth._validation`, NumPy and SciPy.
 """
 
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..._validation import as_grid_operator
-from ...grid.stencil import SymmetricStencil, csr_to_stencil, full_pattern_offsets, index_dtype
+from ...grid.stencil import FullPattern, SymmetricStencil
 
 __all__ = ["grid_stencil", "extract_stencil", "StencilSource", "CollapsedSource", "fine_stencil_source",
-           "mirrored_image", "read_full_pattern", "verify_full_pattern", "PatternRows", "assemble_csr",
-           "centre_row_holds"]
+           "mirrored_image", "full_pattern_within"]
 
 
 def _square_offsets(radius):
@@ -42,21 +41,10 @@ def _mask_outside(S, offsets, shape):
 
 
 def extract_stencil(A, shape, offsets):
-    """Stencil images of a canonical CSR matrix for the given offsets."""
-    h, w = shape
-    n = h * w
-    S = np.zeros((len(offsets), h, w))
-    flat = S.reshape(len(offsets), n)
+    """Stencil images of a canonical CSR matrix for the given offsets, ``(len(offsets), H, W)`` (diagonal by diagonal)."""
+    S = np.empty((len(offsets),) + tuple(shape))
     for k, (dy, dx) in enumerate(offsets):
-        delta = dy * w + dx
-        if abs(delta) >= n:
-            continue
-        d = A.diagonal(delta)
-        if delta >= 0:
-            flat[k, : n - delta] = d
-        else:
-            flat[k, -delta:] = d
-    _mask_outside(S, offsets, shape)
+        _offset_image(A, shape, dy, dx, S[k])
     return S
 
 
@@ -107,11 +95,10 @@ def grid_stencil(A, shape, *, radius=None):
     [(0, -1), (0, 0), (0, 1)]
     """
     A, shape = as_grid_operator(A, shape)
-    offsets = _pattern_offsets(A, shape, radius)  # one pass when A is in the full in-grid pattern
-    if offsets is None:
+    pattern = full_pattern_within(A, shape, radius)  # one pass when A is in the full in-grid pattern
+    if pattern is None:
         return _stencil_of(A, shape, radius)
-    _, S = csr_to_stencil(A, shape, offsets=offsets)
-    return _without_empty_offsets(offsets, S)
+    return _without_empty_offsets(pattern.offsets, pattern.read_rows(A, 0, shape[0]))
 
 
 def _without_empty_offsets(offsets, S):
@@ -141,7 +128,7 @@ def _stencil_of(A, shape, radius=None):
     """Offsets present in ``A`` (radius <= 2, or ``radius``) and their stencil images.
 
     (Matrices in the full in-grid pattern of :func:`~sparsedepth.grid.stencil.stencil_to_csr`
-    are read by the callers, see :func:`_pattern_offsets`, before this is tried.)
+    are read by the callers, see :func:`full_pattern_within`, before this is tried.)
     Two passes over the candidate offsets: the first only counts the non-zeros
     of each offset (one ``(H, W)`` work image; the 5-point, then the 3x3, then
     the 5x5 offsets, stopping as soon as every non-zero is accounted for), the
@@ -233,18 +220,21 @@ class StencilSource:
 
     Either an array ``(K, H, W)`` (coarse levels, or a fine operator whose
     stencil had to be extracted diagonal by diagonal), a symmetric stencil, or a CSR matrix in the
-    full in-grid pattern of :func:`~sparsedepth.grid.stencil.stencil_to_csr`, read
-    class by class (:meth:`parity_class`) or band by band (:meth:`row_reader`) so that the fine stencil is
-    never held whole.  For the class-by-class products, grids below
+    full in-grid pattern of ``csr_offsets`` (:class:`~sparsedepth.grid.stencil.FullPattern`: ``pattern`` when
+    already made), read by position class by class (:meth:`parity_class`) or band by band (:meth:`row_reader`)
+    so that the fine stencil is never held whole.  For the class-by-class products, grids below
     ``keep_stencil_pixels`` (:class:`~sparsedepth.limits.MemoryLimits`) read it whole once (:meth:`read_whole`).
     """
 
-    def __init__(self, offsets, shape, *, array=None, csr=None, csr_offsets=None, symmetric=None, layout=None):
-        self.layout = layout  # a CSR source's pattern layout, when already computed (verify_full_pattern)
+    def __init__(self, offsets, shape, *, array=None, csr=None, csr_offsets=None, symmetric=None, pattern=None):
         self.offsets = list(offsets)
         self.shape = tuple(shape)
         self.array = array
         self.csr = csr
+        self.pattern = None  # a CSR source's FullPattern
+        if csr is not None:
+            self.pattern = FullPattern(csr_offsets, self.shape) if pattern is None else pattern
+            csr_offsets = self.pattern.offsets
         self.csr_offsets = None if csr_offsets is None else list(csr_offsets)
         self.symmetric = symmetric  # a SymmetricStencil, read class by class like a CSR source
         if symmetric is not None:
@@ -253,12 +243,13 @@ class StencilSource:
     def parity_class(self, py, px):
         """Stencil images on the pixels ``(py::2, px::2)``, shape ``(K, ny, nx)`` (``py = None``: all pixels)."""
         if self.array is not None:
-            return np.ascontiguousarray(self.array[:, py::2, px::2])
+            return self.array if py is None else np.ascontiguousarray(self.array[:, py::2, px::2])
         if self.symmetric is not None:
             part = self.symmetric.parity_class(py, px).astype(np.float64, copy=False)
+        elif py is None:  # the whole grid
+            part = self.pattern.read_rows(self.csr, 0, self.shape[0])
         else:
-            parity = None if py is None else (py, px)  # None: the whole grid
-            _, part = csr_to_stencil(self.csr, self.shape, offsets=self.csr_offsets, parity=parity)
+            part = self.pattern.read_class(self.csr, py, px)
         if self.csr_offsets == self.offsets:
             return part
         out = np.zeros((len(self.offsets),) + part.shape[1:])
@@ -283,15 +274,15 @@ class StencilSource:
 
         An array source hands out views of its rows (copies when not float64), a symmetric one
         :meth:`~sparsedepth.grid.stencil.SymmetricStencil.full_rows`, a CSR one (in the full in-grid pattern of
-        ``csr_offsets``, as the set-up makes or checks it) reads them by position (:class:`PatternRows`); the
-        offsets it lacks read as zero.
+        ``csr_offsets``, as the set-up makes or checks it) reads them by position
+        (:meth:`~sparsedepth.grid.stencil.FullPattern.read_rows`); the offsets it lacks read as zero.
         """
         if self.array is not None:
             read = lambda y0, y1: np.asarray(self.array[:, y0:y1], dtype=np.float64)  # noqa: E731
         elif self.symmetric is not None:
             read = lambda y0, y1: self.symmetric.full_rows(y0, y1).astype(np.float64, copy=False)  # noqa: E731
         else:
-            read = PatternRows(self.csr, self.csr_offsets, self.shape, self.layout)
+            read = lambda y0, y1: self.pattern.read_rows(self.csr, y0, y1)  # noqa: E731
         if self.array is not None or self.csr_offsets == self.offsets:
             rows_of = read
         else:
@@ -327,7 +318,7 @@ class StencilSource:
         if self.array is None:
             self.array = (self.row_reader()(0, self.shape[0]) if self.symmetric is None
                           else self.parity_class(None, None))
-            self.csr = self.symmetric = None
+            self.csr = self.symmetric = self.pattern = None
         return self
 
 
@@ -399,277 +390,17 @@ class _ClassImages:
         return image.astype(np.float64, copy=False)
 
 
-def _pattern_offsets(A, shape, radius=None):
-    """Offsets of ``A`` when it is in the full in-grid pattern within the radius (default 2), else None."""
+def full_pattern_within(A, shape, radius=None):
+    """The full in-grid pattern ``A`` is stored in, when its offsets lie within the radius (default 2), else None.
+
+    :meth:`~sparsedepth.grid.stencil.FullPattern.of_matrix` (every index compared), limited to the stencils
+    the hierarchy coarsens; ``A`` is then read by position.
+    """
     largest = 2 if radius is None else int(radius)
-    offsets = full_pattern_offsets(A, shape)
-    if offsets is not None and all(max(abs(dy), abs(dx)) <= largest for dy, dx in offsets):
-        return offsets
+    pattern = FullPattern.of_matrix(A, shape)
+    if pattern is not None and all(max(abs(dy), abs(dx)) <= largest for dy, dx in pattern.offsets):
+        return pattern
     return None
-
-
-def _rows_inside(offset, shape):
-    """Slices of the pixels whose neighbour at ``offset`` lies inside the grid."""
-    h, w = shape
-    dy, dx = offset
-    return slice(max(0, -dy), max(0, min(h, h - dy))), slice(max(0, -dx), max(0, min(w, w - dx)))
-
-
-def _pattern_layout(offsets, shape):
-    """The full in-grid pattern's row lengths and its inner block (the pixels whose every neighbour is inside).
-
-    Returns ``(counts, (y0, y1, x0, x1))``: entries per pixel, an ``(H, W)`` int64 array, and the inner
-    block's rows and columns.
-    """
-    h, w = shape
-    dys = np.array([dy for dy, _ in offsets])
-    dxs = np.array([dx for _, dx in offsets])
-    rows_in = ((np.arange(h)[:, None] + dys >= 0) & (np.arange(h)[:, None] + dys < h)).astype(np.float64)
-    columns_in = ((np.arange(w)[:, None] + dxs >= 0) & (np.arange(w)[:, None] + dxs < w)).astype(np.float64)
-    counts = (rows_in @ columns_in.T).astype(np.int64)  # offsets inside at (y, x): a sum of at most K ones
-    y0, y1 = max(0, -int(dys.min())), h - max(0, int(dys.max()))
-    x0, x1 = max(0, -int(dxs.min())), w - max(0, int(dxs.max()))
-    return counts, (y0, y1, x0, x1)
-
-
-def _inner_views(arrays, indptr, counts, inner, K):
-    """``(rows, columns, K)`` views of the inner block's entries in each of ``arrays`` (CSR values or indices)."""
-    y0, y1, x0, x1 = inner
-    w = counts.shape[1]
-    row_length = int(counts[y0].sum())
-    first = int(counts[y0, :x0].sum())
-    begin = int(indptr[y0 * w])
-    return [array[begin:begin + (y1 - y0) * row_length].reshape(y1 - y0, row_length)[:, first:first + (x1 - x0) * K]
-            .reshape(y1 - y0, x1 - x0, K) for array in arrays]
-
-
-def _border_entries(offsets, shape, indptr, inner):
-    """The entries of the pixels outside the inner block: ``(position, k, pixel)`` of each, in CSR order."""
-    h, w = shape
-    y0, y1, x0, x1 = inner
-    if y1 > y0 and x1 > x0:  # the rows above, the side columns of the inner rows, the rows below: in order
-        sides = np.concatenate([np.arange(x0), np.arange(x1, w)])
-        border = np.concatenate([np.arange(y0 * w), (np.arange(y0, y1)[:, None] * w + sides).reshape(-1),
-                                 np.arange(y1 * w, h * w)])
-    else:
-        border = np.arange(h * w)
-    by, bx = np.divmod(border, w)
-    dys = np.array([dy for dy, _ in offsets])
-    dxs = np.array([dx for _, dx in offsets])
-    ny, nx = by[:, None] + dys[None, :], bx[:, None] + dxs[None, :]
-    valid = (ny >= 0) & (ny < h) & (nx >= 0) & (nx < w)
-    position = indptr[border].astype(np.int64)[:, None] + np.cumsum(valid, axis=1) - 1
-    which, k = np.nonzero(valid)
-    return position[which, k], k, border[which]
-
-
-def centre_row_holds(offsets, shape):
-    """True when the grid's centre pixel has every offset inside the grid, with ``2 |dx| < W``.
-
-    Then a matrix in the full in-grid pattern of these offsets (:func:`assemble_csr`) is recognised as such
-    by :func:`~sparsedepth.grid.stencil.full_pattern_offsets`, which reads the offsets from that row.
-    """
-    h, w = shape
-    cy, cx = h // 2, w // 2
-    return all(0 <= cy + dy < h and 0 <= cx + dx < w and 2 * abs(dx) < w for dy, dx in offsets)
-
-
-def _band_rows(entries_per_row):
-    """Image rows per band of the inner block's copies (about 2**16 entries, a few hundred kilobytes)."""
-    return max(1, (1 << 16) // max(1, entries_per_row))
-
-
-def assemble_csr(offsets, stencil, dtype=np.float64):
-    r"""CSR matrix of a stencil in the full in-grid pattern: :func:`~sparsedepth.grid.stencil.stencil_to_csr`'s.
-
-    Parameters
-    ----------
-    offsets : list of tuple of int
-        Distinct offsets, sorted lexicographically.
-    stencil : ndarray, shape (len(offsets), H, W)
-        Coefficient images (entries whose neighbour is outside the grid are not stored).
-    dtype : numpy dtype, default float64
-        Type of the stored values.
-
-    Returns
-    -------
-    scipy.sparse.csr_array, shape (H*W, H*W)
-        The same ``indptr``, ``indices`` and values as ``stencil_to_csr(offsets, stencil, dtype=dtype)``.
-
-    Notes
-    -----
-    The inner block's entries (``K`` per pixel, in the order of `offsets`) are a ``(rows, columns, K)`` view
-    of the CSR arrays: the values are the stencil's images copied into it one by one, and the column indices
-    :math:`(y + d_y) W + x + d_x` are written a band of rows at a time; the few border pixels are written by
-    scatters.
-    """
-    offsets = [tuple(o) for o in offsets]
-    K, h, w = stencil.shape
-    n = h * w
-    counts, inner = _pattern_layout(offsets, (h, w))
-    itype = index_dtype(n * K)
-    indptr = np.zeros(n + 1, dtype=itype)
-    np.cumsum(counts.reshape(-1), out=indptr[1:])
-    nnz = int(indptr[-1])
-    data = np.empty(nnz, dtype=dtype)
-    indices = np.empty(nnz, dtype=itype)
-    delta = np.array([dy * w + dx for dy, dx in offsets])
-    y0, y1, x0, x1 = inner
-    if y1 > y0 and x1 > x0:
-        values, columns = _inner_views((data, indices), indptr, counts, inner, K)
-        for k in range(K):  # one image at a time: contiguous reads (faster than a transposed copy here)
-            values[:, :, k] = stencil[k, y0:y1, x0:x1]
-        own = np.arange(x0, x1, dtype=itype)[None, :, None] + delta.astype(itype)
-        band = _band_rows((x1 - x0) * K)
-        for r0 in range(0, y1 - y0, band):
-            r1 = min(y1 - y0, r0 + band)
-            np.add(own, (np.arange(y0 + r0, y0 + r1, dtype=itype) * itype(w))[:, None, None], out=columns[r0:r1])
-    position, k, pixel = _border_entries(offsets, (h, w), indptr, inner)
-    data[position] = stencil[k, pixel // w, pixel % w]
-    indices[position] = pixel + delta[k]
-    out = sp.csr_array((data, indices, indptr), shape=(n, n))
-    out.has_sorted_indices = True
-    out.has_canonical_format = True
-    return out
-
-
-def verify_full_pattern(A, shape, radius=None):
-    r"""Offsets of a CSR matrix stored in the full in-grid pattern (every index compared), else None.
-
-    Parameters
-    ----------
-    A : scipy.sparse CSR matrix or array, shape (H*W, H*W)
-    shape : tuple of int
-        ``(H, W)``.
-    radius : int, optional
-        Largest stencil radius accepted (default 2).
-
-    Returns
-    -------
-    list of tuple of int, or None
-        As :func:`~sparsedepth.grid.stencil.full_pattern_offsets` (the offsets read from the row of the grid's
-        centre, when ``A.indptr`` and ``A.indices`` are exactly the pattern of
-        :func:`~sparsedepth.grid.stencil.stencil_to_csr` for them), and None as well for offsets beyond
-        `radius`.
-
-    Notes
-    -----
-    The pixels whose every neighbour is inside the grid hold the ``K`` offsets in order, so their column
-    indices are a ``(rows, columns, K)`` view of ``A.indices`` (the row pointers checked first); a band of
-    rows at a time, less its first row's start, it must equal the band of the pattern's first rows.  The few
-    border pixels are compared by gathers.
-    """
-    checked = _verified_layout(A, shape, radius)
-    return None if checked is None else checked[0]
-
-
-def _verified_layout(A, shape, radius=None):
-    """:func:`verify_full_pattern`'s offsets and the pattern's layout (:func:`_pattern_layout`), or None."""
-    h, w = shape
-    n = h * w
-    if A.format != "csr" or A.shape != (n, n) or A.nnz == 0:
-        return None
-    indptr, indices = A.indptr, A.indices
-    centre = (h // 2) * w + w // 2
-    delta = indices[indptr[centre]:indptr[centre + 1]].astype(np.int64) - centre
-    dys = (delta + w // 2) // w
-    dxs = delta - dys * w
-    offsets = list(zip(dys.tolist(), dxs.tolist()))
-    largest = 2 if radius is None else int(radius)
-    if (not offsets or offsets != sorted(set(offsets)) or np.any(2 * np.abs(dxs) >= w)
-            or max(max(abs(dy), abs(dx)) for dy, dx in offsets) > largest):
-        return None
-    counts, inner = _pattern_layout(offsets, shape)
-    if int(indptr[0]) != 0 or not np.array_equal(indptr[1:], np.cumsum(counts.reshape(-1))):
-        return None
-    K = len(offsets)
-    y0, y1, x0, x1 = inner
-    if y1 > y0 and x1 > x0:
-        (columns,) = _inner_views((indices,), indptr, counts, inner, K)
-        band = min(y1 - y0, _band_rows((x1 - x0) * K))
-        # the columns of the first band's entries, in the index type (they are columns of the matrix: below N)
-        itype = indices.dtype.type
-        pattern = (np.arange(y0, y0 + band, dtype=np.int64)[:, None, None] * w
-                   + np.arange(x0, x1, dtype=np.int64)[None, :, None] + delta).astype(indices.dtype)
-        shifted = np.empty_like(pattern)
-        for r0 in range(0, y1 - y0, band):
-            r1 = min(y1 - y0, r0 + band)
-            part = shifted[:r1 - r0]
-            np.subtract(columns[r0:r1], itype(r0 * w), out=part)  # a later band less its rows' offset from the first
-            if not np.array_equal(part, pattern[:r1 - r0]):
-                return None
-    position, k, pixel = _border_entries(offsets, shape, indptr, inner)
-    if not np.array_equal(indices[position], pixel + delta[k]):
-        return None
-    return offsets, (counts, inner)
-
-
-class PatternRows:
-    """The stencil images of a CSR matrix in the full in-grid pattern, read a band of image rows at a time.
-
-    Parameters
-    ----------
-    A : scipy.sparse CSR matrix or array, shape (H*W, H*W)
-        Stored in the full in-grid pattern of `offsets` (as checked by :func:`verify_full_pattern`, or as made
-        by :func:`assemble_csr`): the values are read by position, the indices are not looked at.
-    offsets : list of tuple of int
-    shape : tuple of int
-        ``(H, W)``.
-    layout : tuple, optional
-        The pattern's layout if already computed (as when checked).
-
-    Notes
-    -----
-    ``rows(y0, y1)`` gives ``(len(offsets), y1 − y0, W)`` float64 images, zero where the neighbour is outside
-    the grid: the inner pixels' values are a ``(rows, columns, K)`` view of ``A.data``, transposed into the
-    images a few hundred kilobytes at a time; the border pixels' are scattered.
-    """
-
-    def __init__(self, A, offsets, shape, layout=None):
-        self.offsets = [tuple(o) for o in offsets]
-        self.shape = tuple(shape)
-        h, w = self.shape
-        self._data = A.data
-        counts, self._inner = _pattern_layout(self.offsets, self.shape) if layout is None else layout
-        y0, y1, x0, x1 = self._inner
-        self._values = (_inner_views((A.data,), A.indptr, counts, self._inner, len(self.offsets))[0]
-                        if y1 > y0 and x1 > x0 else None)
-        self._position, self._k, self._pixel = _border_entries(self.offsets, self.shape, A.indptr, self._inner)
-
-    def __call__(self, y0, y1):
-        """The images on rows ``y0:y1``, a new ``(K, y1 − y0, W)`` float64 array."""
-        h, w = self.shape
-        K = len(self.offsets)
-        out = np.empty((K, y1 - y0, w))
-        iy0, iy1, x0, x1 = self._inner
-        a, b = max(y0, iy0), min(y1, iy1)
-        # zero outside the inner block (the border pixels' entries outside the grid stay so)
-        out[:, :max(0, a - y0)] = 0.0
-        out[:, max(0, b - y0):] = 0.0
-        out[:, max(0, a - y0):max(0, b - y0), :x0] = 0.0
-        out[:, max(0, a - y0):max(0, b - y0), x1:] = 0.0
-        if self._values is not None and b > a:
-            band = _band_rows((x1 - x0) * K)
-            for r0 in range(a, b, band):
-                r1 = min(b, r0 + band)
-                out[:, r0 - y0:r1 - y0, x0:x1] = self._values[r0 - iy0:r1 - iy0].transpose(2, 0, 1)
-        lo, hi = np.searchsorted(self._pixel, (y0 * w, y1 * w))  # border entries in CSR order: by pixel
-        pixel, k = self._pixel[lo:hi], self._k[lo:hi]
-        out[k, pixel // w - y0, pixel % w] = self._data[self._position[lo:hi]]
-        return out
-
-
-def read_full_pattern(A, shape, radius=None):
-    """Offsets and stencil images ``(len(offsets), H, W)`` of a CSR matrix in the full in-grid pattern, else None.
-
-    :func:`verify_full_pattern`, then :class:`PatternRows` for all rows: the results of
-    :func:`~sparsedepth.grid.stencil.full_pattern_offsets` and :func:`~sparsedepth.grid.stencil.csr_to_stencil`.
-    """
-    checked = _verified_layout(A, shape, radius)
-    if checked is None:
-        return None
-    offsets, layout = checked
-    return offsets, PatternRows(A, offsets, shape, layout)(0, shape[0])
 
 
 def fine_stencil_source(A, shape, radius=None):
@@ -680,9 +411,8 @@ def fine_stencil_source(A, shape, radius=None):
             raise ValueError(f"`A` couples pixels farther apart than a stencil of radius {largest}: offsets "
                              f"{A.offsets}")
         return list(A.offsets), StencilSource(A.offsets, shape, symmetric=A)
-    checked = _verified_layout(A, shape, radius)
-    if checked is not None:
-        offsets, layout = checked
-        return offsets, StencilSource(offsets, shape, csr=A, csr_offsets=offsets, layout=layout)
+    pattern = full_pattern_within(A, shape, radius)
+    if pattern is not None:
+        return list(pattern.offsets), StencilSource(pattern.offsets, shape, csr=A, pattern=pattern)
     offsets, S = _stencil_of(A, shape, radius)
     return offsets, StencilSource(offsets, shape, array=S)
