@@ -39,7 +39,14 @@ class MemoryLimits:
         A fine operator with at most this many stored values is smoothed from a float32 copy
         (``fine_precision="auto"``); a larger one is swept from its own float64 values.
     keep_stencil_pixels : int, default 2**21
-        Below this many pixels a multigrid level reads its stencil whole once; from it on, a band at a time.
+        Fine grids of fewer pixels let the multigrid set-up (:class:`~sparsedepth.linalg.multigrid.GridMultigrid`)
+        hold whole stencil arrays: each CSR coarse level's ``(K, H, W)`` float64 stencil is kept as the source of
+        the next level's product, with ``interpolation="operator"`` (read a parity class at a time) the fine
+        operator is read into one such array once, and the line smoother's images of a fine CSR operator are
+        copied as the bilinear Galerkin product reads its rows.  From it on, a coarse level's stencil is read
+        back by position from its CSR form (when the grid's centre row holds every offset) and the line smoother
+        reads its images from the matrix.  The bilinear product reads every level a band of rows at a time
+        either way.
     banded_coarse_pixels : int, default 2**18
         Coarse levels of at least this many pixels are assembled band by band (the Galerkin products).
     gather_pixels : int, default 2**15
