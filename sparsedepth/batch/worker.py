@@ -222,9 +222,7 @@ def process_frame(position: int, source, options: BatchOptions) -> dict:
     row = {"position": position, "name": source.name, "status": "ok"}
     try:
         image, depth, truth = _prepared(source, options)
-        with warnings.catch_warnings():
-            # the row's "clamped" column carries it; a worker never prints
-            warnings.simplefilter("ignore", ClampWarning)
+        with _clamp_warnings_quiet():  # the row's "clamped" column carries them; a worker never prints
             out = evaluate_frame(
                 image, depth, truth=truth, task=options.task, keep_fraction=options.keep_fraction,
                 keep_count=options.keep_count, seed=_sampling_seed(position, options),
@@ -249,6 +247,29 @@ def process_frame(position: int, source, options: BatchOptions) -> dict:
     except Exception as exc:  # noqa: BLE001 - a failing frame is reported, not fatal
         row.update(status="error", error=error_text(exc))
     return row
+
+
+_QUIET_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _clamp_warnings_quiet():
+    """:class:`~sparsedepth.ClampWarning` not shown while a frame runs, in any thread.
+
+    ``warnings.catch_warnings`` changes the filters of the whole process and restores them on exit, so in threads
+    (a thread pool, a threaded Dask worker) one frame's exit would let another's warnings through, or drop filters
+    set meanwhile.  In the main thread (a worker process of the default pool) the filter is set for the frame and
+    restored; in any other thread it is set once for the process and left in place (worker threads run frames only).
+    """
+    if threading.current_thread() is threading.main_thread():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ClampWarning)
+            yield
+        return
+    with _QUIET_LOCK:
+        if not any(f[0] == "ignore" and f[2] is ClampWarning for f in warnings.filters):
+            warnings.filterwarnings("ignore", category=ClampWarning)
+    yield
 
 
 def _write_outputs(target: Path, out, name: str, options: BatchOptions) -> None:
