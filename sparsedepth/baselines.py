@@ -49,7 +49,7 @@ def nearest_fill(sparse_depth, mask=None) -> np.ndarray:
         Equal to the observation at every observed pixel.
     """
     depth, observed = as_depth_and_mask(sparse_depth, mask)
-    _, (ii, jj) = ndimage.distance_transform_edt(~observed, return_distances=True, return_indices=True)
+    ii, jj = ndimage.distance_transform_edt(~observed, return_distances=False, return_indices=True)
     return depth[ii, jj]
 
 

@@ -179,3 +179,17 @@ def test_gmres_with_a_lift_solves_the_composed_operator():
     assert ok
     np.testing.assert_allclose(lift_x, L @ x, rtol=0, atol=1e-10)
     np.testing.assert_allclose(x, np.linalg.solve(B + C @ L, b), rtol=0, atol=1e-9)
+
+
+def test_pcg_info_in_float32_meets_its_tolerance_against_a_direct_solve():
+    A, b = spd_system(n=20, seed=3)
+    exact = spla.spsolve(A.tocsc(), b)
+    single = A.astype(np.float32)
+    inverse_diagonal = (1.0 / A.diagonal()).astype(np.float32)
+    out = pcg_info(single, b, M=lambda r: inverse_diagonal * r, rtol=1e-4, dtype=np.float32)
+    assert out.x.dtype == np.float32 and out.converged
+    assert np.linalg.norm(b - A @ out.x.astype(np.float64)) <= 2e-4 * np.linalg.norm(b)  # float32 rounding: < 1e-4
+    error = np.linalg.norm(out.x - exact) / np.linalg.norm(exact)
+    assert error <= 1e-4 * np.linalg.cond(A.toarray())
+    with pytest.raises(ValueError, match="float64 or float32"):
+        pcg_info(A, b, dtype=np.float16)

@@ -84,7 +84,7 @@ class _RuleMet(Exception):
 
 
 def pcg_info(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callback=None, callback_residual=False,
-             stop=None):
+             stop=None, dtype=np.float64):
     r"""Preconditioned CG for ``A x = b`` stopping at ``‖b − A x‖ ≤ max(rtol·‖b‖, atol)``, with its history.
 
     Parameters
@@ -111,6 +111,12 @@ def pcg_info(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callba
         ``step * direction`` (``direction`` is live: read it, do not keep
         it).  Returning True ends the solve at that iterate with
         ``rule_met`` set; ``converged`` still reports the residual test.
+    dtype : {numpy.float64, numpy.float32}
+        The type of the iterate, the residual and the work vectors (``b``
+        and ``x0`` are cast to it); ``A`` and ``M`` must return it.
+        float32 halves the memory traffic of a solve whose tolerance is far
+        above float32 rounding (a relative residual of 1e-4, say); its dot
+        products are accumulated in float32 too.
 
     Returns
     -------
@@ -130,14 +136,17 @@ def pcg_info(A, b, *, x0=None, M=None, rtol=1e-8, atol=0.0, maxiter=None, callba
     ``b = 0`` the exact ``x = 0`` is returned without iterating.  Dot
     products avoid BLAS (see ``dot``).
     """
-    b = np.asarray(b, dtype=np.float64).ravel()
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float64, np.float32):
+        raise ValueError(f"dtype must be float64 or float32, got {dtype}")
+    b = np.asarray(b, dtype=dtype).ravel()
     n = b.shape[0]
     bnorm = np.sqrt(dot(b, b))
     if bnorm == 0:
         return PCGResult(np.zeros_like(b), 0, True, 0.0, np.zeros(1), False, False, "b = 0: x = 0 is exact")
     maxiter = 10 * n if maxiter is None else int(maxiter)
     prec = _as_apply(M)
-    x = np.zeros(n) if x0 is None else np.array(x0, dtype=np.float64).ravel()
+    x = np.zeros(n, dtype=dtype) if x0 is None else np.array(x0, dtype=dtype).ravel()
     r = b - A @ x if x0 is not None else b.copy()
     target2 = max(rtol * bnorm, float(atol)) ** 2
     rr = dot(r, r)

@@ -9,12 +9,13 @@ May import :mod:`sparsedepth.linalg`, :mod:`sparsedepth.grid`, :mod:`sparsedepth
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import LinearOperator, spsolve
+from scipy.sparse.linalg import spsolve
 
 from ..grid.diagonals import stencil_to_dia
 from ..grid.operators import StencilOperator
@@ -229,31 +230,32 @@ def solve_amg(objective, x0, *, tol, max_iter, recorder, options):
 
 
 def single_precision_cg(objective, x0, *, tol, max_iter, recorder):
-    """Jacobi-preconditioned CG on ``A z = b`` from ``x0`` with the products by ``A`` in single precision.
+    """Jacobi-preconditioned CG on ``A z = b`` from ``x0``, in single precision.
 
-    The loop, preconditioner, start and stop (``‖b − A z‖ <= tol ‖b‖``) of :func:`solve_cg`, with ``A`` held as a
-    float32 DIA array made from the objective's normal stencil (:func:`~sparsedepth.grid.diagonals.stencil_to_dia`:
-    no index arrays to build, half the bytes to stream per product); the vectors and the preconditioner
-    ``diag(A)⁻¹`` stay in float64.  Each product then carries float32 rounding (relative 1e-7) instead of
-    float64's, far below a stopping residual of 1e-4.  An objective with a term that is not a stencil operator keeps
-    its float64 CSR matrix.  No objective values are recorded (NaN) and no certificate is computed: the coarse solve
-    of the fast mode (:func:`sparsedepth.modes.fast.complete_fast`), whose answer is an intermediate.  Returns a
+    The loop (:func:`~sparsedepth.linalg.krylov.pcg_info`), preconditioner, start and stop (``‖b − A z‖ <= tol
+    ‖b‖``) of :func:`solve_cg`, in float32: ``A`` held as a float32 DIA array made from the objective's normal
+    stencil (:func:`~sparsedepth.grid.diagonals.stencil_to_dia`: no index arrays to build), the iterate, the
+    residual, the work vectors and ``diag(A)⁻¹`` in float32 too (half the bytes to stream per step).  Each step then
+    carries float32 rounding (relative 1e-7) instead of float64's, far below a stopping residual of 1e-4; the answer
+    is returned in float64.  An objective with a term that is not a stencil operator keeps its float64 CSR matrix
+    and float64 vectors.  No objective values are recorded (NaN) and no certificate is computed: the coarse solve of
+    the fast mode (:func:`sparsedepth.modes.fast.complete_fast`), whose answer is an intermediate.  Returns a
     :class:`~sparsedepth.solvers.common.SolverOutput` in the units of ``x0``.
     """
     require_quadratic(objective, "cg")
+    dtype = np.float64
     if all(t.operator is None or isinstance(t.operator, StencilOperator) for t in objective.quadratic_terms):
         offsets, stencil = objective.normal_stencil()
         diagonal = stencil[offsets.index((0, 0))].ravel()
-        single = stencil_to_dia(offsets, stencil, dtype=np.float32)
-        A = LinearOperator(single.shape, matvec=lambda z: (single @ z.astype(np.float32)).astype(np.float64),
-                           dtype=np.float64)
+        A = stencil_to_dia(offsets, stencil, dtype=np.float32)
         b = sum(t.normal_rhs(objective.size) for t in objective.quadratic_terms)  # as normal_equations sums it
+        dtype = np.float32
     else:
         A, b, _ = objective.normal_equations()
         diagonal = A.diagonal()
     if not np.all(diagonal > 0):
         raise ValueError("the coarse system has a diagonal entry <= 0; Jacobi preconditioning needs a positive one")
-    inverse_diagonal = 1.0 / diagonal
+    inverse_diagonal = (1.0 / diagonal).astype(dtype)
     recorder(0, x0, value=math.nan)
     steps = itertools.count(1)
 
@@ -262,8 +264,9 @@ def single_precision_cg(objective, x0, *, tol, max_iter, recorder):
         recorder(step, z, inner=step, value=math.nan)
 
     with phase("iterations"):
-        result = pcg_info(A, b, x0=x0, M=lambda r: inverse_diagonal * r, rtol=tol, maxiter=max_iter,
-                          callback=record, callback_residual=True)
+        result = pcg_info(A, b, x0=x0, M=lambda r: np.multiply(inverse_diagonal, r), rtol=tol, maxiter=max_iter,
+                          callback=record, callback_residual=True, dtype=dtype)
+    result = dataclasses.replace(result, x=result.x.astype(np.float64))
     message = (f"relative residual {result.relative_residual:.2e} {'<=' if result.converged else '>'} tol {tol:.1e} "
                f"after {result.iterations} CG iterations")
     return output(result.x, result.iterations, result.converged, message, recorder)
