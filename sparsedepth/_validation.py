@@ -323,6 +323,28 @@ def argument_label(name: str) -> str:
     return name if name.startswith(("-", "`")) else f"`{name}`"
 
 
+def stat_path(path, *, name: str = "path", missing: str = "file") -> tuple[Path, int]:
+    """``(Path(path), st_mode)`` of an existing path, from :func:`os.stat` alone (nothing is opened).
+
+    ``name`` labels the path in messages (see :func:`argument_label`); ``missing`` says what was expected in the
+    message of a missing path (``"file"``, ``"COLMAP model folder"``).  Raises ``TypeError`` for a ``name`` that
+    is not a non-empty str or a ``path`` that is not a str or os.PathLike, ``FileNotFoundError`` for a missing path
+    and ``ValueError`` for one that cannot be examined (permission, embedded NUL, name too long, ...).
+    """
+    if not isinstance(name, str) or not name:
+        raise TypeError(f"`name` must be a non-empty str (the label of the path in messages), got {name!r}.")
+    label = argument_label(name)
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"{label} must be a str or os.PathLike, got {type(path).__name__}.")
+    path = Path(path)
+    try:
+        return path, os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        raise FileNotFoundError(f"{label}: no such {missing}: '{path}'.") from None
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{label} '{path}': cannot be accessed ({exc}).") from None
+
+
 def check_input_file(path, *, name: str = "path") -> Path:
     """Return ``path`` as a :class:`~pathlib.Path` after checking that it names an existing regular file.
 
@@ -334,18 +356,8 @@ def check_input_file(path, *, name: str = "path") -> Path:
     file and ``ValueError`` for a path that cannot be examined or is not a
     regular file (directory, FIFO, device, socket).
     """
-    if not isinstance(name, str) or not name:
-        raise TypeError(f"`name` must be a non-empty str (the label of the path in messages), got {name!r}.")
+    path, mode = stat_path(path, name=name, missing="file")
     label = argument_label(name)
-    if not isinstance(path, (str, os.PathLike)):
-        raise TypeError(f"{label} must be a str or os.PathLike, got {type(path).__name__}.")
-    path = Path(path)
-    try:
-        mode = os.stat(path).st_mode
-    except (FileNotFoundError, NotADirectoryError):
-        raise FileNotFoundError(f"{label}: no such file: '{path}'.") from None
-    except (OSError, ValueError) as exc:  # permission, embedded NUL, name too long, ...
-        raise ValueError(f"{label} '{path}': cannot be accessed ({exc}).") from None
     if not stat.S_ISREG(mode):
         kind = (
             "a directory" if stat.S_ISDIR(mode)

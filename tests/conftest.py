@@ -74,3 +74,31 @@ def set_limits():
 
     with contextlib.ExitStack() as stack:
         yield lambda **changes: stack.enter_context(limited(**changes))
+
+
+def linear_interpolation_1d(n):
+    """``(n, (n + 1) // 2)`` dense 1-D linear interpolation from the even points, written out entry by entry (the
+    last point of an even-length axis takes its one coarse neighbour)."""
+    nc = (n + 1) // 2
+    P = np.zeros((n, nc))
+    for i in range(n):
+        if i % 2 == 0:
+            P[i, i // 2] = 1.0
+        elif i // 2 + 1 < nc:
+            P[i, i // 2] = P[i, i // 2 + 1] = 0.5
+        else:
+            P[i, i // 2] = 1.0
+    return P
+
+
+def stencil_images(dense, offsets, shape):
+    """``(len(offsets), H, W)`` images ``S[k, y, x] = A[(y, x), (y, x) + offsets[k]]`` of a dense matrix (0 outside
+    the grid), read entry by entry."""
+    H, W = shape
+    S = np.zeros((len(offsets), H, W))
+    for k, (dy, dx) in enumerate(offsets):
+        for y in range(H):
+            for x in range(W):
+                if 0 <= y + dy < H and 0 <= x + dx < W:
+                    S[k, y, x] = dense[y * W + x, (y + dy) * W + x + dx]
+    return S

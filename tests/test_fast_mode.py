@@ -10,14 +10,14 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
 import sparsedepth as sd
-from conftest import make_scene
+from conftest import make_scene, stencil_images
 from sparsedepth.modes.fast import fast_factor
 from sparsedepth.complete import main
 from sparsedepth.grid.diagonals import stencil_to_dia
 from sparsedepth.grid.resample import (block_mean, block_sample_mean, coarse_shape, edge_aware_sweeps,
                                        upsample_bilinear)
 from sparsedepth.grid.stencil import stencil_to_csr
-from test_symmetric_stencil import FIVE, THIRTEEN, full_stencil, random_spd
+from test_symmetric_stencil import FIVE, THIRTEEN, random_spd
 
 
 # ----------------------------------------------------------------------------- resampling helpers
@@ -147,7 +147,7 @@ def test_edge_aware_sweeps_reject_bad_parameters(kwargs, words):
 def test_stencil_to_dia_is_the_matrix_and_multiplies_as_csr_does(offsets, shape):
     _, dense = random_spd(offsets, shape, seed=shape[0] * 7 + shape[1])
     dense[np.nonzero(dense)] += np.random.default_rng(3).random(np.count_nonzero(dense))  # not symmetric
-    stencil = full_stencil(dense, offsets, shape)
+    stencil = stencil_images(dense, offsets, shape)
     D = stencil_to_dia(offsets, stencil)
     assert isinstance(D, sp.dia_array)
     np.testing.assert_array_equal(D.toarray(), dense)

@@ -15,7 +15,7 @@ from sparsedepth.linalg.multigrid import (
     solve_spd,
 )
 
-from conftest import DOUBLE
+from conftest import DOUBLE, linear_interpolation_1d
 from conftest import forward_difference_1d as forward_diff
 
 # --------------------------------------------------------------------------
@@ -65,20 +65,6 @@ def biharmonic_system(shape, rng):
     return sp.csr_array(sp.diags(1e-2 + mask * 1.0) + L.T @ L)
 
 
-def linear_1d(n):
-    """1-D linear interpolation from the even points, as a plain dense matrix."""
-    nc = (n + 1) // 2
-    P = np.zeros((n, nc))
-    for i in range(n):
-        if i % 2 == 0:
-            P[i, i // 2] = 1.0
-        elif i // 2 + 1 < nc:
-            P[i, i // 2] = P[i, i // 2 + 1] = 0.5
-        else:
-            P[i, i // 2] = 1.0
-    return P
-
-
 # --------------------------------------------------------------------------
 # structure
 # --------------------------------------------------------------------------
@@ -88,7 +74,7 @@ def test_bilinear_prolongation_is_kron_of_1d_interpolation(shape):
     A = random_system(shape, rng)
     mg = GridMultigrid(A, shape, max_coarse=1)
     P = mg.levels[0].P.toarray()
-    expected = np.kron(linear_1d(shape[0]), linear_1d(shape[1]))
+    expected = np.kron(linear_interpolation_1d(shape[0]), linear_interpolation_1d(shape[1]))
     np.testing.assert_array_equal(P, expected)
     # applied matrix-free, one axis at a time: same products as the dense matrix
     x = rng.standard_normal(expected.shape[1])

@@ -9,24 +9,12 @@ from sparsedepth.linalg.multigrid.galerkin import galerkin_offsets, galerkin_ste
 from sparsedepth.linalg.multigrid.interpolation import bilinear_weights, linear_weights_1d
 from sparsedepth.linalg.multigrid.stencils import StencilSource, mirrored_image
 
+from conftest import linear_interpolation_1d, stencil_images
+
 FIVE = [(-1, 0), (0, -1), (0, 0), (0, 1), (1, 0)]
 NINE = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
 THIRTEEN = sorted(FIVE + [(-1, -1), (-1, 1), (1, -1), (1, 1), (-2, 0), (0, -2), (0, 2), (2, 0)])
 TWENTY_FIVE = [(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3)]
-
-
-def interpolation_1d(n):
-    """``(n, (n + 1) // 2)`` dense linear interpolation from the even points, written out entry by entry."""
-    nc = (n + 1) // 2
-    P = np.zeros((n, nc))
-    for i in range(n):
-        if i % 2 == 0:
-            P[i, i // 2] = 1.0
-        elif i // 2 + 1 < nc:
-            P[i, i // 2] = P[i, i // 2 + 1] = 0.5
-        else:  # the last point of an even-length axis: its one coarse neighbour
-            P[i, i // 2] = 1.0
-    return P
 
 
 def symmetric_matrix(offsets, shape, rng):
@@ -48,21 +36,8 @@ def symmetric_matrix(offsets, shape, rng):
     return sp.csr_array(sp.coo_array((vals, (rows, cols)), shape=(n, n)))
 
 
-def stencil_of(A, offsets, shape):
-    """``(len(offsets), H, W)`` images ``S[k, y, x] = A[(y, x), (y, x) + offsets[k]]`` (0 outside), read entry by entry."""
-    h, w = shape
-    dense = A.toarray()
-    S = np.zeros((len(offsets), h, w))
-    for k, (dy, dx) in enumerate(offsets):
-        for y in range(h):
-            for x in range(w):
-                if 0 <= y + dy < h and 0 <= x + dx < w:
-                    S[k, y, x] = dense[y * w + x, (y + dy) * w + x + dx]
-    return S
-
-
 def expected_product(A, shape):
-    P = sp.csr_array(np.kron(interpolation_1d(shape[0]), interpolation_1d(shape[1])))
+    P = sp.csr_array(np.kron(linear_interpolation_1d(shape[0]), linear_interpolation_1d(shape[1])))
     product = (P.T @ A @ P).toarray()
     scale = (abs(P).T @ abs(A) @ abs(P)).toarray()  # rounding is relative to the terms summed
     return product, scale
@@ -77,7 +52,7 @@ SHAPES = [(1, 1), (1, 7), (6, 1), (2, 2), (3, 4), (4, 3), (5, 5), (6, 8), (9, 7)
 def test_separable_galerkin_equals_scipy_triple_product(offsets, shape, band_values):
     rng = np.random.default_rng(sum(shape) + len(offsets))
     A = symmetric_matrix(offsets, shape, rng)
-    S = stencil_of(A, offsets, shape)
+    S = stencil_images(A.toarray(), offsets, shape)
     coarse = galerkin_offsets(offsets)
     C = separable_galerkin_stencil(offsets, lambda y0, y1: S[:, y0:y1], linear_weights_1d(shape[0]),
                                    linear_weights_1d(shape[1]), coarse, band_values=band_values)
@@ -86,7 +61,7 @@ def test_separable_galerkin_equals_scipy_triple_product(offsets, shape, band_val
     product, scale = expected_product(A, shape)
     np.testing.assert_allclose(stencil_to_csr(coarse, C).toarray(), product, rtol=0, atol=1e-13 * scale.max())
     # and the images themselves: zero wherever the neighbour is outside the coarse grid
-    np.testing.assert_allclose(C, stencil_of(sp.csr_array(product), coarse, (hc, wc)), rtol=0,
+    np.testing.assert_allclose(C, stencil_images(sp.csr_array(product).toarray(), coarse, (hc, wc)), rtol=0,
                                atol=1e-13 * scale.max())
 
 
@@ -95,7 +70,7 @@ def test_galerkin_stencil_of_each_source_equals_scipy_triple_product(shape):
     """Array, symmetric-stencil and CSR sources (read by bands of rows): the same product."""
     rng = np.random.default_rng(3)
     A = symmetric_matrix(THIRTEEN, shape, rng)
-    S = stencil_of(A, THIRTEEN, shape)
+    S = stencil_images(A.toarray(), THIRTEEN, shape)
     coarse = galerkin_offsets(THIRTEEN)
     product, scale = expected_product(A, shape)
     symmetric = SymmetricStencil.from_stencil(THIRTEEN, S)
@@ -112,7 +87,7 @@ def test_mirrored_image_is_the_transposed_coupling():
     rng = np.random.default_rng(4)
     shape = (5, 6)
     A = symmetric_matrix(THIRTEEN, shape, rng)
-    S = stencil_of(A, THIRTEEN, shape)
+    S = stencil_images(A.toarray(), THIRTEEN, shape)
     images = dict(zip(THIRTEEN, S))
     for (dy, dx), image in images.items():
         np.testing.assert_array_equal(mirrored_image(image, (dy, dx)), images[-dy, -dx])

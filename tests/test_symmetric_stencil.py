@@ -13,6 +13,8 @@ from sparsedepth.linalg.multigrid import bands
 from sparsedepth.linalg.multigrid.bands import BandedStencil
 from sparsedepth.linalg.multigrid.smoothers import gauss_seidel_backward, gauss_seidel_forward
 
+from conftest import stencil_images
+
 FIVE = [(-1, 0), (0, -1), (0, 0), (0, 1), (1, 0)]
 THIRTEEN = sorted({(0, 0), (0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (-1, -1), (1, -1), (-1, 1), (0, 2), (0, -2),
                    (2, 0), (-2, 0)})
@@ -49,26 +51,14 @@ def random_spd(offsets, shape, seed):
     return SymmetricStencil(offsets, images), dense
 
 
-def full_stencil(dense, offsets, shape):
-    """The full stencil images read from a dense matrix (0 outside the grid)."""
-    H, W = shape
-    S = np.zeros((len(offsets), H, W))
-    for k, (dy, dx) in enumerate(offsets):
-        for y in range(H):
-            for x in range(W):
-                if 0 <= y + dy < H and 0 <= x + dx < W:
-                    S[k, y, x] = dense[y * W + x, (y + dy) * W + x + dx]
-    return S
-
-
 @pytest.mark.parametrize("offsets", [FIVE, THIRTEEN, TWENTY_FIVE], ids=["5", "13", "25"])
 @pytest.mark.parametrize("shape", SHAPES)
 def test_product_equals_csr_and_dense(offsets, shape):
     A, dense = random_spd(offsets, shape, seed=shape[0] * 31 + shape[1])
-    csr = stencil_to_csr(offsets, full_stencil(dense, offsets, shape))
+    csr = stencil_to_csr(offsets, stencil_images(dense, offsets, shape))
     np.testing.assert_array_equal(A.tocsr().toarray(), dense)
     for dtype in (np.float64, np.float32):  # the CSR form of stencil_to_csr, entry for entry
-        mine, full = A.tocsr(dtype=dtype), stencil_to_csr(offsets, full_stencil(dense, offsets, shape), dtype=dtype)
+        mine, full = A.tocsr(dtype=dtype), stencil_to_csr(offsets, stencil_images(dense, offsets, shape), dtype=dtype)
         assert mine.dtype == dtype and mine.has_canonical_format
         for name in ("indptr", "indices", "data"):
             np.testing.assert_array_equal(getattr(mine, name), getattr(full, name))
@@ -89,7 +79,7 @@ def test_product_equals_csr_and_dense(offsets, shape):
 @pytest.mark.parametrize("shape", [(1, 1), (1, 5), (6, 1), (7, 9)])
 def test_from_stencil_round_trip_and_parity_classes(shape):
     A, dense = random_spd(THIRTEEN, shape, seed=3)
-    full = full_stencil(dense, THIRTEEN, shape)
+    full = stencil_images(dense, THIRTEEN, shape)
     B = SymmetricStencil.from_stencil(THIRTEEN, full)
     for a, b in zip(A.images, B.images):
         np.testing.assert_array_equal(a, b)
@@ -102,7 +92,7 @@ def test_from_stencil_round_trip_and_parity_classes(shape):
 
 def test_from_stencil_refuses_an_asymmetric_stencil():
     _, dense = random_spd(FIVE, (6, 7), seed=4)
-    full = full_stencil(dense, FIVE, (6, 7))
+    full = stencil_images(dense, FIVE, (6, 7))
     full[0, 3, 2] = np.nextafter(full[0, 3, 2], 10.0)  # one lower coefficient off by one unit in the last place
     assert SymmetricStencil.from_stencil(FIVE, full) is None
     assert SymmetricStencil.from_stencil(FIVE[1:], full[1:]) is None  # (1, 0) without (-1, 0)

@@ -31,7 +31,7 @@ from typing import Callable
 
 import numpy as np
 
-from .._validation import argument_label, check_count, check_nonnegative_real, is_int
+from .._validation import check_count, check_nonnegative_real, is_int, stat_path
 from .files import MAX_PIXELS, atomic_target, check_max_pixels, check_pixels, file_label
 
 __all__ = [
@@ -943,17 +943,7 @@ def _check_links(cameras: dict, images: dict, image_at: Callable, points: Points
 
 
 def _model_folder(path, name: str) -> Path:
-    if not isinstance(name, str) or not name:
-        raise TypeError(f"`name` must be a non-empty str (the label of the path in messages), got {name!r}.")
-    if not isinstance(path, (str, os.PathLike)):
-        raise TypeError(f"{argument_label(name)} must be a str or os.PathLike, got {type(path).__name__}.")
-    folder = Path(path)
-    try:
-        mode = os.stat(folder).st_mode
-    except (FileNotFoundError, NotADirectoryError):
-        raise FileNotFoundError(f"{file_label(folder, name)}: no such COLMAP model folder.") from None
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{file_label(folder, name)}: cannot be accessed ({exc}).") from None
+    folder, mode = stat_path(path, name=name, missing="COLMAP model folder")
     if not stat.S_ISDIR(mode):
         raise ValueError(f"{file_label(folder, name)} is not a folder; expected a COLMAP model folder holding "
                          "cameras, images and points3D (.bin or .txt).")
