@@ -8,7 +8,8 @@ The user's API
 --------------
 Complete and fill
     :func:`complete_depth` (``quality="fast"``, ``prior=``, ``uncertainty=``), :func:`fill_holes`,
-    :class:`CompletionProblem` (set up once, solve many times), :class:`CompletionResult`, :class:`ClampWarning`.
+    :class:`CompletionProblem` (set up once, solve many times), :class:`CompletionResult`, :class:`ClampWarning`,
+    :class:`NoGainWarning` (``complete_depth(..., expected_error=True)``, :mod:`~sparsedepth.expected_error`).
 Model
     :class:`Weights`, :data:`DEFAULT_WEIGHTS`, :data:`FAST_WEIGHTS`, :class:`DensitySchedule`,
     :data:`DEFAULT_SCHEDULE`, :func:`default_weights`, :data:`SOLVERS`, :data:`SOLVER_OPTIONS`.
@@ -54,7 +55,8 @@ from .registration import ImageShift, estimate_image_shift, pool_image_shifts, s
 from .metrics import DepthMetrics, depth_metrics
 from .objective.objective import AbsTerm, Objective, QuadraticTerm, RobustTerm, build_objective, edge_weights
 from .objective.robust import PENALTIES, RobustPenalty, robust_penalty
-from .result import ClampWarning, CompletionResult, IterationRecord, SolverState, UncertaintyCalibration
+from . import expected_error
+from .result import ClampWarning, CompletionResult, IterationRecord, NoGainWarning, SolverState, UncertaintyCalibration
 from .sampling import sample_depth, sample_mask, valid_depth_mask
 from .solvers import SOLVER_OPTIONS, SOLVERS
 from .objective.weights import (DEFAULT_SCHEDULE, DEFAULT_WEIGHTS, DensitySchedule, Weights, default_weights,
@@ -74,7 +76,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     # complete and fill
-    "complete_depth", "fill_holes", "CompletionProblem", "CompletionResult", "ClampWarning",
+    "complete_depth", "fill_holes", "CompletionProblem", "CompletionResult", "ClampWarning", "NoGainWarning",
     # model
     "Weights", "DEFAULT_WEIGHTS", "FAST_WEIGHTS", "DensitySchedule", "DEFAULT_SCHEDULE", "default_weights", "SOLVERS",
     "SOLVER_OPTIONS",

@@ -9,6 +9,9 @@ May import :mod:`sparsedepth.problem`, :mod:`sparsedepth.modes` and what they im
 
 from __future__ import annotations
 
+import warnings
+from dataclasses import replace
+
 import numpy as np
 
 from ._validation import check_nonnegative_real
@@ -18,7 +21,8 @@ from .modes.uncertainty import complete_with_uncertainty
 from .objective.objective import DEFAULT_L1_SMOOTHING
 from .objective.weights import DensitySchedule, Weights
 from .problem import CLAMP_WARNING_SHARE, CompletionProblem, choose_solver, depth_jump_factor, range_outliers
-from .result import CompletionResult
+from .expected_error import expected_error as estimate_expected_error
+from .result import CompletionResult, NoGainWarning
 
 __all__ = ["complete_depth", "check_modes", "argument_conflict", "ARGUMENT_RULES", "choose_solver", "depth_jump_factor",
            "range_outliers", "QUALITIES", "fast_factor", "FAST_WEIGHTS", "FAST_COARSE_RTOL", "CLAMP_WARNING_SHARE"]
@@ -47,6 +51,7 @@ def complete_depth(
     prior=None,
     prior_alignment: str = "scale_shift",
     quality: str = "default",
+    expected_error: bool = False,
 ) -> CompletionResult:
     """Complete a sparse depth map into a dense one, guided by an image.
 
@@ -138,6 +143,18 @@ def complete_depth(
         are NaN and ``terms`` is empty; the iterations and history are
         those of the coarse solve, whose objective values are not computed
         (NaN: the coarse objective is not the user's).
+    expected_error : bool
+        Also estimate, from the samples alone, the RMSE over the unobserved
+        pixels of the result and of nearest fill
+        (:func:`sparsedepth.expected_error.expected_error`: cross-validation
+        on the samples with fast completions, about 0.1-0.3 of a default
+        completion's time); stored in ``result.expected_rmse`` and
+        ``result.expected_nearest_rmse``, with a
+        :class:`~sparsedepth.result.NoGainWarning` when the first is not
+        below the second.  Works with the default, fast and uncertainty
+        modes (with ``max_uncertainty`` it is about every unobserved pixel,
+        the removed ones included); not with ``prior``, whose completion
+        the fast completions do not model (an error).
 
     Returns
     -------
@@ -153,7 +170,8 @@ def complete_depth(
         quadratic-only solver with γ > 0.
         Fewer than 16 observed pixels with ``uncertainty``; a negative or
         non-finite ``max_uncertainty``; an unknown ``quality``, or
-        ``"fast"`` with γ > 0, ``x0``, ``callback`` or uncertainty.
+        ``"fast"`` with γ > 0, ``x0``, ``callback`` or uncertainty;
+        ``expected_error`` with ``prior`` or fewer than 16 observed pixels.
     TypeError
         ``weights`` not a :class:`Weights`, :class:`DensitySchedule` or
         ``None``, ``max_iter`` not an int, ``tol``
@@ -239,19 +257,35 @@ def complete_depth(
     (40, 50)
     """
     mode = check_modes(quality=quality, solver=solver, tol=tol, max_iter=max_iter, callback=callback,
-                       options=options, uncertainty=uncertainty, max_uncertainty=max_uncertainty, prior=prior)
+                       options=options, uncertainty=uncertainty, max_uncertainty=max_uncertainty, prior=prior,
+                       expected_error=expected_error)
     if mode == "fast":
-        return complete_fast(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
-                             clip_to_observed=clip_to_observed, x0=x0)
-    settings = dict(solver=solver, tol=tol, max_iter=max_iter, options=options, callback=callback, x0=x0)
-    if mode == "prior":
-        return complete_with_prior(image, sparse_depth, mask, prior, alignment=prior_alignment, weights=weights,
-                                   l1_smoothing=l1_smoothing, clip_to_observed=clip_to_observed, **settings)
-    problem = CompletionProblem(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
-                                clip_to_observed=clip_to_observed)
-    if mode == "uncertainty":
-        return complete_with_uncertainty(problem, max_uncertainty=max_uncertainty, **settings)
-    return problem.solve(**settings)
+        result = complete_fast(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
+                               clip_to_observed=clip_to_observed, x0=x0)
+    else:
+        settings = dict(solver=solver, tol=tol, max_iter=max_iter, options=options, callback=callback, x0=x0)
+        if mode == "prior":
+            return complete_with_prior(image, sparse_depth, mask, prior, alignment=prior_alignment, weights=weights,
+                                       l1_smoothing=l1_smoothing, clip_to_observed=clip_to_observed, **settings)
+        problem = CompletionProblem(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
+                                    clip_to_observed=clip_to_observed)
+        if mode == "uncertainty":
+            result = complete_with_uncertainty(problem, max_uncertainty=max_uncertainty, **settings)
+        else:
+            result = problem.solve(**settings)
+    return _with_expected_error(result, image, sparse_depth, mask, quality, weights) if expected_error else result
+
+
+def _with_expected_error(result, image, sparse_depth, mask, quality, weights) -> CompletionResult:
+    """``result`` with its expected RMSE and nearest fill's (:func:`~sparsedepth.expected_error.expected_error`),
+    warning :class:`~sparsedepth.result.NoGainWarning` when the completion is not expected to beat nearest fill."""
+    estimate = estimate_expected_error(image, sparse_depth, mask, quality=quality,
+                                       weights=weights if quality == "fast" else None)
+    if not estimate.beats_nearest:
+        warnings.warn(f"the completion is not expected to beat nearest fill: expected RMSE {estimate.rmse:.4g} vs "
+                      f"{estimate.nearest_rmse:.4g} for nearest fill (estimated from the samples; "
+                      "sparsedepth.nearest_fill gives it)", NoGainWarning, stacklevel=3)
+    return replace(result, expected_rmse=estimate.rmse, expected_nearest_rmse=estimate.nearest_rmse)
 
 
 #: Which arguments go together, the one table every front end reads: ``(argument, why, the arguments it
@@ -264,6 +298,8 @@ ARGUMENT_RULES = (
     ("prior", "cannot be combined with", ("quality", "uncertainty", "max_uncertainty")),
     ("quality", "picks its own solve and takes no",
      ("solver", "tol", "max_iter", "callback", "options", "uncertainty", "max_uncertainty")),
+    ("expected_error", "estimates the completion's error from fast completions and cannot be combined with",
+     ("colorization", "prior")),
 )
 
 
@@ -283,7 +319,7 @@ def argument_conflict(given) -> tuple[str, str, list[str]] | None:
 
 
 def check_modes(*, quality="default", solver="auto", tol=None, max_iter=None, callback=None, options=None,
-                uncertainty=False, max_uncertainty=None, prior=None) -> str:
+                uncertainty=False, max_uncertainty=None, prior=None, expected_error=False) -> str:
     """Which mode a call of :func:`complete_depth` asks for: ``"fast"``, ``"prior"``, ``"uncertainty"`` or ``"default"``.
 
     Which arguments go together is :data:`ARGUMENT_RULES` (:func:`argument_conflict`); ``max_uncertainty``
@@ -295,12 +331,13 @@ def check_modes(*, quality="default", solver="auto", tol=None, max_iter=None, ca
         An unknown ``quality``, arguments :data:`ARGUMENT_RULES` refuses together, or a negative or non-finite
         ``max_uncertainty``.
     TypeError
-        ``uncertainty`` not a bool.
+        ``uncertainty`` or ``expected_error`` not a bool.
     """
     if not isinstance(quality, str) or quality not in QUALITIES:
         raise ValueError(f"quality must be one of {list(QUALITIES)}; got {quality!r}")
-    if not isinstance(uncertainty, (bool, np.bool_)):
-        raise TypeError(f"uncertainty must be True or False; got {type(uncertainty).__name__}")
+    for name, value in (("uncertainty", uncertainty), ("expected_error", expected_error)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{name} must be True or False; got {type(value).__name__}")
     if max_uncertainty is not None:
         check_nonnegative_real(max_uncertainty, name="max_uncertainty")
     given = [name for name, value in (("quality", quality == "fast"), ("solver", solver != "auto"),
@@ -308,7 +345,8 @@ def check_modes(*, quality="default", solver="auto", tol=None, max_iter=None, ca
                                       ("callback", callback is not None), ("options", options is not None),
                                       ("uncertainty", bool(uncertainty)),
                                       ("max_uncertainty", max_uncertainty is not None),
-                                      ("prior", prior is not None)) if value]
+                                      ("prior", prior is not None),
+                                      ("expected_error", bool(expected_error))) if value]
     conflict = argument_conflict(given)
     if conflict is not None:
         argument, why, excluded = conflict

@@ -13,7 +13,7 @@ import numpy as np
 from .objective.weights import Weights
 
 __all__ = ["IterationRecord", "SolverState", "UncertaintyCalibration", "CompletionResult", "ClampWarning",
-           "RangeOutlierWarning"]
+           "RangeOutlierWarning", "NoGainWarning"]
 
 
 class ClampWarning(UserWarning):
@@ -28,6 +28,15 @@ class RangeOutlierWarning(ClampWarning):
     """A :class:`ClampWarning` about observed depths so far outside the others that they widen the clamp range.
 
     See :func:`sparsedepth.completion.range_outliers` for the rule.
+    """
+
+
+class NoGainWarning(UserWarning):
+    """Warned by :func:`sparsedepth.complete_depth` with ``expected_error=True`` when the completion is not
+    expected to beat nearest fill: ``result.expected_rmse >= result.expected_nearest_rmse``.
+
+    Both are estimates from the samples alone (:func:`sparsedepth.expected_error.expected_error`); filter it with
+    ``warnings.filterwarnings("ignore", category=sparsedepth.NoGainWarning)``.
     """
 
 
@@ -169,6 +178,11 @@ class CompletionResult:
     removed : int
         Pixels set to NaN in :attr:`depth` because their uncertainty exceeds
         ``max_uncertainty`` (0 without it).
+    expected_rmse, expected_nearest_rmse : float
+        With ``expected_error=True``: the RMSE over the unobserved pixels
+        expected of :attr:`depth` and of nearest fill, estimated from the
+        samples alone (:func:`sparsedepth.expected_error.expected_error`),
+        in the units of :attr:`depth`; NaN without it.
     """
 
     depth: np.ndarray
@@ -189,6 +203,8 @@ class CompletionResult:
     uncertainty: Optional[np.ndarray] = field(default=None, repr=False)
     uncertainty_calibration: Optional[UncertaintyCalibration] = None
     removed: int = 0
+    expected_rmse: float = float("nan")
+    expected_nearest_rmse: float = float("nan")
 
     def history_array(self, name: str) -> np.ndarray:
         """One field of :attr:`history` as an array (``None`` becomes NaN)."""

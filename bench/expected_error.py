@@ -1,0 +1,169 @@
+"""Expected error: how well ``expected_error`` predicts a completion's true RMSE on frames it was not fitted on.
+
+Run (full, ~15-25 minutes on 2 cores)::
+
+    python -m bench.expected_error --out docs/expected_error.md
+
+Every constant of :mod:`sparsedepth.expected_error` was fitted on the calibration scenes
+(:data:`CALIBRATION_FRAMES`: middlebury2001/tsukuba, nyu_mmseg_pseudo/bookstore_0001d_00001 and the two
+realsense_d435 frames, one scene); the table reports the other scenes' frames, :data:`bench.frames.REPORT_FRAMES`
+(``--calibration`` reports the calibration frames instead).  For each frame, pattern (:data:`PATTERNS`) and seed
+(0, 1, 2): ``sample_depth`` draws the samples, ``complete_depth`` completes them (default mode) and
+``nearest_fill`` fills them; their true RMSE is over the hidden pixels (valid ground truth, not observed).  The
+estimate is ``expected_error(image, sparse, mask, region=valid)``: the same pixels (the ground truth's *validity*
+says where the RMSE is taken, never its values); the column "all unobserved" is the default ``region`` (every
+unobserved pixel, ground truth or not), which the user gets from ``complete_depth(..., expected_error=True)``.
+
+Scores per pattern: the share of inputs with ``|expected / true − 1| <= 0.3``, the median and the worst (farthest
+from 1 in ratio) ``expected / true``; the "not expected to beat nearest fill" warning
+(``expected_rmse >= expected_nearest_rmse``) against the truth (``true RMSE >= nearest fill's``): true positives,
+false alarms, misses; and the estimate's time over the default completion's (``time.perf_counter``, same process).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import sparsedepth as sd
+from sparsedepth import expected_error as ee
+from bench import frames as frame_list
+from bench.harness import load_frame
+
+#: The scenes every constant of :mod:`sparsedepth.expected_error` was fitted on.
+CALIBRATION_FRAMES = ("middlebury2001/tsukuba", "nyu_mmseg_pseudo/bookstore_0001d_00001",
+                      "realsense_d435/000000080", "realsense_d435/000000130")
+#: (label, sample_depth keywords) of every input pattern.
+PATTERNS = (
+    ("uniform 1 %", dict(pattern="uniform", fraction=0.01)),
+    ("uniform 5 %", dict(pattern="uniform", fraction=0.05)),
+    ("uniform 10 %", dict(pattern="uniform", fraction=0.1)),
+    ("keypoints 500", dict(pattern="keypoints", count=500)),
+    ("keypoints 2000", dict(pattern="keypoints", count=2000)),
+    ("scan lines 8", dict(pattern="scan_lines", spacing=8)),
+    ("scan lines 16", dict(pattern="scan_lines", spacing=16)),
+    ("holes 0.7", dict(pattern="holes", fraction=0.7)),
+)
+#: The accuracy target: ``|expected / true − 1| <= TOLERANCE`` on at least ``TARGET_SHARE`` of the inputs.
+TOLERANCE, TARGET_SHARE = 0.3, 0.8
+
+
+def _rmse(values, truth, where) -> float:
+    return float(np.sqrt(np.mean((values[where] - truth[where]) ** 2)))
+
+
+def measure(name, seeds, step=1) -> list[dict]:
+    """One record per pattern and seed of frame ``name``: true and expected RMSEs, times."""
+    frame = load_frame(name, step=step)
+    valid = np.isfinite(frame.depth)
+    records = []
+    for label, keywords in PATTERNS:
+        for seed in seeds:
+            try:
+                sparse, mask = sd.sample_depth(frame.depth, image=frame.image, seed=seed, **keywords)
+            except ValueError:  # fewer valid pixels than the pattern asks for
+                continue
+            hidden = valid & ~mask
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                start = time.perf_counter()
+                result = sd.complete_depth(frame.image, sparse, mask)
+                completion_time = time.perf_counter() - start
+                start = time.perf_counter()
+                estimate = ee.expected_error(frame.image, sparse, mask, seed=seed, region=valid)
+                estimate_time = time.perf_counter() - start
+                everywhere = ee.expected_error(frame.image, sparse, mask, seed=seed)
+            nearest = sd.nearest_fill(sparse, mask)
+            records.append(dict(
+                frame=name, pattern=label, seed=seed, true=_rmse(result.depth, frame.depth, hidden),
+                true_nearest=_rmse(nearest, frame.depth, hidden), expected=estimate.rmse,
+                expected_nearest=estimate.nearest_rmse, expected_all=everywhere.rmse,
+                expected_all_nearest=everywhere.nearest_rmse, cost=estimate_time / completion_time))
+            print(f"{name} {label} seed {seed}: true {records[-1]['true']:.4g} expected {estimate.rmse:.4g}; "
+                  f"nearest {records[-1]['true_nearest']:.4g} expected {estimate.nearest_rmse:.4g}; "
+                  f"cost {records[-1]['cost']:.2f}", file=sys.stderr, flush=True)
+    return records
+
+
+def _scores(ratios) -> tuple[float, float, float]:
+    """(share within TOLERANCE, median, worst = farthest from 1 in log)."""
+    ratios = np.asarray(ratios, dtype=float)
+    worst = ratios[np.argmax(np.abs(np.log(ratios)))]
+    return float(np.mean(np.abs(ratios - 1) <= TOLERANCE)), float(np.median(ratios)), float(worst)
+
+
+def _warning_counts(records, expected="expected", expected_nearest="expected_nearest"):
+    fired = np.array([r[expected] >= r[expected_nearest] for r in records])
+    worse = np.array([r["true"] >= r["true_nearest"] for r in records])
+    return int(np.sum(fired & worse)), int(np.sum(fired & ~worse)), int(np.sum(~fired & worse)), int(worse.sum())
+
+
+def table(records) -> str:
+    """The markdown table of one set of records, one row per pattern and one for all."""
+    lines = ["| pattern | inputs | completion: within 30 % | median | worst | nearest fill: within 30 % | median "
+             "| worst | all unobserved: completion within 30 % | nearest within 30 % | warning: fired right / false "
+             "alarms / missed (of worse) | cost |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|"]
+    groups = [(label, [r for r in records if r["pattern"] == label]) for label, _ in PATTERNS] + [("all", records)]
+    for label, rows in groups:
+        if not rows:
+            continue
+        share, median, worst = _scores([r["expected"] / r["true"] for r in rows])
+        n_share, n_median, n_worst = _scores([r["expected_nearest"] / r["true_nearest"] for r in rows])
+        a_share = _scores([r["expected_all"] / r["true"] for r in rows])[0]
+        an_share = _scores([r["expected_all_nearest"] / r["true_nearest"] for r in rows])[0]
+        right, false, missed, worse = _warning_counts(rows)
+        name = f"**{label}**" if label == "all" else label
+        lines.append(f"| {name} | {len(rows)} | {share:.0%} | {median:.2f} | {worst:.2f} | {n_share:.0%} | "
+                     f"{n_median:.2f} | {n_worst:.2f} | {a_share:.0%} | {an_share:.0%} | {right} / {false} / "
+                     f"{missed} (of {worse}) | {np.median([r['cost'] for r in rows]):.2f} |")
+    return "\n".join(lines)
+
+
+def frame_table(records) -> str:
+    """Per frame: the share within 30 % for the completion and nearest fill, and the median ratio."""
+    lines = ["| frame | inputs | completion within 30 % | median | nearest within 30 % | median |",
+             "|---|---:|---:|---:|---:|---:|"]
+    for name in dict.fromkeys(r["frame"] for r in records):
+        rows = [r for r in records if r["frame"] == name]
+        share, median, _ = _scores([r["expected"] / r["true"] for r in rows])
+        n_share, n_median, _ = _scores([r["expected_nearest"] / r["true_nearest"] for r in rows])
+        lines.append(f"| {name} | {len(rows)} | {share:.0%} | {median:.2f} | {n_share:.0%} | {n_median:.2f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", help="markdown file to write (default: print)")
+    parser.add_argument("--calibration", action="store_true", help="report the calibration frames instead")
+    parser.add_argument("--frames", nargs="*", help="frame names (default: the report or calibration frames)")
+    parser.add_argument("--seeds", default="0,1,2")
+    parser.add_argument("--step", type=int, default=1, help="keep every step-th row and column (quick runs)")
+    args = parser.parse_args(argv)
+    names = args.frames or frame_list.available(CALIBRATION_FRAMES if args.calibration else frame_list.REPORT_FRAMES)
+    if not names:
+        print("no shared frames: set SPARSEDEPTH_DATA", file=sys.stderr)
+        return 1
+    seeds = [int(s) for s in args.seeds.split(",")]
+    records = [record for name in names for record in measure(name, seeds, args.step)]
+    command = "python -m bench.expected_error" + ("".join(f" {a}" for a in argv) if argv else
+                                                  "".join(f" {a}" for a in sys.argv[1:]))
+    text = "\n\n".join([
+        f"Written by `{command}`; frames: {', '.join(names)}; seeds {args.seeds}.",
+        table(records),
+        frame_table(records),
+    ]) + "\n"
+    if args.out:
+        Path(args.out).write_text(text)
+    else:
+        print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
