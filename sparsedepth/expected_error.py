@@ -205,7 +205,9 @@ def expected_error(image, sparse_depth, mask=None, *, folds=3, seed=0, weights=N
               \\widehat{RMSE}_{nearest} = \\sqrt{\\tfrac{1}{|T|} \\sum_{x \\in T} m_{nearest}(D(x))}
 
     with ``c = DEFAULT_FACTOR`` for the default completion (its error relative to the fast one's) and 1 for the
-    fast one.  The estimate is about ``T``: pixels where the sensor gives no depth and the scene has none either
+    fast one.  The held-out values are measurements: with samples of noise ``σ`` the estimate is the error
+    against a new measurement, ``sqrt(e² + σ²)`` for a true error ``e`` (nearest fill of a constant scene:
+    ``σ √2``).  The estimate is about ``T``: pixels where the sensor gives no depth and the scene has none either
     (sky, the zero border of a registered frame) count as far-away pixels.
 
     Cost: ``folds`` fast completions and nearest fills and ``folds + 1`` distance transforms, about 0.1-0.3 of a

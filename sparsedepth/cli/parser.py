@@ -519,7 +519,7 @@ def _add_method_options(parser) -> None:
 
 
 def _add_output_options(parser) -> None:
-    """--out, --uncertainty, --max-uncertainty, --json, --figure, --depth-vis, --outdir and -q."""
+    """--out, --uncertainty, --max-uncertainty, --json, --expected-error, --figure, --depth-vis, --outdir and -q."""
     out = parser.add_argument_group("output")
     out.add_argument("--out", metavar="PATH",
                      help=f"dense depth: {_OUT_HELP}; a PNG's scale is the input's or --out-scale.")
@@ -539,6 +539,12 @@ def _add_output_options(parser) -> None:
                      help="leave the pixels whose uncertainty exceeds M metres missing in --out (0 in PNG, NaN in "
                           "float formats) instead of extrapolating; the count is reported.")
     out.add_argument("--json", metavar="PATH", help="metrics, settings and solver history as JSON.")
+    out.add_argument("--expected-error", action="store_true",
+                     help="also estimate, from the samples alone (cross-validation with fast completions, about "
+                          "0.1-0.3 of a default completion's time), the RMSE over the unobserved pixels of the "
+                          "output and of nearest fill: one line 'expected RMSE ~ X m (nearest fill ~ Y m)', both in "
+                          "--json, and a warning when the output is not expected to beat nearest fill.  Not with "
+                          "--prior or --fill-method colorization.  docs/expected_error.md measures it.")
     out.add_argument("--ply", metavar="PATH",
                      help="coloured 3-D point cloud of the completed depth (binary PLY, metres, camera frame; "
                           "colours of --image); needs --intrinsics, --camera or --calib calib.txt (the demo "

@@ -90,6 +90,8 @@ def build_report(args, argv, outcome, description, weights, weights_given, png_s
             gap_proven=bool(result.gap_proven), solver_runtime=result.runtime,
             history=[dataclasses.asdict(record) for record in result.history],
         )
+    if getattr(args, "expected_error", False) and result is not None:
+        report.update(expected_rmse=result.expected_rmse, expected_nearest_rmse=result.expected_nearest_rmse)
     if result is not None and result.uncertainty is not None:
         report["uncertainty"] = _uncertainty_summary(outcome)
         png = uncertainty_png(args, outcome, png_scale)

@@ -10,6 +10,7 @@ Imports anything of the library and the other modules of
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -18,6 +19,7 @@ import imageio.v3 as iio
 import numpy as np
 
 from ..batch import evaluate_frame
+from ..completion import ARGUMENT_RULES, _with_expected_error
 from ..datasets import load_motorcycle
 from .._validation import check_input_file
 from ..io import KINECT_NYU, KinectDisparity, read_calib, read_depth, read_image, read_mask
@@ -35,7 +37,7 @@ from .outputs import Named, commit
 from .parser import DEMO_DIR, DEMO_DOWNSAMPLE, DEMO_KEEP_FRACTION, weights_of
 from .report import build_report, matplotlib_classes, print_table, render_figure, uncertainty_png_line
 
-__all__ = ["READER_FLAGS", "plan_outputs", "wants_uncertainty", "input_files", "run_one"]
+__all__ = ["READER_FLAGS", "plan_outputs", "wants_uncertainty", "input_files", "run_one", "expected_error_line"]
 
 _ABSURD_LOW, _ABSURD_HIGH = 1e-3, 1e3  # metres: a median outside this means a wrong scale
 
@@ -367,12 +369,41 @@ def _check_observable(args, mode, depth, mask) -> None:
         raise UsageError(f"--keep-count {args.keep_count} exceeds the {count} valid pixels of {source}")
 
 
+def _check_expected_error(args) -> None:
+    """--expected-error with --prior or --fill-method colorization: the library's rule (its row of
+    :data:`~sparsedepth.completion.ARGUMENT_RULES`) in flags, refused before any file is read."""
+    if not args.expected_error:
+        return
+    why, excludes = next((why, excludes) for argument, why, excludes in ARGUMENT_RULES if argument == "expected_error")
+    given = {"colorization": args.fill_holes and args.fill_method == "colorization", "prior": args.prior is not None}
+    flags = {"colorization": "--fill-method colorization", "prior": "--prior"}
+    named = [flags[name] for name in excludes if given.get(name)]
+    if named:
+        raise UsageError(f"--expected-error {why} {', '.join(named)}")
+
+
+def _estimate_error(args, image, outcome, weights, stream):
+    """``outcome`` with its result's expected RMSEs (:func:`~sparsedepth.expected_error.expected_error` on the
+    samples the completion used); the warning that it is not expected to beat nearest fill is one line on
+    ``stream``."""
+    with warnings_as_lines(stream):
+        result = _with_expected_error(outcome.result, image, outcome.sparse, outcome.observed,
+                                      "fast" if args.fast else "default", weights)
+    return dataclasses.replace(outcome, result=result)
+
+
+def expected_error_line(result) -> str:
+    """The line of ``--expected-error``: ``expected RMSE ~ X m (nearest fill ~ Y m)``."""
+    return f"expected RMSE ~ {result.expected_rmse:.3g} m (nearest fill ~ {result.expected_nearest_rmse:.3g} m)"
+
+
 def run_one(args, argv, mode, stdout, stderr) -> int:
     """The demo or one frame of the user's files: complete or fill it, write every output or none, print the table.
 
     Returns the exit code (0); bad options or files raise
     :class:`~sparsedepth.cli.messages.UsageError` or a library error.
     """
+    _check_expected_error(args)
     weights, weights_given = weights_of(args)
     image, depth, mask, truth, prior, description, keep_fraction, intrinsics = _load_frame(args, mode, stderr)
     _check_observable(args, mode, depth, mask)
@@ -388,6 +419,8 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
     outcome = _evaluate(args, image, depth, mask, truth, prior, keep_fraction, weights, stderr)
     if outcome.image_shift != (0, 0):
         image = shift_image(image, outcome.image_shift)  # the figure and the point cloud show the registered image
+    if args.expected_error and outcome.result is not None:
+        outcome = _estimate_error(args, image, outcome, weights, stderr)
 
     # every output is encoded and checked before any file is touched; commit writes all or none
     _check_png_range(outcome.depth, png_scale, png_targets, "the completed depth")
@@ -399,6 +432,8 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
         print("note: matplotlib is not installed, no figure.png (pip install 'sparsedepth[plot]')", file=stderr)
 
     print_table(outcome, description, stdout, image_shift=args.image_shift)
+    if args.expected_error and outcome.result is not None:
+        print(expected_error_line(outcome.result), file=stdout)
     saturated = uncertainty_png_line(args, outcome, png_scale)
     if saturated is not None:
         print(saturated, file=stdout)
