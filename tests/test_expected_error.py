@@ -161,3 +161,19 @@ def test_the_command_line_refuses_it_with_a_prior(tmp_path, capsys, monkeypatch)
     assert main(["--image", "rgb.png", "--depth", "d.png", "--prior", "p.npy", "--expected-error"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--expected-error" in err[0] and "--prior" in err[0]
+
+
+def test_the_command_line_warns_in_one_line_where_nearest_fill_is_exact(image, tmp_path, capsys, monkeypatch):
+    import imageio.v3 as iio
+
+    monkeypatch.chdir(tmp_path)
+    sparse, mask, _ = _cells(image)
+    iio.imwrite("rgb.png", (image * 255).astype(np.uint8))
+    np.save("depth.npy", np.where(mask, sparse, 0.0))
+    assert main(["--image", "rgb.png", "--depth", "depth.npy", "--out", "dense.npy", "--expected-error", "-q"]) == 0
+    captured = capsys.readouterr()
+    warned = [line for line in captured.err.splitlines() if "not expected to beat nearest fill" in line]
+    assert len(warned) == 1 and warned[0].startswith("warning: ")
+    line = next(line for line in captured.out.splitlines() if line.startswith("expected RMSE"))
+    expected, nearest = map(float, re.findall(r"~ (\S+) m", line))
+    assert expected >= nearest

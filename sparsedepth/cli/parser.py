@@ -543,8 +543,9 @@ def _add_output_options(parser) -> None:
                      help="also estimate, from the samples alone (cross-validation with fast completions, about "
                           "0.1-0.3 of a default completion's time), the RMSE over the unobserved pixels of the "
                           "output and of nearest fill: one line 'expected RMSE ~ X m (nearest fill ~ Y m)', both in "
-                          "--json, and a warning when the output is not expected to beat nearest fill.  Not with "
-                          "--prior or --fill-method colorization.  docs/expected_error.md measures it.")
+                          "--json, and a warning when the output is not expected to beat nearest fill.  One frame (the "
+                          "demo or --image/--depth); not with --prior or --fill-method colorization.  "
+                          "docs/expected_error.md measures it.")
     out.add_argument("--ply", metavar="PATH",
                      help="coloured 3-D point cloud of the completed depth (binary PLY, metres, camera frame; "
                           "colours of --image); needs --intrinsics, --camera or --calib calib.txt (the demo "
