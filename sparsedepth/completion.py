@@ -280,7 +280,8 @@ def _with_expected_error(result, image, sparse_depth, mask, quality, weights) ->
     """``result`` with its expected RMSE and nearest fill's (:func:`~sparsedepth.expected_error.expected_error`),
     warning :class:`~sparsedepth.result.NoGainWarning` when the completion is not expected to beat nearest fill."""
     estimate = estimate_expected_error(image, sparse_depth, mask, quality=quality,
-                                       weights=weights if quality == "fast" else None)
+                                       weights=weights if quality == "fast" else None,
+                                       completed=result.depth if quality == "default" else None)
     if not estimate.beats_nearest:
         warnings.warn(f"the completion is not expected to beat nearest fill: expected RMSE {estimate.rmse:.4g} vs "
                       f"{estimate.nearest_rmse:.4g} for nearest fill (estimated from the samples; "

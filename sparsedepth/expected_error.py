@@ -20,13 +20,18 @@ from scipy import ndimage
 from ._validation import as_depth_and_mask
 from .modes.fast import complete_fast
 
-__all__ = ["ExpectedError", "expected_error", "distance_model", "DEFAULT_FACTOR", "TILE_SCALE", "TILE_QUANTILE",
-           "MIN_TILE", "MAX_TILE_SHARE", "BIN_RATIO", "MIN_BIN_COUNT", "EXPONENT_BOUNDS", "MIN_SAMPLES"]
+__all__ = ["ExpectedError", "expected_error", "distance_model", "DEFAULT_FACTOR", "MIN_DEFAULT_FACTOR", "TILE_SCALE",
+           "TILE_QUANTILE", "MIN_TILE", "MAX_TILE_SHARE", "BIN_RATIO", "MIN_BIN_COUNT", "EXPONENT_BOUNDS",
+           "MIN_SAMPLES"]
 
 #: The default completion's RMSE over the fast completion's at the same samples, the median on the calibration
 #: scenes (middlebury2001/tsukuba, nyu_mmseg_pseudo/bookstore_0001d_00001, realsense_d435 80 and 130: every
 #: pattern of ``python -m bench.expected_error``, seeds 0-2).  The held-out errors are those of fast completions.
 DEFAULT_FACTOR = 0.9
+#: With the default completion's depth at hand (``completed``), its RMSE is the fast one's times a factor of its own
+#: (Notes), at least ``MIN_DEFAULT_FACTOR`` (the smallest default-over-fast RMSE ratio on the calibration scenes is
+#: 0.52).
+MIN_DEFAULT_FACTOR = 0.5
 #: Tiles of side ``TILE_SCALE ×`` the ``TILE_QUANTILE`` quantile of the target pixels' distances to the nearest
 #: sample (at least :data:`MIN_TILE` pixels) are held out together, so that the held-out samples' distances to
 #: the remaining ones reach those of the pixels the estimate is about (holes, gaps between scan lines).  Chosen
@@ -61,6 +66,9 @@ class ExpectedError:
         Side in pixels of the tiles held out together.
     exponent, nearest_exponent : float
         Power-law exponents ``p`` of the two squared-error models beyond the largest held-out distance.
+    factor : float
+        :attr:`rmse` over the fast completions' modelled RMSE: 1 for ``quality="fast"``, :data:`DEFAULT_FACTOR`
+        for the default completion without ``completed``, its own factor with it (Notes).
     largest_distance : float
         Mean distance of the farthest distance bin of the model (pixels); target pixels farther are extrapolated.
     extrapolated : float
@@ -76,6 +84,7 @@ class ExpectedError:
     tile: int = 0
     exponent: float = float("nan")
     nearest_exponent: float = float("nan")
+    factor: float = float("nan")
     largest_distance: float = float("nan")
     extrapolated: float = float("nan")
     pixels: int = 0
@@ -157,7 +166,7 @@ def _tile_folds(observed, tile, folds, rng):
 
 
 def expected_error(image, sparse_depth, mask=None, *, folds=3, seed=0, weights=None, quality="default",
-                   region=None) -> ExpectedError:
+                   region=None, completed=None) -> ExpectedError:
     """Estimate the RMSE of a completion and of nearest fill from the samples alone.
 
     Parameters
@@ -175,6 +184,10 @@ def expected_error(image, sparse_depth, mask=None, *, folds=3, seed=0, weights=N
         :data:`DEFAULT_FACTOR`) or the fast one (the model as measured).
     region : ndarray of bool, (H, W), optional
         The pixels the RMSE is about (the unobserved ones among them); default every unobserved pixel.
+    completed : ndarray, (H, W), optional
+        With ``quality="default"``: the default completion itself (``result.depth``; NaN pixels are left out),
+        which sets the factor from the fast model to it for this input (Notes) at the cost of one more fast
+        completion.
 
     Returns
     -------
@@ -184,7 +197,7 @@ def expected_error(image, sparse_depth, mask=None, *, folds=3, seed=0, weights=N
     ------
     ValueError
         Fewer than :data:`MIN_SAMPLES` observed pixels; ``folds`` not an integer >= 2; an unknown ``quality``;
-        ``region`` of another shape or with no unobserved pixel.
+        ``region`` or ``completed`` of another shape, or no unobserved pixel.
 
     Notes
     -----
@@ -203,14 +216,24 @@ def expected_error(image, sparse_depth, mask=None, *, folds=3, seed=0, weights=N
     .. math:: \\widehat{RMSE} = c \\sqrt{\\tfrac{1}{|T|} \\sum_{x \\in T} m_{completion}(D(x))}, \\qquad
               \\widehat{RMSE}_{nearest} = \\sqrt{\\tfrac{1}{|T|} \\sum_{x \\in T} m_{nearest}(D(x))}
 
-    with ``c = DEFAULT_FACTOR`` for the default completion (its error relative to the fast one's) and 1 for the
-    fast one.  The held-out values are measurements: with samples of noise ``σ`` the estimate is the error
-    against a new measurement, ``sqrt(e² + σ²)`` for a true error ``e`` (nearest fill of a constant scene:
+    with ``c = 1`` for the fast completion.  For the default one, ``c = DEFAULT_FACTOR`` (its RMSE over the fast
+    one's, the median on the calibration scenes), or, given the default completion ``z_d`` and the fast
+    completion ``z_f`` of all the samples, the factor of this input: taking the default's departure from the fast
+    completion as a correction orthogonal to its own error, ``E(z_f − t)² = E(z_d − z_f)² + E(z_d − t)²``, so
+
+    .. math:: c^2 = \\max\\Big(1 - \\frac{\\tfrac{1}{|T|} \\sum_{x \\in T} (z_d - z_f)^2}
+              {\\tfrac{1}{|T|} \\sum_{x \\in T} m_{completion}(D(x))}, \\; c_{min}^2\\Big)
+
+    with ``c_min = MIN_DEFAULT_FACTOR``.
+
+    The held-out values are measurements: with samples of noise ``σ`` the estimate is the error against a new
+    measurement, ``sqrt(e² + σ²)`` for a true error ``e`` (nearest fill of a constant scene:
     ``σ √2``).  The estimate is about ``T``: pixels where the sensor gives no depth and the scene has none either
     (sky, the zero border of a registered frame) count as far-away pixels.
 
-    Cost: ``folds`` fast completions and ``folds + 1`` distance transforms (the nearest fills are read from those),
-    0.15-0.3 of a default completion's time at 640x480 (``docs/expected_error.md``).
+    Cost: ``folds`` fast completions (one more with ``completed``) and ``folds + 1`` distance transforms (the
+    nearest fills are read from those), 0.1-0.3 of a default completion's time at 640x480
+    (``docs/expected_error.md``).
     """
     depth, observed = as_depth_and_mask(sparse_depth, mask)
     if isinstance(folds, bool) or not isinstance(folds, (int, np.integer)) or folds < 2:
@@ -220,6 +243,10 @@ def expected_error(image, sparse_depth, mask=None, *, folds=3, seed=0, weights=N
     count = int(observed.sum())
     if count < MIN_SAMPLES:
         raise ValueError(f"expected_error needs at least {MIN_SAMPLES} observed pixels; got {count}")
+    if completed is not None:
+        completed = np.asarray(completed, dtype=np.float64)
+        if completed.shape != observed.shape:
+            raise ValueError(f"completed has shape {completed.shape} but the depth has shape {observed.shape}")
     target = ~observed
     if region is not None:
         region = np.asarray(region, dtype=bool)
@@ -245,21 +272,28 @@ def expected_error(image, sparse_depth, mask=None, *, folds=3, seed=0, weights=N
         keep = observed.copy()
         keep[rows[held], cols[held]] = False
         kept_depth = np.where(keep, depth, np.nan)
-        completed = complete_fast(image, kept_depth, keep, weights=weights).depth
+        fold_completion = complete_fast(image, kept_depth, keep, weights=weights).depth
         # nearest fill at the held-out pixels, as sparsedepth.nearest_fill computes it, and their distances
         distance, (near_rows, near_cols) = ndimage.distance_transform_edt(~keep, return_indices=True)
         held_rows, held_cols = rows[held], cols[held]
         truth = depth[held_rows, held_cols]
         distances.append(distance[held_rows, held_cols])
-        completion_errors.append((completed[held_rows, held_cols] - truth) ** 2)
+        completion_errors.append((fold_completion[held_rows, held_cols] - truth) ** 2)
         nearest_errors.append((depth[near_rows[held_rows, held_cols], near_cols[held_rows, held_cols]] - truth) ** 2)
     distances = np.concatenate(distances)
     completion_model, exponent, largest = distance_model(distances, np.concatenate(completion_errors))
     nearest_model, nearest_exponent, _ = distance_model(distances, np.concatenate(nearest_errors))
-    factor = DEFAULT_FACTOR if quality == "default" else 1.0
+    fast_mse = float(np.mean(completion_model(distance_all)))
+    factor = 1.0 if quality == "fast" else DEFAULT_FACTOR
+    if quality == "default" and completed is not None and fast_mse > 0:
+        fast = complete_fast(image, np.where(observed, depth, np.nan), observed, weights=weights).depth
+        departure = (completed - fast)[target]
+        departure = departure[np.isfinite(departure)]
+        gain = float(np.mean(departure ** 2)) / fast_mse if departure.size else 0.0
+        factor = float(np.sqrt(max(1.0 - gain, MIN_DEFAULT_FACTOR ** 2)))
     return ExpectedError(
-        rmse=factor * float(np.sqrt(np.mean(completion_model(distance_all)))),
+        rmse=factor * float(np.sqrt(fast_mse)),
         nearest_rmse=float(np.sqrt(np.mean(nearest_model(distance_all)))),
         held_out=int(distances.size), folds=int(folds), tile=tile, exponent=exponent,
-        nearest_exponent=nearest_exponent, largest_distance=largest,
+        nearest_exponent=nearest_exponent, factor=factor, largest_distance=largest,
         extrapolated=float(np.mean(distance_all > largest)), pixels=int(distance_all.size))

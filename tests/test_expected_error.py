@@ -90,11 +90,30 @@ def test_complete_depth_stores_what_expected_error_returns(image):
             warnings.simplefilter("error", sd.NoGainWarning)
             warnings.simplefilter("ignore", sd.ClampWarning)
             result = sd.complete_depth(image, sparse, mask, quality=quality, expected_error=True)
-        estimate = expected_error(image, sparse, mask, quality=quality)
+        estimate = expected_error(image, sparse, mask, quality=quality,
+                                  completed=result.depth if quality == "default" else None)
         assert result.expected_rmse == estimate.rmse and result.expected_nearest_rmse == estimate.nearest_rmse
     assert np.array_equal(result.depth, _quiet(sd.complete_depth, image, sparse, mask, quality="fast").depth)
     assert expected_error(image, sparse, mask).rmse == pytest.approx(
         DEFAULT_FACTOR * expected_error(image, sparse, mask, quality="fast").rmse)
+
+
+def test_the_default_completions_own_factor(image):
+    """Given the default completion, the factor is sqrt(1 - mean (z_d - z_f)^2 / fast MSE), within [0.5, 1]: 1 when
+    the completion is the fast one itself, 0.5 when it departs from it by more than the fast error."""
+    rows, cols = np.mgrid[0:96, 0:120]
+    truth = 1.0 + np.sin(cols / 15.0) * 0.3 + rows / 100.0
+    sparse, mask = sd.sample_depth(truth, fraction=0.05, seed=0)
+    fast = _quiet(sd.complete_depth, image, sparse, mask, quality="fast").depth
+    fast_estimate = expected_error(image, sparse, mask, quality="fast")
+    same = expected_error(image, sparse, mask, completed=fast)
+    assert same.factor == 1.0 and same.rmse == pytest.approx(fast_estimate.rmse)
+    shift = 0.5 * fast_estimate.rmse
+    shifted = expected_error(image, sparse, mask, completed=fast + shift)
+    assert shifted.factor == pytest.approx(np.sqrt(1 - shift ** 2 / fast_estimate.rmse ** 2))
+    far = expected_error(image, sparse, mask, completed=fast + 10 * fast_estimate.rmse)
+    assert far.factor == 0.5 and far.rmse == pytest.approx(0.5 * fast_estimate.rmse)
+    assert expected_error(image, sparse, mask).factor == DEFAULT_FACTOR
 
 
 def test_the_estimate_is_a_function_of_the_seed(image):
@@ -131,6 +150,8 @@ def test_arguments_are_checked(image):
         expected_error(image, sparse, mask, quality="slow")
     with pytest.raises(ValueError, match="region has shape"):
         expected_error(image, sparse, mask, region=np.ones((3, 3), bool))
+    with pytest.raises(ValueError, match="completed has shape"):
+        expected_error(image, sparse, mask, completed=np.ones((3, 3)))
     few = np.zeros_like(mask)
     few[0, :10] = True
     with pytest.raises(ValueError, match="at least 16"):
