@@ -541,7 +541,7 @@ def _add_output_options(parser) -> None:
     out.add_argument("--json", metavar="PATH", help="metrics, settings and solver history as JSON.")
     out.add_argument("--expected-error", action="store_true",
                      help="also estimate, from the samples alone (cross-validation with fast completions, about "
-                          "0.1-0.3 of a default completion's time), the RMSE over the unobserved pixels of the "
+                          "0.15-0.35 of a default completion's time), the RMSE over the unobserved pixels of the "
                           "output and of nearest fill: one line 'expected RMSE ~ X m (nearest fill ~ Y m)', both in "
                           "--json, and a warning when the output is not expected to beat nearest fill.  One frame (the "
                           "demo or --image/--depth); not with --prior or --fill-method colorization.  "
