@@ -25,7 +25,8 @@ from .expected_error import expected_error as estimate_expected_error
 from .result import CompletionResult, NoGainWarning
 
 __all__ = ["complete_depth", "check_modes", "argument_conflict", "ARGUMENT_RULES", "choose_solver", "depth_jump_factor",
-           "range_outliers", "QUALITIES", "fast_factor", "FAST_WEIGHTS", "FAST_COARSE_RTOL", "CLAMP_WARNING_SHARE"]
+           "range_outliers", "QUALITIES", "fast_factor", "FAST_WEIGHTS", "FAST_COARSE_RTOL", "CLAMP_WARNING_SHARE",
+           "with_expected_error"]
 
 #: The values of ``complete_depth``'s ``quality``.
 QUALITIES = ("default", "fast")
@@ -273,10 +274,10 @@ def complete_depth(
             result = complete_with_uncertainty(problem, max_uncertainty=max_uncertainty, **settings)
         else:
             result = problem.solve(**settings)
-    return _with_expected_error(result, image, sparse_depth, mask, quality, weights) if expected_error else result
+    return with_expected_error(result, image, sparse_depth, mask, quality, weights) if expected_error else result
 
 
-def _with_expected_error(result, image, sparse_depth, mask, quality, weights) -> CompletionResult:
+def with_expected_error(result, image, sparse_depth, mask, quality, weights) -> CompletionResult:
     """``result`` with its expected RMSE and nearest fill's (:func:`~sparsedepth.expected_error.expected_error`),
     warning :class:`~sparsedepth.result.NoGainWarning` when the completion is not expected to beat nearest fill."""
     estimate = estimate_expected_error(image, sparse_depth, mask, quality=quality,

@@ -13,12 +13,12 @@ from sparsedepth.complete import main
 
 #: complete_depth's value for each argument of the table that it takes
 LIBRARY = dict(quality="fast", solver="cg", tol=1e-3, max_iter=3, callback=print, options={}, uncertainty=True,
-               max_uncertainty=1.0, prior=np.ones((12, 14)))
+               max_uncertainty=1.0, prior=np.ones((12, 14)), expected_error=True)
 #: the command line's flags for each argument of the table that it has
 FLAGS = dict(quality=["--fast"], solver=["--solver", "cg"], tol=["--tol", "1e-3"], max_iter=["--max-iter", "3"],
              uncertainty=["--uncertainty", "u.npy"], max_uncertainty=["--max-uncertainty", "1"],
              prior=["--prior", "prior.npy"], colorization=["--fill-holes", "--fill-method", "colorization"],
-             weights=["--delta", "0.1"])
+             weights=["--delta", "0.1"], expected_error=["--expected-error"])
 
 
 def _pairs(names):

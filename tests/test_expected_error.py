@@ -198,3 +198,13 @@ def test_the_command_line_warns_in_one_line_where_nearest_fill_is_exact(image, t
     line = next(line for line in captured.out.splitlines() if line.startswith("expected RMSE"))
     expected, nearest = map(float, re.findall(r"~ (\S+) m", line))
     assert expected >= nearest
+
+
+@pytest.mark.parametrize("source", [["--batch", "frames"], ["--colmap", "sparse", "--images", "images"]])
+def test_the_command_line_refuses_it_for_a_batch(source, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for folder in ("frames", "sparse", "images", "out"):
+        (tmp_path / folder).mkdir()
+    assert main([*source, "--outdir", "out", "--csv", "out/rows.csv", "--expected-error"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--expected-error is for one frame" in err[0]

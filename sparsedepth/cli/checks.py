@@ -81,6 +81,8 @@ def _check_combinations(args) -> str:
                               "a batch writes --csv (and per-frame depth with --outdir)")
         if args.depth_vis:
             raise UsageError("--depth-vis is for one frame; a batch writes --csv (and per-frame depth with --outdir)")
+        if args.expected_error:
+            raise UsageError("--expected-error is for one frame; a batch with ground truth scores every frame in --csv")
         if args.indices is not None and args.nyu_mat is None:
             raise UsageError("--indices selects frames of --nyu-mat")
         if (args.nyu_mat is not None and not args.fill_holes and args.keep_fraction is None
@@ -181,7 +183,8 @@ def _check_argument_rules(args, colorization) -> None:
              "quality": ["--fast"] if args.fast else [],
              "uncertainty": ["--uncertainty"] if args.uncertainty is not None else [],
              "max_uncertainty": ["--max-uncertainty"] if args.max_uncertainty is not None else [],
-             "prior": ["--prior"] if args.prior is not None else []}
+             "prior": ["--prior"] if args.prior is not None else [],
+             "expected_error": ["--expected-error"] if args.expected_error else []}
     if not colorization:
         flags["colorization"] = []
     conflict = argument_conflict(name for name, given in flags.items() if given)

@@ -19,7 +19,7 @@ import imageio.v3 as iio
 import numpy as np
 
 from ..batch import evaluate_frame
-from ..completion import ARGUMENT_RULES, _with_expected_error
+from ..completion import with_expected_error
 from ..datasets import load_motorcycle
 from .._validation import check_input_file
 from ..io import KINECT_NYU, KinectDisparity, read_calib, read_depth, read_image, read_mask
@@ -369,25 +369,12 @@ def _check_observable(args, mode, depth, mask) -> None:
         raise UsageError(f"--keep-count {args.keep_count} exceeds the {count} valid pixels of {source}")
 
 
-def _check_expected_error(args) -> None:
-    """--expected-error with --prior or --fill-method colorization: the library's rule (its row of
-    :data:`~sparsedepth.completion.ARGUMENT_RULES`) in flags, refused before any file is read."""
-    if not args.expected_error:
-        return
-    why, excludes = next((why, excludes) for argument, why, excludes in ARGUMENT_RULES if argument == "expected_error")
-    given = {"colorization": args.fill_holes and args.fill_method == "colorization", "prior": args.prior is not None}
-    flags = {"colorization": "--fill-method colorization", "prior": "--prior"}
-    named = [flags[name] for name in excludes if given.get(name)]
-    if named:
-        raise UsageError(f"--expected-error {why} {', '.join(named)}")
-
-
 def _estimate_error(args, image, outcome, weights, stream):
     """``outcome`` with its result's expected RMSEs (:func:`~sparsedepth.expected_error.expected_error` on the
     samples the completion used); the warning that it is not expected to beat nearest fill is one line on
     ``stream``."""
     with warnings_as_lines(stream):
-        result = _with_expected_error(outcome.result, image, outcome.sparse, outcome.observed,
+        result = with_expected_error(outcome.result, image, outcome.sparse, outcome.observed,
                                       "fast" if args.fast else "default", weights)
     return dataclasses.replace(outcome, result=result)
 
@@ -403,7 +390,6 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
     Returns the exit code (0); bad options or files raise
     :class:`~sparsedepth.cli.messages.UsageError` or a library error.
     """
-    _check_expected_error(args)
     weights, weights_given = weights_of(args)
     image, depth, mask, truth, prior, description, keep_fraction, intrinsics = _load_frame(args, mode, stderr)
     _check_observable(args, mode, depth, mask)
