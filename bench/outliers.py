@@ -32,6 +32,7 @@ import time  # noqa: E402
 import warnings  # noqa: E402
 
 import numpy as np  # noqa: E402
+from scipy import ndimage  # noqa: E402
 
 import sparsedepth as sd  # noqa: E402
 from sparsedepth.modes.fast import complete_fast  # noqa: E402
@@ -50,6 +51,8 @@ TUNE_FRAMES = ("middlebury2001/tsukuba", "nyu_mmseg_pseudo/bookstore_0001d_00001
 THRESHOLDS, FOLDS, RELATIVE_FLOOR = (5.0, 8.0, 12.0, 20.0), 5, 0.05
 #: What "pays" means (issue 48): mean RMSE gain at 2 % outliers and largest mean loss on clean inputs.
 REQUIRED_GAIN, ALLOWED_CLEAN_LOSS = 0.03, 0.005
+#: The depth-edge band of the ground truth (:func:`depth_edge_band`): relative 3x3 depth range and half-width (px).
+EDGE_JUMP, EDGE_BAND = 0.05, 2
 
 
 def leave_out_flags(image, sparse, mask, *, threshold, folds=FOLDS, floor=RELATIVE_FLOOR, seed=0) -> np.ndarray:
@@ -79,6 +82,21 @@ def leave_out_flags(image, sparse, mask, *, threshold, folds=FOLDS, floor=RELATI
     return flagged
 
 
+def depth_edge_band(depth) -> np.ndarray:
+    """Valid pixels within :data:`EDGE_BAND` pixels of a ground-truth depth edge.
+
+    A valid pixel is on an edge when the depth range of its 3x3 neighbourhood (valid pixels only) exceeds
+    :data:`EDGE_JUMP` times its depth (as ``sparsedepth.sampling.HOLE_EDGE_JUMP`` marks a sensor's edge pixels);
+    the band is those pixels widened by a square of side ``2 · EDGE_BAND + 1``.
+    """
+    valid = sd.valid_depth_mask(depth)
+    local_max = ndimage.maximum_filter(np.where(valid, depth, -np.inf), size=3, mode="nearest")
+    local_min = ndimage.minimum_filter(np.where(valid, depth, np.inf), size=3, mode="nearest")
+    with np.errstate(invalid="ignore"):
+        edge = valid & (local_max - local_min > EDGE_JUMP * np.where(valid, depth, 1.0))
+    return valid & ndimage.maximum_filter(edge, size=2 * EDGE_BAND + 1)
+
+
 def _completion(image, sparse, mask) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", sd.ClampWarning)
@@ -105,11 +123,13 @@ def _label(pattern, amount) -> str:
 def records(frames, inputs, seeds, thresholds, oracle=True) -> list[dict]:
     """One record per frame, input, level and seed: RMSE/MAE of each completion, what each rejection dropped."""
     out = []
+    bands = {frame.name: depth_edge_band(frame.depth) for frame in frames}
     for frame, (pattern, amount), seed, level in itertools.product(frames, inputs, seeds, LEVELS):
         sparse, mask, outlier = _inputs(frame, pattern, amount, level, seed)
-        hidden = ~mask
+        hidden, band = ~mask, bands[frame.name]
         rec = {"frame": frame.name, "input": _label(pattern, amount), "seed": seed, "level": level,
-               "samples": int(mask.sum()), "outliers": int(outlier.sum())}
+               "samples": int(mask.sum()), "outliers": int(outlier.sum()),
+               "inliers_at_edges": int((mask & ~outlier & band).sum())}
         metrics = sd.depth_metrics(_completion(frame.image, sparse, mask), frame.depth, mask=hidden)
         rec["default"] = (float(metrics.rmse), float(metrics.mae))
         if oracle:
@@ -124,6 +144,7 @@ def records(frames, inputs, seeds, thresholds, oracle=True) -> list[dict]:
             metrics = sd.depth_metrics(_completion(frame.image, sparse, mask & ~flagged), frame.depth, mask=hidden)
             rec[threshold] = {"rmse": float(metrics.rmse), "mae": float(metrics.mae), "seconds": seconds,
                               "inliers_dropped": int((flagged & ~outlier).sum()),
+                              "inliers_dropped_at_edges": int((flagged & ~outlier & band).sum()),
                               "outliers_found": int((flagged & outlier).sum())}
         out.append(rec)
         print(f"  {frame.name} {rec['input']} seed {seed} {100 * level:g} %: default RMSE {rec['default'][0]:.4g}, "
@@ -183,14 +204,17 @@ def report_tables(recs, threshold) -> tuple[str, dict]:
         found = (np.sum([r[threshold]["outliers_found"] for r in group])
                  / max(1, np.sum([r["outliers"] for r in group])))
         seconds = np.mean([r[threshold]["seconds"] for r in group])
+        dropped_count = np.sum([r[threshold]["inliers_dropped"] for r in group])
+        at_edges = np.sum([r[threshold]["inliers_dropped_at_edges"] for r in group]) / max(1, dropped_count)
+        edge_share = np.sum([r["inliers_at_edges"] for r in group]) / inliers
         stats[label, level] = {"cost": cost, "oracle": oracle, "rejection": rejection}
         rows.append([label, f"{100 * level:g} %", f"{cost:.3f}", f"{oracle:.3f}", f"{rejection:.3f}",
                      f"{mae_rejection:.3f}", f"{100 * found:.0f} %" if level else "–", f"{100 * dropped:.1f} %",
-                     f"{seconds:.2f}"])
+                     f"{100 * at_edges:.0f} % (of all inliers: {100 * edge_share:.0f} %)", f"{seconds:.2f}"])
     table = H.markdown_table(
         ["input", "outliers", "default RMSE / clean default's", "oracle RMSE / default's",
          f"rejection (t = {threshold:g}) RMSE / default's", "rejection MAE / default's", "outliers found",
-         "true inliers dropped", "rejection time (s)"], rows)
+         "true inliers dropped", "dropped inliers at depth edges", "rejection time (s)"], rows)
     per_frame = []
     for frame in dict.fromkeys(r["frame"] for r in recs):
         row = [frame]
@@ -238,7 +262,9 @@ def run(argv=()) -> tuple[str, dict]:
         f"{FOLDS} folds, each fold predicted by `complete_depth(..., quality=\"fast\")` of the other folds, "
         "r = log(sample / prediction), flagged when |r − median r| exceeds t times 1.4826 · median |r − median r| "
         f"and {RELATIVE_FLOOR:g}. 'Outliers found' is the share of true outliers flagged, 'true inliers dropped' the "
-        "share of the other samples flagged.")
+        "share of the other samples flagged; 'dropped inliers at depth edges' the share of those within "
+        f"{EDGE_BAND} px of a ground-truth depth edge (a 3x3 depth range above {100 * EDGE_JUMP:g} % of the depth; "
+        "`bench.outliers.depth_edge_band`), next to the share of all true inliers that lie there.")
     tuning = H.section(
         "Tuning the threshold (tuning frames)", command=command, frames_=tune_frames, seeds=seeds,
         body=H.markdown_table(["t", "RMSE / default's, clean", "at 2 % outliers", "at 5 % outliers",
@@ -267,7 +293,7 @@ def run(argv=()) -> tuple[str, dict]:
         f"(oracle) changes it by {change(1 - oracle_gain)} at 2 %.",
         f"* Leave-out rejection (t = {threshold:g}, tuned on the tuning frames), keypoint inputs: RMSE change "
         f"{change(1 - gain)} at 2 % outliers, {change(1 + clean_loss)} on clean inputs.",
-        *[f"* {label} input: RMSE change by 2 % outliers {change(stats[label, 0.02]['cost'])}; the oracle "
+        *[f"* {label.capitalize()} input: RMSE change by 2 % outliers {change(stats[label, 0.02]['cost'])}; the oracle "
           f"{change(stats[label, 0.02]['oracle'])}, the rejection {change(stats[label, 0.02]['rejection'])} at 2 % "
           f"(clean inputs: {change(stats[label, 0.0]['rejection'])})." for label in uniform],
         f"* Verdict: {'it pays' if pays else 'it does not pay'} by issue 48's bar (a mean RMSE gain of at least "

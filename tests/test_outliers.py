@@ -112,3 +112,15 @@ def test_the_true_outliers_are_the_samples_that_differ_from_the_clean_input(leve
     assert true_outliers.sum() == round(level * mask.sum())
     ratio = sparse[true_outliers] / depth[true_outliers]
     assert np.all((ratio >= outliers.OUTLIER_RANGE[0]) & (ratio <= outliers.OUTLIER_RANGE[1]))
+
+
+def test_depth_edge_band_of_a_step_and_of_a_plane():
+    depth, _ = _plane_and_image()
+    assert not outliers.depth_edge_band(depth).any()  # the plane's 3x3 ranges are at most 1.5 % of its depth
+    step = depth + 1.5 * (np.arange(SHAPE[1]) >= 40)
+    step[0, 0] = np.nan
+    band = outliers.depth_edge_band(step)
+    # columns 39 and 40 see both sides in their 3x3 neighbourhood; the band widens them by EDGE_BAND = 2
+    expected = np.zeros(SHAPE, bool)
+    expected[:, 39 - outliers.EDGE_BAND:41 + outliers.EDGE_BAND] = True
+    np.testing.assert_array_equal(band, expected)
