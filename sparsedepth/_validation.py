@@ -412,6 +412,25 @@ def check_option_names(options, valid, *, where: str) -> None:
 
 # --- colours
 
+def _intrinsics_of_matrix(matrix, label) -> list:
+    """``[fx, fy, cx, cy]`` of a 3x3 pinhole matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``."""
+    try:
+        K = np.asarray(matrix, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"{label} must be a 3x3 matrix of real numbers, got {matrix!r:.80}.") from None
+    if K.shape != (3, 3):
+        raise TypeError(f"{label} must be four numbers (fx, fy, cx, cy) or a 3x3 matrix K, got shape {K.shape}.")
+    if not np.all(np.isfinite(K)):
+        raise ValueError(f"{label}: the matrix K must be finite, got {K.tolist()}.")
+    if K[0, 1] != 0 or K[1, 0] != 0:
+        raise ValueError(f"{label}: the matrix K has a skew or shear term ({K[0, 1]:g}, {K[1, 0]:g}); only "
+                         "pinhole intrinsics [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] are supported.")
+    if not np.allclose(K[2], (0.0, 0.0, 1.0), rtol=0, atol=1e-12):
+        raise ValueError(f"{label}: the last row of K must be [0, 0, 1], got {K[2].tolist()} (divide K by K[2, 2] "
+                         "if it is a scaled pinhole matrix).")
+    return [K[0, 0], K[1, 1], K[0, 2], K[1, 2]]
+
+
 def check_rgb_colour(colour, *, name: str = "colour") -> tuple[int, int, int]:
     """Return an 8-bit sRGB colour as three Python ints.
 
@@ -435,20 +454,28 @@ def check_rgb_colour(colour, *, name: str = "colour") -> tuple[int, int, int]:
 def check_intrinsics(intrinsics, *, name: str = "intrinsics") -> tuple[float, float, float, float]:
     """Return pinhole intrinsics ``(fx, fy, cx, cy)`` in pixels as four Python floats.
 
-    ``TypeError`` unless ``intrinsics`` is a sequence of four real numbers
-    (a 3x3 matrix is refused with the fix: pass ``(K[0, 0], K[1, 1], K[0, 2],
-    K[1, 2])``); ``ValueError`` unless the focal lengths ``fx``, ``fy`` are
-    finite and positive and the principal point ``cx``, ``cy`` is finite.
+    ``intrinsics`` is any of: a sequence ``(fx, fy, cx, cy)``; a 3x3 matrix ``K = [[fx, 0, cx], [0, fy, cy], [0, 0,
+    1]]`` (nested sequences or an array); an object with attributes ``fx``, ``fy``, ``cx``, ``cy``; an object with an
+    ``intrinsic_matrix`` attribute holding ``K`` (Open3D's ``PinholeCameraIntrinsic``; no Open3D import here).
+    ``TypeError`` for anything else; ``ValueError`` for a matrix with a skew term or a last row other than ``[0, 0,
+    1]``, and unless the focal lengths ``fx``, ``fy`` are finite and positive and the principal point ``cx``, ``cy``
+    is finite.
     """
     label = argument_label(name)
+    if hasattr(intrinsics, "intrinsic_matrix"):
+        intrinsics = np.asarray(intrinsics.intrinsic_matrix, dtype=float)
+    elif all(hasattr(intrinsics, part) for part in ("fx", "fy", "cx", "cy")):
+        intrinsics = [getattr(intrinsics, part) for part in ("fx", "fy", "cx", "cy")]
     if isinstance(intrinsics, (str, bytes)) or not hasattr(intrinsics, "__len__"):
-        raise TypeError(f"{label} must be a sequence (fx, fy, cx, cy) of four numbers in pixels, "
+        raise TypeError(f"{label} must be a sequence (fx, fy, cx, cy) of four numbers in pixels or a 3x3 matrix K, "
                         f"got {type(intrinsics).__name__}.")
-    values = list(intrinsics)
+    if np.ndim(intrinsics) == 2 and not isinstance(intrinsics, (str, bytes)):
+        values = _intrinsics_of_matrix(intrinsics, label)
+    else:
+        values = list(intrinsics)
     if len(values) != 4 or not all(is_real(v) for v in values):
-        raise TypeError(f"{label} must be four real numbers (fx, fy, cx, cy) in pixels, got {len(values)} "
-                        f"item(s) ({intrinsics!r:.80}); from a 3x3 matrix K pass (K[0, 0], K[1, 1], K[0, 2], "
-                        "K[1, 2]).")
+        raise TypeError(f"{label} must be four real numbers (fx, fy, cx, cy) in pixels or a 3x3 matrix K, got "
+                        f"{len(values)} item(s) ({intrinsics!r:.80}).")
     fx, fy, cx, cy = (float(v) for v in values)
     for part, value in (("fx", fx), ("fy", fy)):
         if not (math.isfinite(value) and value > 0):

@@ -110,7 +110,10 @@ def test_downsampled_intrinsics_put_every_kept_pixel_where_the_full_grid_does():
 
 @pytest.mark.parametrize("intrinsics, error, match", [
     ((1.0, 1.0, 0.0), TypeError, "four real numbers"),
-    (np.eye(3), TypeError, r"K\[0, 0\]"),
+    ([[1.0, 0.5, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], ValueError, "skew"),
+    (2 * np.eye(3), ValueError, "last row"),
+    (np.eye(2), TypeError, "3x3"),
+    ([[1.0, 0.0, np.nan], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], ValueError, "finite"),
     ("1,1,0,0", TypeError, "sequence"),
     ((0.0, 1.0, 0.0, 0.0), ValueError, "fx"),
     ((1.0, -2.0, 0.0, 0.0), ValueError, "fy"),
@@ -233,3 +236,22 @@ def test_write_ply_failure_leaves_an_existing_file_alone(tmp_path):
     with pytest.raises(ValueError):
         sd.write_ply(tmp_path / "p.ply", [[0, np.inf, 1]])
     assert (tmp_path / "p.ply").read_bytes() == before and os.listdir(tmp_path) == ["p.ply"]
+
+
+def test_intrinsics_as_a_matrix_or_a_camera_object_give_the_same_points():
+    fx, fy, cx, cy = 525.0, 520.5, 319.5, 239.5
+    depth = np.random.default_rng(0).uniform(1, 3, (6, 8))
+    expected, _ = sd.depth_to_points(depth, (fx, fy, cx, cy))
+    K = [[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]
+
+    class WithMatrix:  # as Open3D's PinholeCameraIntrinsic offers it
+        intrinsic_matrix = np.array(K)
+
+    class WithParts:
+        def __init__(self):
+            self.fx, self.fy, self.cx, self.cy = fx, fy, cx, cy
+
+    for intrinsics in (K, np.array(K), WithMatrix(), WithParts()):
+        assert check_intrinsics(intrinsics) == (fx, fy, cx, cy)
+        points, _ = sd.depth_to_points(depth, intrinsics)
+        np.testing.assert_array_equal(points, expected)

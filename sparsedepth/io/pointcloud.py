@@ -72,9 +72,12 @@ def depth_to_points(depth, intrinsics, *, image=None, name: str = "intrinsics") 
     depth : (H, W) array_like of real numbers
         Depth ``z`` along the optical axis, in metres; pixels that are NaN,
         infinite or ``<= 0`` are missing and skipped.
-    intrinsics : sequence of 4 floats
+    intrinsics : sequence of 4 floats, 3x3 array_like or camera object
         ``(fx, fy, cx, cy)`` in pixels, for this ``(H, W)`` grid (scale them
-        with the image: see Notes).
+        with the image: see Notes); or the matrix ``K``, or an object with
+        ``fx``, ``fy``, ``cx``, ``cy`` or an ``intrinsic_matrix`` (Open3D's
+        ``PinholeCameraIntrinsic``), see
+        :func:`~sparsedepth._validation.check_intrinsics`.
     image : (H, W) or (H, W, 3) or (H, W, 4) array_like, optional
         The image registered with ``depth``.  uint8 as is, uint16 divided by
         257, float in [0, 1] times 255; grey is repeated in the three
