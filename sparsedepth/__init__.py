@@ -1,8 +1,9 @@
 """sparsedepth: dense depth from an image and a few depth samples, by regularised optimisation.
 
 Turn an RGB image plus a few percent of depth pixels into a dense depth map, or fill the holes of a raw depth
-sensor, with no training and on a CPU.  ``python -m sparsedepth.complete`` is the command line; the guides and the
-API reference are in the documentation (``docs/``, built by ``mkdocs build``).
+sensor, with no training and on a CPU.  ``python -m sparsedepth.complete`` is the command line (``--help``); the
+guides and the measured results are the Markdown pages of the repository's ``docs/`` folder (``docs/colmap.md``
+for structure-from-motion scenes, ``docs/architecture.md`` for the code).
 
 The user's API
 --------------
