@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from .._validation import check_intrinsics
 from ..datasets.frame import NYU_RGB_INTRINSICS
 from ..io import read_calib
+from ..io.calibration import read_intrinsics
 from .messages import UsageError
 
 __all__ = ["CAMERA_PRESETS", "CameraPreset", "KINECT_CALIB", "frame_intrinsics", "intrinsics_source",
@@ -53,14 +54,24 @@ CAMERA_PRESETS = {
 
 
 def parse_intrinsics(text: str) -> tuple[float, float, float, float]:
-    """The argparse type of ``--intrinsics``: ``fx,fy,cx,cy`` in pixels, focal lengths positive."""
+    """The argparse type of ``--intrinsics``: ``fx,fy,cx,cy`` in pixels (focal lengths positive), or a calibration
+    file :func:`~sparsedepth.io.calibration.read_intrinsics` reads (a 3x3 K, JSON/YAML, KITTI, COLMAP)."""
     parts = text.split(",")
     try:
         values = [float(p) for p in parts]
     except ValueError:
         values = None
+    if values is None and len(parts) == 1:
+        try:
+            return read_intrinsics(text, name="--intrinsics")
+        except FileNotFoundError:
+            raise argparse.ArgumentTypeError(f"expected four numbers fx,fy,cx,cy in pixels or a calibration file, "
+                                             f"got {text!r} (no such file)") from None
+        except (TypeError, ValueError) as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix("--intrinsics ").rstrip(".")) from None
     if values is None or len(values) != 4:
-        raise argparse.ArgumentTypeError(f"expected four numbers fx,fy,cx,cy in pixels, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected four numbers fx,fy,cx,cy in pixels or a calibration file, got "
+                                         f"{text!r}")
     try:
         return check_intrinsics(values, name="--intrinsics")
     except ValueError as exc:

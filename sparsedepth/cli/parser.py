@@ -448,9 +448,12 @@ def _add_camera_options(parser) -> None:
     """--intrinsics / --camera: the pinhole camera of --image, for --ply."""
     cam = parser.add_argument_group("camera (for --ply; --calib calib.txt gives them too)")
     which = cam.add_mutually_exclusive_group()
-    which.add_argument("--intrinsics", type=parse_intrinsics, metavar="FX,FY,CX,CY",
+    which.add_argument("--intrinsics", type=parse_intrinsics, metavar="FX,FY,CX,CY|FILE",
                        help="pinhole intrinsics of --image in pixels (pixel centres at integer coordinates, "
-                            "column u, row v from 0); scaled by --downsample.")
+                            "column u, row v from 0), or a file holding them: a 3x3 K (.txt, .npy; KITTI cam.txt), "
+                            "JSON (fx/fy/cx/cy, K, Open3D's), 'fx: ...' YAML (RealSense), KITTI "
+                            "calib_cam_to_cam.txt (P_rect_02), COLMAP cameras.txt (one pinhole camera); scaled by "
+                            "--downsample.")
     presets = "; ".join(f"{name}: {preset.what}" for name, preset in CAMERA_PRESETS.items())
     which.add_argument("--camera", choices=sorted(CAMERA_PRESETS),
                        help=f"intrinsics preset. {presets}. Other image sizes are refused.")

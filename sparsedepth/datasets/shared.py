@@ -6,7 +6,7 @@ folder (see its ``SOURCES.md`` for the units), the registry of frame name ->
 files + loader + scene, :func:`list_shared_frames`, :func:`load_shared_frame` and :func:`shared_frame_scenes`
 (which frames show one scene: a benchmark keeps a scene on one side of a tuning/report split).
 
-Imports NumPy, :mod:`sparsedepth.io` and :mod:`.frame` only.
+Imports :mod:`sparsedepth.io` and :mod:`.frame` only.
 """
 
 from __future__ import annotations
@@ -17,10 +17,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-import numpy as np
-
 from .._validation import check_folder
 from ..io import read_calib, read_depth, read_depth_array, read_depth_png, read_image
+from ..io.calibration import read_intrinsics
 from .frame import MMSEG_NAME, MOTORCYCLE_CALIBRATION, Frame, as_rgb, nyu_mmseg_frame
 
 __all__ = ["list_shared_frames", "load_shared_frame", "shared_data_dir", "shared_frame_scenes"]
@@ -177,32 +176,13 @@ def _load_realsense(root: Path, frame: str) -> Frame:
         depth=read_depth_array(depth_path, key="depth"),
         units="m",
         source=f"{image_path}; {depth_path}; {calib_path}",
-        intrinsics=_key_value_intrinsics(calib_path),
+        intrinsics=read_intrinsics(calib_path),
     )
-
-
-def _key_value_intrinsics(path: Path) -> tuple[float, float, float, float]:
-    """``(fx, fy, cx, cy)`` from a file of ``key: value`` lines (ClearGrasp's ``camera_intrinsics.yaml``)."""
-    values = {}
-    for line in path.read_text(encoding="utf-8").splitlines():
-        key, sep, value = line.partition("#")[0].partition(":")
-        if sep:
-            values[key.strip()] = value.strip()
-    try:
-        return tuple(float(values[k]) for k in ("fx", "fy", "cx", "cy"))
-    except (KeyError, ValueError) as exc:
-        raise ValueError(f"'{path}': expected fx, fy, cx, cy as 'key: number' lines ({exc})") from None
 
 
 def _load_kitti_raw(root: Path, frame: str) -> Frame:
     folder = root / "kitti_raw_0023"
     image_path, depth_path, cam_path = folder / f"rgb_{frame}.png", folder / f"velodyne_{frame}.npz", folder / "cam.txt"
-    try:
-        K = np.loadtxt(cam_path, dtype=np.float64)
-    except ValueError as exc:
-        raise ValueError(f"'{cam_path}': expected a 3x3 matrix of numbers ({exc})") from None
-    if K.shape != (3, 3):
-        raise ValueError(f"'{cam_path}': expected a 3x3 matrix, got shape {K.shape}")
     return Frame(
         name=f"kitti_raw_0023/{frame}",
         dataset="KITTI raw (drive 2011_09_26_0023)",
@@ -210,7 +190,7 @@ def _load_kitti_raw(root: Path, frame: str) -> Frame:
         depth=read_depth_array(depth_path, key="velodyne_depth"),
         units="m",
         source=f"{image_path}; {depth_path}; {cam_path}",
-        intrinsics=(K[0, 0], K[1, 1], K[0, 2], K[1, 2]),
+        intrinsics=read_intrinsics(cam_path),
     )
 
 

@@ -1,8 +1,10 @@
 """Stereo and Kinect calibration: ``calib.txt`` files and disparity-to-depth conversions.
 
 What lives here: :class:`StereoCalibration` (Middlebury / ETH3D rectified
-stereo), :func:`read_calib`, :func:`disparity_to_depth`, and
-:class:`KinectDisparity` with the NYU Depth V2 constants :data:`KINECT_NYU`.
+stereo), :func:`read_calib`, :func:`disparity_to_depth`,
+:class:`KinectDisparity` with the NYU Depth V2 constants :data:`KINECT_NYU`,
+and :func:`read_intrinsics` (pinhole intrinsics from the files cameras come
+with: a 3x3 K, JSON or YAML, KITTI, COLMAP).
 
 Imports NumPy, :mod:`sparsedepth._validation` and :mod:`.files` /
 :mod:`.stored` only.
@@ -18,11 +20,11 @@ from typing import Mapping
 
 import numpy as np
 
-from .._validation import check_input_file, check_positive_finite, is_real
+from .._validation import check_input_file, check_intrinsics, check_positive_finite, is_real
 from .files import file_label
 from .stored import check_real_array
 
-__all__ = ["KINECT_NYU", "KinectDisparity", "StereoCalibration", "disparity_to_depth", "read_calib"]
+__all__ = ["KINECT_NYU", "KinectDisparity", "StereoCalibration", "disparity_to_depth", "read_calib", "read_intrinsics"]
 
 _MAX_BYTES = 1 << 20
 _KNOWN_KEYS = ("cam0", "cam1", "doffs", "baseline", "width", "height", "ndisp")
@@ -349,3 +351,151 @@ def disparity_to_depth(disparity, focal_px, baseline_mm, *, doffs=0.0) -> np.nda
     depth = np.full(shifted.shape, np.nan)
     depth[valid] = (focal_px * baseline_mm / 1000.0) / shifted[valid]
     return depth
+
+
+#: The KITTI projection matrix :func:`read_intrinsics` reads from a ``calib_cam_to_cam.txt``: the left colour
+#: camera's (image_02), the one the depth-completion benchmark's images come from.
+KITTI_PROJECTION = "P_rect_02"
+
+
+def read_intrinsics(path, *, name: str = "path") -> tuple[float, float, float, float]:
+    """Pinhole intrinsics ``(fx, fy, cx, cy)`` in pixels from a camera's calibration file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        One of (told apart by extension and content):
+
+        * ``.npy``: a 3x3 matrix ``K`` or four numbers ``fx, fy, cx, cy`` (never unpickled);
+        * ``.json``: an object with ``fx``, ``fy``, ``cx``, ``cy``, or with ``K`` / ``camera_matrix`` (3x3,
+          row by row), or Open3D's ``PinholeCameraIntrinsic`` file (``intrinsic_matrix``: 9 numbers, column by
+          column);
+        * text: ``key: value`` lines with ``fx``, ``fy``, ``cx``, ``cy`` (YAML as ClearGrasp / RealSense tools
+          write it); a KITTI ``calib_cam_to_cam.txt`` (its :data:`KITTI_PROJECTION` line); a COLMAP
+          ``cameras.txt`` holding one SIMPLE_PINHOLE or PINHOLE camera; nine numbers (a 3x3 ``K``, as KITTI's
+          ``cam.txt``); or four numbers.
+    name : str
+        Label of ``path`` in messages (``"--intrinsics"`` on the command line).
+
+    Returns
+    -------
+    tuple of 4 floats
+        Checked by :func:`~sparsedepth._validation.check_intrinsics`.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If the file is not one of the above (the message names the file), is larger than 1 MiB, or holds a camera
+        model other than a pinhole one.
+
+    Notes
+    -----
+    COLMAP puts the centre of the top-left pixel at ``(0.5, 0.5)``; this package at ``(0, 0)`` (as
+    :func:`~sparsedepth.depth_to_points` does), so a COLMAP principal point is shifted by −0.5 in both axes.  The
+    other formats already use integer pixel centres (OpenCV's convention, which KITTI, Open3D and RealSense follow).
+    """
+    path = check_input_file(path, name=name)
+    where = file_label(path, name)
+    suffix = path.suffix.lower()
+    if suffix == ".npy":
+        try:
+            values = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{where}: not a NumPy array of numbers ({exc}).") from None
+        return _checked(values, where)
+    text = _read_text(path, where)
+    if suffix == ".json":
+        return _json_intrinsics(text, where)
+    for reader in (_key_value_intrinsics, _kitti_intrinsics, _colmap_intrinsics):
+        values = reader(text, where)
+        if values is not None:
+            return _checked(values, where)
+    try:
+        numbers = [float(v) for v in text.split()]
+    except ValueError:
+        numbers = []
+    if len(numbers) in (4, 9):
+        return _checked(np.reshape(numbers, (3, 3)) if len(numbers) == 9 else numbers, where)
+    raise ValueError(f"{where}: no camera intrinsics found: expected a 3x3 K, four numbers fx fy cx cy, 'fx: ...' "
+                     "lines, a KITTI calib_cam_to_cam.txt, a COLMAP cameras.txt or a .json/.npy file.")
+
+
+def _checked(values, where) -> tuple[float, float, float, float]:
+    """``check_intrinsics`` with the file in its messages."""
+    try:
+        return check_intrinsics(np.asarray(values, dtype=float), name="intrinsics")
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {str(exc).removeprefix('`intrinsics`').lstrip(': ')}") from None
+
+
+def _json_intrinsics(text, where):
+    import json
+
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        raise ValueError(f"{where}: not valid JSON ({exc}).") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: expected a JSON object with fx, fy, cx, cy or a matrix K.")
+    if all(key in data for key in ("fx", "fy", "cx", "cy")):
+        return _checked([data[key] for key in ("fx", "fy", "cx", "cy")], where)
+    for key in ("K", "camera_matrix"):
+        if key in data:
+            return _checked(data[key], where)
+    if "intrinsic_matrix" in data:  # Open3D's PinholeCameraIntrinsic: column-major
+        values = np.asarray(data["intrinsic_matrix"], dtype=float)
+        return _checked(values.reshape(3, 3, order="F") if values.size == 9 else values, where)
+    raise ValueError(f"{where}: the JSON object has none of fx/fy/cx/cy, K, camera_matrix, intrinsic_matrix.")
+
+
+def _key_value_intrinsics(text, where):
+    """``fx: ...`` lines (YAML, '#' comments), or None when ``fx`` is not among the keys."""
+    values = {}
+    for line in text.splitlines():
+        key, sep, value = line.partition("#")[0].partition(":")
+        if sep:
+            values[key.strip()] = value.strip()
+    if "fx" not in values:
+        return None
+    try:
+        return [float(values[key]) for key in ("fx", "fy", "cx", "cy")]
+    except (KeyError, ValueError) as exc:
+        raise ValueError(f"{where}: expected fx, fy, cx, cy as 'key: number' lines ({exc}).") from None
+
+
+def _kitti_intrinsics(text, where):
+    """fx, fy, cx, cy of the :data:`KITTI_PROJECTION` line of a ``calib_cam_to_cam.txt``, or None without one."""
+    for line in text.splitlines():
+        key, sep, value = line.partition(":")
+        if sep and key.strip() == KITTI_PROJECTION:
+            try:
+                P = np.array([float(v) for v in value.split()]).reshape(3, 4)
+            except ValueError:
+                raise ValueError(f"{where}: {KITTI_PROJECTION} must be 12 numbers (a 3x4 matrix).") from None
+            return [P[0, 0], P[1, 1], P[0, 2], P[1, 2]]
+    return None
+
+
+def _colmap_intrinsics(text, where):
+    """The one pinhole camera of a COLMAP ``cameras.txt`` (principal point moved to integer pixel centres), or None
+    when the text is not one."""
+    lines = [line.split() for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    if not lines or not all(len(parts) >= 4 and parts[1].isupper() and parts[0].isdigit() for parts in lines):
+        return None
+    if len(lines) != 1:
+        raise ValueError(f"{where}: a COLMAP cameras.txt with {len(lines)} cameras; give the intrinsics of one.")
+    model, params = lines[0][1], lines[0][4:]
+    try:
+        params = [float(v) for v in params]
+    except ValueError:
+        raise ValueError(f"{where}: the camera's parameters must be numbers.") from None
+    if model == "SIMPLE_PINHOLE" and len(params) == 3:
+        f, cx, cy = params
+        return [f, f, cx - 0.5, cy - 0.5]
+    if model == "PINHOLE" and len(params) == 4:
+        fx, fy, cx, cy = params
+        return [fx, fy, cx - 0.5, cy - 0.5]
+    raise ValueError(f"{where}: COLMAP camera model {model} with {len(params)} parameters is not a pinhole camera; "
+                     "run `colmap image_undistorter` and use the undistorted model's cameras.txt.")
