@@ -15,7 +15,7 @@ import numpy as np
 
 from ._validation import check_rgb_colour, is_real
 
-__all__ = ["DEPTH_COLORMAP", "DEPTH_COLORMAP_ANCHORS", "MISSING_COLOUR", "colorize_depth"]
+__all__ = ["DEPTH_COLORMAP", "DEPTH_COLORMAP_ANCHORS", "MISSING_COLOUR", "INVERSE_DEPTH_RATIO", "colorize_depth"]
 
 #: sRGB anchors of the depth colour map, far (first) to near (last).  Each is
 #: the CIE 1976 L*a*b* colour with lightness L* = 8, 22, 36, 50, 64, 78, 92
@@ -46,6 +46,11 @@ DEPTH_COLORMAP.setflags(write=False)
 MISSING_COLOUR = (128, 128, 128)
 
 _LOW_PERCENTILE, _HIGH_PERCENTILE = 2.0, 98.0
+#: ``scale="auto"`` colours by inverse depth when ``vmax / vmin`` is at least this: a street scene (KITTI: 3-80 m)
+#: rather than a room (NYU, TUM, RealSense: a factor of 2-6), where a linear scale would give the near tenth of
+#: the range, where most of the structure is, a few colours only.
+INVERSE_DEPTH_RATIO = 8.0
+_SCALES = ("auto", "linear", "inverse")
 
 
 def _check_depth(depth) -> np.ndarray:
@@ -69,7 +74,7 @@ def _check_limit(value, name: str) -> float | None:
     return number
 
 
-def colorize_depth(depth, *, vmin=None, vmax=None, missing=MISSING_COLOUR) -> np.ndarray:
+def colorize_depth(depth, *, vmin=None, vmax=None, missing=MISSING_COLOUR, scale="auto") -> np.ndarray:
     """Depth map to an RGB image: near pixels bright and warm, far pixels dark and blue, missing ones grey.
 
     Parameters
@@ -84,6 +89,11 @@ def colorize_depth(depth, *, vmin=None, vmax=None, missing=MISSING_COLOUR) -> np
         flatten the picture.
     missing : sequence of 3 ints in [0, 255]
         Colour of the missing pixels (default mid grey, ``(128, 128, 128)``).
+    scale : {"auto", "linear", "inverse"}
+        Colours equally spaced in depth (``"linear"``) or in inverse depth
+        (``"inverse"``, the convention of outdoor depth figures: near
+        structure gets most of the colours); ``"auto"`` (default) picks
+        ``"inverse"`` when ``vmax / vmin >=`` :data:`INVERSE_DEPTH_RATIO`.
 
     Returns
     -------
@@ -107,8 +117,9 @@ def colorize_depth(depth, *, vmin=None, vmax=None, missing=MISSING_COLOUR) -> np
 
     .. math:: t = \\operatorname{clip}\\left(\\frac{d - v_{min}}{v_{max} - v_{min}}, 0, 1\\right),
 
-    so ``vmin`` is entry 255 (pale yellow) and ``vmax`` entry 0 (dark
-    blue).  When the range is empty (a constant map, or a default limit on
+    or with ``scale="inverse"`` ``t = clip((1/v_min − 1/d) / (1/v_min −
+    1/v_max), 0, 1)``, so ``vmin`` is entry 255 (pale yellow) and ``vmax``
+    entry 0 (dark blue).  When the range is empty (a constant map, or a default limit on
     the wrong side of the given one), ``t`` is 0 below ``vmin``, 1 above it
     and 1/2 at it.
 
@@ -135,6 +146,8 @@ def colorize_depth(depth, *, vmin=None, vmax=None, missing=MISSING_COLOUR) -> np
     if low is not None and high is not None and low >= high:
         raise ValueError(f"vmin must be below vmax, got vmin={low!r} and vmax={high!r}; swap them or widen the range")
     colour = np.asarray(check_rgb_colour(missing, name="missing"), dtype=np.uint8)
+    if not isinstance(scale, str) or scale not in _SCALES:
+        raise ValueError(f"scale must be one of {list(_SCALES)}, got {scale!r}")
 
     values = array.astype(np.float64)  # a copy: the caller's array is never modified
     with np.errstate(invalid="ignore"):
@@ -152,7 +165,11 @@ def colorize_depth(depth, *, vmin=None, vmax=None, missing=MISSING_COLOUR) -> np
         else:
             high = max(float(p_high), low)
     d = values[valid]
-    if high > low:
+    if scale == "auto":
+        scale = "inverse" if low > 0 and high >= INVERSE_DEPTH_RATIO * low else "linear"
+    if high > low and scale == "inverse" and low > 0:
+        t = np.clip((1.0 / low - 1.0 / d) / (1.0 / low - 1.0 / high), 0.0, 1.0)
+    elif high > low:
         t = np.clip((d - low) / (high - low), 0.0, 1.0)
     else:
         t = 0.5 + 0.5 * np.sign(d - low)

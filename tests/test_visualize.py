@@ -121,3 +121,23 @@ def test_bad_options(options, error, words):
 def test_options_are_keyword_only():
     with pytest.raises(TypeError):
         sd.colorize_depth(np.ones((2, 2)), 0.0, 1.0)
+
+
+def test_inverse_depth_scale_spaces_colours_in_one_over_depth():
+    from sparsedepth.visualize import INVERSE_DEPTH_RATIO
+
+    depth = np.array([[2.0, 4.0, 80.0]])
+    rgb = sd.colorize_depth(depth, vmin=2.0, vmax=80.0, scale="inverse")
+    t = (1 / 2.0 - 1 / 4.0) / (1 / 2.0 - 1 / 80.0)  # by hand
+    assert rgb[0, 1].tolist() == DEPTH_COLORMAP[round(255 * (1 - t))].tolist()
+    assert rgb[0, 0].tolist() == DEPTH_COLORMAP[255].tolist() and rgb[0, 2].tolist() == DEPTH_COLORMAP[0].tolist()
+    linear = sd.colorize_depth(depth, vmin=2.0, vmax=80.0, scale="linear")
+    assert linear[0, 1].tolist() == DEPTH_COLORMAP[round(255 * (1 - 2.0 / 78.0))].tolist()
+    # auto: inverse from a range ratio of INVERSE_DEPTH_RATIO on (a street), linear below (a room)
+    np.testing.assert_array_equal(sd.colorize_depth(depth, vmin=2.0, vmax=80.0), rgb)
+    room = np.array([[1.0, 2.0, 4.0]])
+    assert 4.0 < INVERSE_DEPTH_RATIO * 1.0
+    np.testing.assert_array_equal(sd.colorize_depth(room, vmin=1.0, vmax=4.0),
+                                  sd.colorize_depth(room, vmin=1.0, vmax=4.0, scale="linear"))
+    with pytest.raises(ValueError, match="scale"):
+        sd.colorize_depth(depth, scale="log")
