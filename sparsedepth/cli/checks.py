@@ -14,6 +14,7 @@ import os
 from pathlib import Path
 
 from ..io import MAX_PIXELS
+from ..io.depth import SENSOR_PRESETS
 from ..io.formats import OUT_EXTENSIONS
 from ..completion import argument_conflict
 from ..objective import DEFAULT_WEIGHTS, Weights
@@ -245,6 +246,27 @@ def _check_batch_flags(args, mode) -> None:
         raise UsageError("--batch-truths goes with --batch-depths (--truth-prefix for a --batch folder)")
 
 
+def _apply_sensor(args, mode) -> None:
+    """``--sensor``: the preset's scale, invalid codes and range where the user gave none of their own."""
+    name = getattr(args, "sensor", None)
+    if name is None:
+        return
+    if mode == "demo":
+        raise UsageError(f"--sensor {name} describes your --depth files; the demo has its own")
+    if args.colmap is not None:
+        raise UsageError(f"--sensor {name} describes depth files; --colmap takes the depth from the model's points")
+    preset = SENSOR_PRESETS[name]
+    if args.depth_scale is None:
+        args.depth_scale = preset.scale
+    if preset.invalid_values:
+        given = list(args.invalid_values or [])
+        args.invalid_values = given + [v for v in preset.invalid_values if v not in given]
+    if args.min_depth is None and preset.min_depth > 0:
+        args.min_depth = preset.min_depth
+    if args.max_depth is None:
+        args.max_depth = preset.max_depth
+
+
 def _check_reader_options(args, mode) -> None:
     """Reader options apply to the user's files (one frame or a batch); check their combinations."""
     given = [flag for flag, value in (("--byteorder", args.byteorder), ("--invalid-value", args.invalid_values),
@@ -287,6 +309,7 @@ def check_options(args) -> str:
     ``args.fill_method`` left unset becomes ``"colorization"`` (it is only given with ``--fill-holes``).
     """
     mode = _check_combinations(args)
+    _apply_sensor(args, mode)
     _check_batch_flags(args, mode)
     _check_reader_options(args, mode)
     return mode

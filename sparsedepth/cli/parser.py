@@ -24,6 +24,7 @@ from ..batch import default_workers
 from ..completion import FAST_WEIGHTS
 from ..holes import FILL_METHODS
 from ..io import DEPTH_SCALES, MAX_PIXELS
+from ..io.depth import SENSOR_PRESETS
 from ..io import resolve_scale
 from ..io.formats import DEPTH_EXTENSIONS, FORMATS, IMAGE_EXTENSIONS, OUT_FORMATS
 from ..objective import DEFAULT_WEIGHTS, EDGE_PENALTIES, Weights
@@ -117,6 +118,7 @@ COMMON_OPTIONS = (
         ("--depth", "sparse or raw depth (0/NaN/inf = unknown), or a dense map with --keep-fraction."),
         ("--depth-scale", "divisor of stored integer depth: nyu or mm (1000), kitti (256), tum (5000), m (1), or "
                           "a number."),
+        ("--sensor", f"the depth files of a sensor: {', '.join(SENSOR_PRESETS)} (scale, invalid codes, range)."),
         ("--keep-fraction", "simulate sparse input: keep this fraction of the valid depth, score on the rest."),
         ("--truth", "ground-truth depth to score against."),
         ("--solver", "solver (default auto)."),
@@ -422,6 +424,15 @@ def _add_input_options(parser) -> None:
                      help="divisor of stored depth values: nyu or mm (1000), kitti (256), tum (5000), m (1), or a "
                           "number.  Required for integer data (png, pgm, tif, integer npy/npz/h5); float data default "
                           "to 1, except a pfm, which needs this or --calib.")
+    inp.add_argument("--sensor", choices=list(SENSOR_PRESETS), metavar="{" + ",".join(SENSOR_PRESETS) + "}",
+                     help="how a sensor's or dataset's depth files store depth: sets --depth-scale, adds its "
+                          "'no measurement' codes to --invalid-value and its working range as --min-depth/--max-depth "
+                          "(each of those given explicitly wins). "
+                          + "; ".join(f"{name}: scale {p.scale:g}, {p.min_depth:g}-{p.max_depth:g} m"
+                                      + (f", invalid {', '.join(f'{v:g}' for v in p.invalid_values)}"
+                                         if p.invalid_values else "")
+                                      for name, p in SENSOR_PRESETS.items())
+                          + ". Sources: sparsedepth.io.depth.SENSOR_PRESETS.")
     inp.add_argument("--depth-key", metavar="NAME", help="array name in an .npz or dataset in an .h5 depth file.")
     inp.add_argument("--calib", metavar="CALIB_TXT",
                      help="Middlebury/ETH3D calib.txt: --depth holds disparity in pixels, converted to metres; "

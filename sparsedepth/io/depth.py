@@ -25,6 +25,7 @@ modules of :mod:`sparsedepth.io` only.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 import os
 import warnings
 from pathlib import Path
@@ -41,7 +42,7 @@ from .formats import (DEPTH_EXTENSIONS, KEYED_EXTENSIONS, MASK_EXTENSIONS, exten
 from .netpbm import check_byteorder
 from .stored import as_depth, is_real_dtype
 
-__all__ = ["DEPTH_IMAGE_EXTENSIONS", "DEPTH_SCALES", "read_depth", "read_depth_png", "read_mask", "read_stored",
+__all__ = ["DEPTH_IMAGE_EXTENSIONS", "DEPTH_SCALES", "SENSOR_PRESETS", "SensorPreset", "read_depth", "read_depth_png", "read_mask", "read_stored",
            "resolve_scale"]
 
 #: Named divisors for integer depth images: ``depth = stored_value / scale``.
@@ -56,6 +57,56 @@ DEPTH_SCALES: Mapping[str, float] = MappingProxyType(
         "meters": 1.0,
     }
 )
+
+@dataclass(frozen=True)
+class SensorPreset:
+    """How a depth sensor's files store depth: the divisor to metres, the codes for "no measurement", the range.
+
+    Attributes
+    ----------
+    scale : float
+        Stored value / ``scale`` = metres (:data:`DEPTH_SCALES`).
+    invalid_values : tuple of float
+        Stored codes that mean "no measurement" besides 0 (always invalid).
+    min_depth, max_depth : float
+        Depth outside ``[min_depth, max_depth]`` metres counts as missing: the sensor's documented working range,
+        widened to what its files hold.
+    source : str
+        Where the numbers come from.
+    """
+
+    scale: float
+    invalid_values: tuple
+    min_depth: float
+    max_depth: float
+    source: str
+
+
+#: ``--sensor`` presets: the depth files of common sensors and datasets.
+SENSOR_PRESETS: Mapping[str, SensorPreset] = MappingProxyType({
+    "realsense-d4xx": SensorPreset(
+        1000.0, (65535.0,), 0.1, 10.0,
+        "Intel RealSense D400 series: 16-bit depth in the SDK's default unit of 1 mm, 0 = no depth (65535 as "
+        "written by some recorders); minimum Z about 0.1-0.16 m (D435/D415 at full resolution, less at lower), "
+        "range up to about 10 m (Intel D400-series datasheet)"),
+    "azure-kinect": SensorPreset(
+        1000.0, (), 0.25, 5.46,
+        "Azure Kinect DK: depth in millimetres, 0 = invalid; operating range 0.25-5.46 m over its depth modes "
+        "(Azure Kinect DK hardware specification)"),
+    "kinect-v1": SensorPreset(
+        1000.0, (), 0.4, 10.0,
+        "Kinect v1 depth registered and stored in millimetres as NYU Depth V2's toolbox and 'sync' PNGs do, 0 = "
+        "invalid; ranges 0.4-3 m (near mode) and 0.8-4 m (default), readings kept up to NYU's 10 m (Kinect for "
+        "Windows DepthRange; NYU Depth V2). Raw Kinect disparity needs --calib kinect-nyu instead"),
+    "kitti-lidar": SensorPreset(
+        256.0, (), 0.0, 120.0,
+        "KITTI depth PNGs (depth completion devkit): metres = value / 256, 0 = no measurement; Velodyne HDL-64E "
+        "range up to about 120 m"),
+    "tum": SensorPreset(
+        5000.0, (), 0.4, 10.0,
+        "TUM RGB-D benchmark: 16-bit PNG scaled by 5000 (value / 5000 = metres), 0 = no data; a Kinect v1, range "
+        "as kinect-v1"),
+})
 
 #: What :func:`read_depth_png` reads: the formats whose depth is a grey image (PNG, PGM).
 DEPTH_IMAGE_EXTENSIONS = extensions_of(lambda f: f.read_depth is read_grey_depth)
