@@ -216,3 +216,22 @@ def test_json_report_records_the_intrinsics_of_the_cloud(scene_files):
     import json
     report = json.loads((folder / "r.json").read_text())
     assert report["intrinsics"] == {"fx": 20.0, "fy": 20.75, "cx": 10.5, "cy": 7.25}
+
+
+def test_a_camera_preset_says_which_calibration_it_assumed(tmp_path, capsys, monkeypatch):
+    import imageio.v3 as iio
+
+    from sparsedepth.complete import main
+
+    monkeypatch.chdir(tmp_path)
+    rng = np.random.default_rng(0)
+    iio.imwrite(tmp_path / "rgb.png", rng.integers(0, 255, (375, 1242, 3), dtype=np.uint8))
+    depth = np.where(rng.random((375, 1242)) < 0.05, rng.uniform(5, 50, (375, 1242)), 0.0)
+    iio.imwrite(tmp_path / "depth.png", np.round(depth * 256).astype(np.uint16))
+    assert main(["--image", "rgb.png", "--depth", "depth.png", "--depth-scale", "kitti", "--camera", "kitti",
+                 "--fast", "--ply", "c.ply"]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if line.startswith("note: --camera kitti")]
+    assert len(notes) == 1 and "707.049" in notes[0] and "--intrinsics calib_cam_to_cam.txt" in notes[0]
+    assert main(["--image", "rgb.png", "--depth", "depth.png", "--depth-scale", "kitti", "--camera", "kitti",
+                 "--fast", "--ply", "d.ply", "-q"]) == 0
+    assert "note: --camera" not in capsys.readouterr().err  # -q: no note

@@ -22,8 +22,8 @@ from ..io import read_calib
 from ..io.calibration import read_intrinsics
 from .messages import UsageError
 
-__all__ = ["CAMERA_PRESETS", "CameraPreset", "KINECT_CALIB", "frame_intrinsics", "intrinsics_source",
-           "missing_intrinsics_message", "parse_intrinsics"]
+__all__ = ["CAMERA_PRESETS", "CameraPreset", "KINECT_CALIB", "camera_assumption", "frame_intrinsics",
+           "intrinsics_source", "missing_intrinsics_message", "parse_intrinsics"]
 
 #: The ``--calib`` value that means raw Kinect disparity (no intrinsics in it).
 KINECT_CALIB = "kinect-nyu"
@@ -51,6 +51,17 @@ CAMERA_PRESETS = {
     "kitti": CameraPreset((707.0493, 707.0493, 604.0814, 180.5066), 375, 1242,
                           "KITTI image_02, P2 of the shared frames' raw calibration (1242x375 images)"),
 }
+
+
+def camera_assumption(name: str) -> str:
+    """The one line a run with ``--camera NAME`` prints: the calibration it assumed and how to give another."""
+    preset = CAMERA_PRESETS[name]
+    fx, fy, cx, cy = preset.intrinsics
+    line = f"--camera {name} assumes {preset.what}: fx {fx:g}, fy {fy:g}, cx {cx:g}, cy {cy:g} px"
+    if name == "kitti":
+        line += ("; KITTI's calibration differs by recording date (fx 707-722 px, a 2 % error in the point cloud): "
+                 "for another date give --intrinsics calib_cam_to_cam.txt of that date (P_rect_02 is read)")
+    return line
 
 
 def parse_intrinsics(text: str) -> tuple[float, float, float, float]:

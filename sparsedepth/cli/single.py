@@ -30,7 +30,7 @@ from ..priors import as_prior
 from ..registration import shift_image
 from ..sampling import valid_depth_mask
 from ..visualize import colorize_depth
-from .camera import KINECT_CALIB, frame_intrinsics, intrinsics_source
+from .camera import KINECT_CALIB, camera_assumption, frame_intrinsics, intrinsics_source
 from .frame_checks import check_frame
 from .messages import UsageError, one_line, warnings_as_lines
 from .outputs import Named, commit
@@ -242,6 +242,8 @@ def _load_frame(args, mode, stream):
         downsample = 1 if args.downsample is None else args.downsample
         keep_fraction = args.keep_fraction
     intrinsics = frame_intrinsics(args, mode, depth.shape, downsample, demo_intrinsics)
+    if getattr(args, "camera", None) is not None and intrinsics is not None and not args.quiet:
+        print(f"note: {camera_assumption(args.camera)}", file=stream)
     if downsample > 1:
         description += f" (downsampled by {downsample})"
         image, depth = image[::downsample, ::downsample], depth[::downsample, ::downsample]
