@@ -85,25 +85,25 @@ class SensorPreset:
 #: ``--sensor`` presets: the depth files of common sensors and datasets.
 SENSOR_PRESETS: Mapping[str, SensorPreset] = MappingProxyType({
     "realsense-d4xx": SensorPreset(
-        1000.0, (65535.0,), 0.1, 10.0,
+        DEPTH_SCALES["mm"], (65535.0,), 0.1, 10.0,
         "Intel RealSense D400 series: 16-bit depth in the SDK's default unit of 1 mm, 0 = no depth (65535 as "
         "written by some recorders); minimum Z about 0.1-0.16 m (D435/D415 at full resolution, less at lower), "
         "range up to about 10 m (Intel D400-series datasheet)"),
     "azure-kinect": SensorPreset(
-        1000.0, (), 0.25, 5.46,
+        DEPTH_SCALES["mm"], (), 0.25, 5.46,
         "Azure Kinect DK: depth in millimetres, 0 = invalid; operating range 0.25-5.46 m over its depth modes "
         "(Azure Kinect DK hardware specification)"),
     "kinect-v1": SensorPreset(
-        1000.0, (), 0.4, 10.0,
+        DEPTH_SCALES["nyu"], (), 0.4, 10.0,
         "Kinect v1 depth registered and stored in millimetres as NYU Depth V2's toolbox and 'sync' PNGs do, 0 = "
         "invalid; ranges 0.4-3 m (near mode) and 0.8-4 m (default), readings kept up to NYU's 10 m (Kinect for "
         "Windows DepthRange; NYU Depth V2). Raw Kinect disparity needs --calib kinect-nyu instead"),
     "kitti-lidar": SensorPreset(
-        256.0, (), 0.0, 120.0,
+        DEPTH_SCALES["kitti"], (), 0.0, 120.0,
         "KITTI depth PNGs (depth completion devkit): metres = value / 256, 0 = no measurement; Velodyne HDL-64E "
         "range up to about 120 m"),
     "tum": SensorPreset(
-        5000.0, (), 0.4, 10.0,
+        DEPTH_SCALES["tum"], (), 0.4, 10.0,
         "TUM RGB-D benchmark: 16-bit PNG scaled by 5000 (value / 5000 = metres), 0 = no data; a Kinect v1, range "
         "as kinect-v1"),
 })

@@ -273,10 +273,7 @@ class Objective:
                 A = sp.csr_array(A)
                 A.sum_duplicates()
                 A.sort_indices()
-            b = np.zeros(n)
-            for t in self.quadratic_terms:
-                b += t.normal_rhs(n)
-            normal = (A, b, self.constant())
+            normal = (A, self.normal_rhs(), self.constant())
         if cache:
             self._normal = normal
             self._last_system = None
@@ -304,11 +301,16 @@ class Objective:
             A = other._normal[0]
             if diagonal is not None:
                 A = _plus_diagonal(A, np.asarray(diagonal, dtype=np.float64).reshape(-1))
-            b = np.zeros(self.size)
-            for t in self.quadratic_terms:
-                b += t.normal_rhs(self.size)
-            self._normal = (A, b, self.constant())
+            self._normal = (A, self.normal_rhs(), self.constant())
             self._last_system = None
+
+    def normal_rhs(self) -> np.ndarray:
+        """``b`` of :meth:`normal_equations` (the sum of the quadratic terms' ``weight · Kᵀ(r ⊙ d)``), without
+        assembling ``A``."""
+        b = np.zeros(self.size)
+        for t in self.quadratic_terms:
+            b += t.normal_rhs(self.size)
+        return b
 
     def constant(self) -> float:
         """The constant ``c`` of :meth:`normal_equations` (the quadratic part at ``z = 0``), without assembling ``A``.

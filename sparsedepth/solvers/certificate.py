@@ -348,12 +348,9 @@ class Certificate:
     def _solve_bound(self, A, r, y, first, ok):
         """``first + ¼ (yᵀ(r + e) + ‖e‖² / λ)`` with ``e = r − A y`` (``λ`` the curvature bound; without one, the
         error term is left out and NaN is returned for a solve that did not converge)."""
-        e = r - A @ y
-        quad = dot(y, r) + dot(y, e)  # = 2yᵀr − yᵀAy
-        if self.proven:
-            quad += dot(e, e) / self.curvature
-        elif not ok:
+        if not self.proven and not ok:
             return float("nan")
+        quad = _inverse_form_bound(y, r, r - A @ y, self.curvature if self.proven else None)
         if not np.isfinite(quad):
             return float("nan")
         return first + 0.25 * max(quad, 0.0)
@@ -421,10 +418,20 @@ class BoundReached:
         self.reached = False
 
     def __call__(self, y, e):
-        quad = dot(y, self.r) + dot(y, e) + dot(e, e) / self.curvature
+        quad = _inverse_form_bound(y, self.r, e, self.curvature)
         if self.first + 0.25 * max(quad, 0.0) <= self.target:
             self.reached = True
             raise StopIteration
+
+
+def _inverse_form_bound(y, r, e, curvature):
+    """``yᵀ(r + e) + ‖e‖² / λ`` with ``e = r − A y`` and ``λ = curvature``: a bound on ``rᵀA⁻¹r`` for any ``y``
+    (:class:`BoundReached`, Notes); without ``curvature`` (None) the last term is left out and the value is an
+    estimate, exact as ``e → 0``."""
+    quad = dot(y, r) + dot(y, e)  # = 2yᵀr − yᵀAy
+    if curvature is not None:
+        quad += dot(e, e) / curvature
+    return quad
 
 
 def _norm_sq(v):

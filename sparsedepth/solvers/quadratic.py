@@ -248,7 +248,7 @@ def single_precision_cg(objective, x0, *, tol, max_iter, recorder):
         offsets, stencil = objective.normal_stencil()
         diagonal = stencil[offsets.index((0, 0))].ravel()
         A = stencil_to_dia(offsets, stencil, dtype=np.float32)
-        b = sum(t.normal_rhs(objective.size) for t in objective.quadratic_terms)  # as normal_equations sums it
+        b = objective.normal_rhs()
         dtype = np.float32
     else:
         A, b, _ = objective.normal_equations()
