@@ -342,9 +342,9 @@ def sfm_like_section(frames, counts, seeds, command, step_note) -> tuple[str, li
         "Methods: `default` = "
         "`complete_depth(image, sparse, mask)`; `fast` = the same with `quality=\"fast\"`; `nearest` = "
         "`sparsedepth.nearest_fill` (the reference); `linear (griddata)` = `sparsedepth.linear_fill`. The other "
-        "baselines of `bench/harness/methods.py` are left out as not cheap: in a one-off trial (not part of this run) "
-        "on `kitti/0000000050` with 2000 points, the biharmonic fill (scikit-image) took 49 s and the colorization "
-        "baseline 4.2 s, where the default took 2.3 s. Scores: RMSE and MAE on the valid ground-truth pixels not "
+        "baselines of `bench/harness/methods.py` (the biharmonic fill and the colorization baseline) are left out: "
+        "on full-size frames they take many times the default's time. Scores: RMSE and MAE on the valid "
+        "ground-truth pixels not "
         "given to the method, in the frame's units; "
         "the ratios are to the nearest fill's on the same input, mean and worst (largest) over frames x seeds. Time: "
         "one wall-clock call per input (shared machine: indicative only).")
