@@ -22,7 +22,7 @@ from .modes.fast import complete_fast
 
 __all__ = ["ExpectedError", "expected_error", "distance_model", "DEFAULT_FACTOR", "MIN_DEFAULT_FACTOR", "TILE_SCALE",
            "TILE_QUANTILE", "MIN_TILE", "MAX_TILE_SHARE", "BIN_RATIO", "MIN_BIN_COUNT", "EXPONENT_BOUNDS",
-           "MIN_SAMPLES"]
+           "MIN_SAMPLES", "TileFolds", "tile_folds", "held_out_errors", "expected_mse", "departure_factor"]
 
 #: The default completion's RMSE over the fast completion's at the same samples, the median on the calibration
 #: scenes (middlebury2001/tsukuba, nyu_mmseg_pseudo/bookstore_0001d_00001, realsense_d435 80 and 130: every
@@ -157,12 +157,130 @@ def distance_model(distance, squared_error, *, bin_ratio=BIN_RATIO, min_count=MI
     return model, exponent, float(last_distance)
 
 
-def _tile_folds(observed, tile, folds, rng):
-    """Each observed pixel's fold: its tile's, the tiles of side ``tile`` dealt to the folds at random."""
+@dataclass(frozen=True)
+class TileFolds:
+    """What :func:`tile_folds` returns: the folds of a cross-validation on the samples.
+
+    Attributes
+    ----------
+    fold_of : ndarray of int, (N,)
+        Each observed pixel's fold, in the order of ``np.nonzero(observed)``.
+    folds : int
+    tile : int
+        Side in pixels of the tiles (held out together unless the samples themselves were dealt, Notes).
+    target_distance : ndarray, (T,)
+        Each target pixel's distance to the nearest sample (pixels), in the order of ``np.nonzero(target)``.
+    """
+
+    fold_of: np.ndarray
+    folds: int
+    tile: int
+    target_distance: np.ndarray
+
+
+def tile_folds(observed, target, folds=3, seed=0) -> TileFolds:
+    """Deal the samples to ``folds`` folds by square tiles sized to the target pixels' distances to the samples.
+
+    Parameters
+    ----------
+    observed : ndarray of bool, (H, W)
+        The samples.
+    target : ndarray of bool, (H, W)
+        The pixels whose error the cross-validation is about (at least one).
+    folds : int
+        Number of folds (>= 2).
+    seed : int
+        Seeds the dealing (the folds are a function of it).
+
+    Returns
+    -------
+    TileFolds
+
+    Notes
+    -----
+    With ``D(x)`` the distance from a target pixel ``x`` to the nearest sample, the tiles have side
+    ``s = max(MIN_TILE, min(round(TILE_SCALE · q_TILE_QUANTILE(D)), MAX_TILE_SHARE · min(H, W)))`` and are dealt
+    to the folds by a random permutation of the tile indices modulo ``folds``; a sample's fold is its tile's.
+    When every sample lands in one fold, the samples themselves are dealt at random instead.
+    """
+    target_distance = ndimage.distance_transform_edt(~observed)[target]
+    tile = int(max(MIN_TILE, min(round(TILE_SCALE * float(np.quantile(target_distance, TILE_QUANTILE))),
+                                 MAX_TILE_SHARE * min(observed.shape))))
+    rng = np.random.default_rng(seed)
     rows, cols = np.nonzero(observed)
     tiles_down, tiles_across = -(-observed.shape[0] // tile), -(-observed.shape[1] // tile)
     tile_fold = rng.permutation(tiles_down * tiles_across) % folds
-    return tile_fold[(rows // tile) * tiles_across + cols // tile]
+    fold_of = tile_fold[(rows // tile) * tiles_across + cols // tile]
+    if np.unique(fold_of).size < 2:  # every sample in one fold's tiles: deal the samples themselves
+        fold_of = rng.permutation(rows.size) % folds
+    return TileFolds(fold_of=fold_of, folds=int(folds), tile=tile, target_distance=target_distance)
+
+
+def held_out_errors(depth, observed, split: TileFolds, predict) -> tuple[np.ndarray, dict]:
+    """The held-out samples' distances to the kept ones and squared errors of each prediction, fold by fold.
+
+    Parameters
+    ----------
+    depth : ndarray, (H, W)
+        The depth, read at the observed pixels.
+    observed : ndarray of bool, (H, W)
+    split : TileFolds
+        The folds (:func:`tile_folds`).
+    predict : callable
+        ``predict(keep, kept_depth, nearest) -> {name: (H, W) prediction}`` for one fold: ``keep`` the kept
+        samples, ``kept_depth`` the depth there (NaN elsewhere), ``nearest`` their nearest fill.
+
+    Returns
+    -------
+    distances : ndarray, (N,)
+        Each held-out sample's distance to the nearest kept sample of its fold.
+    squared_errors : dict of str to ndarray, (N,)
+        ``"nearest"`` (nearest fill's) and each name ``predict`` returns.
+    """
+    rows, cols = np.nonzero(observed)
+    distances, errors = [], {}
+    for fold in range(split.folds):
+        held = split.fold_of == fold
+        if not held.any() or held.all():
+            continue
+        keep = observed.copy()
+        keep[rows[held], cols[held]] = False
+        # nearest fill as sparsedepth.nearest_fill computes it, and the held-out samples' distances
+        distance, (near_rows, near_cols) = ndimage.distance_transform_edt(~keep, return_indices=True)
+        nearest = depth[near_rows, near_cols]
+        held_rows, held_cols = rows[held], cols[held]
+        truth = depth[held_rows, held_cols]
+        distances.append(distance[held_rows, held_cols])
+        predictions = {"nearest": nearest, **predict(keep, np.where(keep, depth, np.nan), nearest)}
+        for name, prediction in predictions.items():
+            errors.setdefault(name, []).append((prediction[held_rows, held_cols] - truth) ** 2)
+    return np.concatenate(distances), {name: np.concatenate(values) for name, values in errors.items()}
+
+
+def expected_mse(distances, squared_errors, target_distance) -> tuple[float, float, float]:
+    """The mean over the target pixels of :func:`distance_model` fitted on held-out ``(distances, squared_errors)``.
+
+    Returns
+    -------
+    mse : float
+        ``mean_x m(D(x))`` over the target distances ``D``.
+    exponent, largest : float
+        As :func:`distance_model` returns them.
+    """
+    model, exponent, largest = distance_model(distances, squared_errors)
+    return float(np.mean(model(target_distance))), exponent, largest
+
+
+def departure_factor(completed, fast, target, fast_mse) -> float:
+    """The factor ``c`` from a fast completion's expected MSE to the RMSE of ``completed`` (Notes of
+    :func:`expected_error`): ``c² = max(1 − mean_T (completed − fast)² / fast_mse, MIN_DEFAULT_FACTOR²)``, NaN
+    pixels of ``completed`` left out; 1 when ``fast_mse`` is 0."""
+    if fast_mse <= 0:
+        return 1.0
+    departure = (completed - fast)[target]
+    departure = departure[np.isfinite(departure)]
+    gain = float(np.mean(departure ** 2)) / fast_mse if departure.size else 0.0
+    return float(np.sqrt(max(1.0 - gain, MIN_DEFAULT_FACTOR ** 2)))
 
 
 def expected_error(image, sparse_depth, mask=None, *, folds=3, seed=0, weights=None, quality="default",
@@ -256,44 +374,21 @@ def expected_error(image, sparse_depth, mask=None, *, folds=3, seed=0, weights=N
     if not target.any():
         raise ValueError("expected_error has no unobserved pixel to estimate the error of"
                          + (" inside region" if region is not None else ""))
-    distance_all = ndimage.distance_transform_edt(~observed)[target]
-    tile = int(max(MIN_TILE, min(round(TILE_SCALE * float(np.quantile(distance_all, TILE_QUANTILE))),
-                                 MAX_TILE_SHARE * min(observed.shape))))
-    rng = np.random.default_rng(seed)
-    fold_of = _tile_folds(observed, tile, int(folds), rng)
-    if np.unique(fold_of).size < 2:  # every sample in one fold's tiles: deal the samples themselves
-        fold_of = rng.permutation(count) % int(folds)
-    rows, cols = np.nonzero(observed)
-    distances, completion_errors, nearest_errors = [], [], []
-    for fold in range(int(folds)):
-        held = fold_of == fold
-        if not held.any() or held.all():
-            continue
-        keep = observed.copy()
-        keep[rows[held], cols[held]] = False
-        kept_depth = np.where(keep, depth, np.nan)
-        fold_completion = complete_fast(image, kept_depth, keep, weights=weights).depth
-        # nearest fill at the held-out pixels, as sparsedepth.nearest_fill computes it, and their distances
-        distance, (near_rows, near_cols) = ndimage.distance_transform_edt(~keep, return_indices=True)
-        held_rows, held_cols = rows[held], cols[held]
-        truth = depth[held_rows, held_cols]
-        distances.append(distance[held_rows, held_cols])
-        completion_errors.append((fold_completion[held_rows, held_cols] - truth) ** 2)
-        nearest_errors.append((depth[near_rows[held_rows, held_cols], near_cols[held_rows, held_cols]] - truth) ** 2)
-    distances = np.concatenate(distances)
-    completion_model, exponent, largest = distance_model(distances, np.concatenate(completion_errors))
-    nearest_model, nearest_exponent, _ = distance_model(distances, np.concatenate(nearest_errors))
-    fast_mse = float(np.mean(completion_model(distance_all)))
+    split = tile_folds(observed, target, int(folds), seed)
+
+    def fast_completion(keep, kept_depth, nearest):
+        return {"completion": complete_fast(image, kept_depth, keep, weights=weights).depth}
+
+    distances, errors = held_out_errors(depth, observed, split, fast_completion)
+    distance_all = split.target_distance
+    fast_mse, exponent, largest = expected_mse(distances, errors["completion"], distance_all)
+    nearest_mse, nearest_exponent, _ = expected_mse(distances, errors["nearest"], distance_all)
     factor = 1.0 if quality == "fast" else DEFAULT_FACTOR
     if quality == "default" and completed is not None and fast_mse > 0:
         fast = complete_fast(image, np.where(observed, depth, np.nan), observed, weights=weights).depth
-        departure = (completed - fast)[target]
-        departure = departure[np.isfinite(departure)]
-        gain = float(np.mean(departure ** 2)) / fast_mse if departure.size else 0.0
-        factor = float(np.sqrt(max(1.0 - gain, MIN_DEFAULT_FACTOR ** 2)))
+        factor = departure_factor(completed, fast, target, fast_mse)
     return ExpectedError(
-        rmse=factor * float(np.sqrt(fast_mse)),
-        nearest_rmse=float(np.sqrt(np.mean(nearest_model(distance_all)))),
-        held_out=int(distances.size), folds=int(folds), tile=tile, exponent=exponent,
+        rmse=factor * float(np.sqrt(fast_mse)), nearest_rmse=float(np.sqrt(nearest_mse)),
+        held_out=int(distances.size), folds=int(folds), tile=split.tile, exponent=exponent,
         nearest_exponent=nearest_exponent, factor=factor, largest_distance=largest,
         extrapolated=float(np.mean(distance_all > largest)), pixels=int(distance_all.size))
