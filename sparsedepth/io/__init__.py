@@ -8,7 +8,7 @@ One module per responsibility:
 * :mod:`.stored` - the dtype/shape rules of stored arrays and their conversion to depth;
 * :mod:`.netpbm`, :mod:`.images` - grey and colour images (Netpbm, PNG, JPEG, BMP, TIFF);
 * :mod:`.pfm` - Portable Float Maps;
-* :mod:`.calibration` - ``calib.txt``, stereo and Kinect disparity to depth;
+* :mod:`.calibration` - ``calib.txt``, stereo and Kinect disparity to depth, camera intrinsics files;
 * :mod:`.arrays` - NumPy ``.npy``/``.npz`` and HDF5 arrays;
 * :mod:`.nyu` - the NYU Depth V2 files;
 * :mod:`.depth` - depth scales, :func:`read_depth`, :func:`read_mask`;
@@ -37,7 +37,7 @@ Besides ``__all__``, the package exports :func:`atomic_target`,
 Imports NumPy, imageio, Pillow, tifffile, h5py and :mod:`sparsedepth._validation`; nothing else of the package.
 """
 
-from .calibration import KINECT_NYU, KinectDisparity, StereoCalibration, disparity_to_depth, read_calib
+from .calibration import KINECT_NYU, KinectDisparity, StereoCalibration, disparity_to_depth, read_calib, read_intrinsics
 from .colmap import ColmapModel, read_colmap_model, view_depth, view_observations, write_colmap_model
 from .formats import read_depth_array
 from .depth import DEPTH_SCALES, read_depth, read_depth_png, read_mask, resolve_scale  # noqa: F401 - resolve_scale for the CLI
@@ -50,5 +50,5 @@ from .writing import depth_writer, write_depth  # noqa: F401 - depth_writer for 
 
 __all__ = ["ColmapModel", "DEPTH_SCALES", "KINECT_NYU", "KinectDisparity", "MAX_PIXELS", "NYUDepthV2Labeled",
            "StereoCalibration", "depth_to_points", "disparity_to_depth", "read_calib", "read_depth", "read_depth_array", "read_depth_png", "read_image",
-           "read_colmap_model", "read_mask", "read_nyu_h5", "read_pfm", "read_ply", "view_depth", "view_observations",
+           "read_colmap_model", "read_intrinsics", "read_mask", "read_nyu_h5", "read_pfm", "read_ply", "view_depth", "view_observations",
            "write_colmap_model", "write_depth", "write_pfm", "write_ply"]
