@@ -128,3 +128,13 @@ def test_markdown_docstring_rewrites_restructuredtext():
     assert rewrite("Notes\n.. math:: x = 1\n          + y\n\nAfter.\n") == "Notes\n$$\nx = 1\n+ y\n$$\n\nAfter.\n"
     assert rewrite(".. [1] J. E. Dendy, 1982.") == "[1] J. E. Dendy, 1982."
     assert rewrite("plain ``code`` text") == "plain ``code`` text"
+
+
+def test_the_api_reference_renders_every_public_name():
+    import sparsedepth
+
+    directives = set()
+    for page in (DOCS / "reference").glob("*.md"):
+        directives |= set(re.findall(r"^::: ([\w.]+)\s*$", page.read_text(encoding="utf-8"), re.MULTILINE))
+    missing = sorted(name for name in sparsedepth.__all__ if f"sparsedepth.{name}" not in directives)
+    assert not missing, f"names of sparsedepth.__all__ without a ::: directive in docs/reference/: {missing}"
