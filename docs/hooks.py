@@ -1,9 +1,11 @@
-"""MkDocs hook of the documentation site: the command line's options table, built from the parser.
+"""Build-time helpers of the documentation site: the command line's options table and Markdown docstrings.
 
-``docs/guides/command_line.md`` holds the marker :data:`OPTIONS_MARKER`; :func:`on_page_markdown` replaces it by
-:func:`options_table`, one HTML table per argument group of :func:`sparsedepth.cli.parser.build_parser` (option,
-value, default, help), so the table always lists the options of the installed version.  Registered in
-``mkdocs.yml`` under ``hooks``.
+``docs/guides/command_line.md`` holds the marker :data:`OPTIONS_MARKER`; the MkDocs hook :func:`on_page_markdown`
+replaces it by :func:`options_table`, one HTML table per argument group of
+:func:`sparsedepth.cli.parser.build_parser` (option and value, default, help), so the table always lists the
+options of the installed version.  :class:`SphinxRoles`, a griffe extension, passes every docstring of the API
+reference through :func:`markdown_docstring`.  Both are registered in ``mkdocs.yml`` (``hooks`` and the python
+handler's ``extensions``); ``tests/test_docs_site.py`` imports this file by path.
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ def _default(action: argparse.Action) -> str:
 
 
 def _cell(text: str) -> str:
-    """One table cell: the text HTML-escaped, option names and paths in code style where they stand alone."""
+    """One table cell: the text on one line (runs of white space made one space), HTML-escaped."""
     return html.escape(" ".join(text.split()), quote=False)
 
 
