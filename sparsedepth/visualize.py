@@ -4,18 +4,23 @@ A 16-bit metric PNG looks black in an ordinary image viewer (a few metres
 are a few thousand of 65535 grey levels); :func:`colorize_depth` maps depth
 through :data:`DEPTH_COLORMAP`, a colour map whose lightness rises steadily
 from far (dark blue) to near (pale yellow), and draws missing pixels in a
-neutral grey.
+neutral grey.  :func:`depth_colour_scale` says where it puts each depth (the
+range, linear or inverse-depth spacing, round depths for a colour bar's
+ticks), so that a figure's colour bar matches its pictures.
 
 Imports NumPy and :mod:`sparsedepth._validation` only (no matplotlib).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ._validation import check_rgb_colour, is_real
 
-__all__ = ["DEPTH_COLORMAP", "DEPTH_COLORMAP_ANCHORS", "MISSING_COLOUR", "INVERSE_DEPTH_RATIO", "colorize_depth"]
+__all__ = ["DEPTH_COLORMAP", "DEPTH_COLORMAP_ANCHORS", "MISSING_COLOUR", "INVERSE_DEPTH_RATIO", "DepthColourScale",
+           "depth_colour_scale", "colorize_depth"]
 
 #: sRGB anchors of the depth colour map, far (first) to near (last).  Each is
 #: the CIE 1976 L*a*b* colour with lightness L* = 8, 22, 36, 50, 64, 78, 92
@@ -156,23 +161,151 @@ def colorize_depth(depth, *, vmin=None, vmax=None, missing=MISSING_COLOUR, scale
     rgb[...] = colour
     if not valid.any():
         return rgb
+    colours = _resolve_scale(values[valid], low, high, scale)
+    index = np.rint(255.0 * (1.0 - colours.position(values[valid]))).astype(np.intp)
+    rgb[valid] = DEPTH_COLORMAP[index]
+    return rgb
+
+
+@dataclass(frozen=True)
+class DepthColourScale:
+    """Where :func:`colorize_depth` puts a depth on its colour map: the range and the spacing of the colours.
+
+    Attributes
+    ----------
+    vmin, vmax : float
+        Depth of the nearest (pale yellow) and the farthest (dark blue)
+        colour, in the depth's units.
+    scale : {"linear", "inverse"}
+        Colours equally spaced in depth or in inverse depth.
+    """
+
+    vmin: float
+    vmax: float
+    scale: str
+
+    def position(self, depth) -> np.ndarray:
+        """Place ``t`` in [0, 1] of each depth between ``vmin`` (0) and ``vmax`` (1), as in :func:`colorize_depth`.
+
+        Parameters
+        ----------
+        depth : array_like
+            Positive depths (any shape).
+
+        Returns
+        -------
+        ndarray of float64
+            ``t``, same shape; colour map entry ``round(255 (1 - t))``.
+        """
+        d = np.asarray(depth, dtype=np.float64)
+        low, high = self.vmin, self.vmax
+        if not high > low:
+            return 0.5 + 0.5 * np.sign(d - low)
+        if self.scale == "inverse":
+            return np.clip((1.0 / low - 1.0 / d) / (1.0 / low - 1.0 / high), 0.0, 1.0)
+        return np.clip((d - low) / (high - low), 0.0, 1.0)
+
+    def ticks(self, count: int = 6) -> np.ndarray:
+        """Round depths in ``[vmin, vmax]`` for the ticks of a colour bar: at most about ``count``, spread evenly.
+
+        Parameters
+        ----------
+        count : int, default 6
+            About how many ticks (at least 2).
+
+        Returns
+        -------
+        ndarray of float64
+            Increasing depths; none when ``vmin == vmax``.
+
+        Notes
+        -----
+        Linear scale: the multiples in range of the smallest step ``s`` of
+        the form 1, 2, 2.5 or 5 times a power of ten with
+        ``s >= (vmax - vmin) / (count + 1)``.  Inverse scale: the numbers 1, 1.5,
+        2, 3, 4, 5 and 7 times a power of ten in range, kept from the near
+        end whenever their :meth:`position` is at least ``0.75 / count``
+        beyond the last one kept.
+        """
+        count = max(int(count), 2)
+        low, high = self.vmin, self.vmax
+        if not high > low:
+            return np.array([low])
+        if self.scale == "linear":
+            raw = (high - low) / (count + 1)
+            power = 10.0 ** np.floor(np.log10(raw))
+            step = next(m * power for m in (1.0, 2.0, 2.5, 5.0, 10.0) if m * power >= raw * (1 - 1e-9))
+            ticks = np.arange(np.ceil(low / step - 1e-9), np.floor(high / step + 1e-9) + 1) * step
+            return np.round(ticks, 12)
+        powers = 10.0 ** np.arange(np.floor(np.log10(low)), np.ceil(np.log10(high)) + 1)
+        candidates = np.unique(np.round(np.outer(powers, (1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 7.0)).ravel(), 12))
+        candidates = candidates[(candidates >= low * (1 - 1e-9)) & (candidates <= high * (1 + 1e-9))]
+        kept, last = [], -np.inf
+        for value, place in zip(candidates, self.position(candidates)):
+            if place - last >= 0.75 / count:
+                kept.append(value)
+                last = place
+        return np.array(kept)
+
+
+def _resolve_scale(valid_values, low, high, scale) -> DepthColourScale:
+    """The :class:`DepthColourScale` of the valid depths with the limits given (None: percentiles) and ``scale``."""
     if low is None or high is None:
-        p_low, p_high = np.percentile(values[valid], [_LOW_PERCENTILE, _HIGH_PERCENTILE])
+        p_low, p_high = np.percentile(valid_values, [_LOW_PERCENTILE, _HIGH_PERCENTILE])
         if low is None and high is None:
             low, high = float(p_low), float(p_high)
         elif low is None:
             low = min(float(p_low), high)
         else:
             high = max(float(p_high), low)
-    d = values[valid]
     if scale == "auto":
         scale = "inverse" if low > 0 and high >= INVERSE_DEPTH_RATIO * low else "linear"
-    if high > low and scale == "inverse" and low > 0:
-        t = np.clip((1.0 / low - 1.0 / d) / (1.0 / low - 1.0 / high), 0.0, 1.0)
-    elif high > low:
-        t = np.clip((d - low) / (high - low), 0.0, 1.0)
-    else:
-        t = 0.5 + 0.5 * np.sign(d - low)
-    index = np.rint(255.0 * (1.0 - t)).astype(np.intp)
-    rgb[valid] = DEPTH_COLORMAP[index]
-    return rgb
+    if scale == "inverse" and not low > 0:
+        scale = "linear"
+    return DepthColourScale(float(low), float(high), scale)
+
+
+def depth_colour_scale(depth, *, vmin=None, vmax=None, scale="auto") -> DepthColourScale:
+    """The range and spacing of colours :func:`colorize_depth` uses for ``depth`` with the same arguments.
+
+    For a colour bar beside a picture of :func:`colorize_depth`: the bar's
+    colours are ``DEPTH_COLORMAP[round(255 (1 - t))]`` at ``t`` in [0, 1],
+    and its ticks :meth:`DepthColourScale.ticks` sit at
+    :meth:`DepthColourScale.position`.
+
+    Parameters
+    ----------
+    depth, vmin, vmax, scale
+        As :func:`colorize_depth`'s.
+
+    Returns
+    -------
+    DepthColourScale
+        With ``scale`` ``"linear"`` or ``"inverse"`` (``"auto"`` decided).
+
+    Raises
+    ------
+    TypeError, ValueError
+        As :func:`colorize_depth`; also a ``ValueError`` when a limit is
+        left to the percentiles and ``depth`` has no valid pixel.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> colours = depth_colour_scale(np.array([[3.0, 80.0]]), vmin=3.0, vmax=80.0)
+    >>> colours.scale, colours.ticks().tolist()
+    ('inverse', [3.0, 4.0, 5.0, 7.0, 10.0, 20.0])
+    """
+    array = _check_depth(depth)
+    low, high = _check_limit(vmin, "vmin"), _check_limit(vmax, "vmax")
+    if low is not None and high is not None and low >= high:
+        raise ValueError(f"vmin must be below vmax, got vmin={low!r} and vmax={high!r}; swap them or widen the range")
+    if not isinstance(scale, str) or scale not in _SCALES:
+        raise ValueError(f"scale must be one of {list(_SCALES)}, got {scale!r}")
+    values = array.astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(values) & (values > 0)
+    if (low is None or high is None) and not valid.any():
+        raise ValueError("depth has no valid pixel (finite and > 0) to take the colour range from; give vmin and "
+                         "vmax")
+    return _resolve_scale(values[valid], low, high, scale)

@@ -141,3 +141,49 @@ def test_inverse_depth_scale_spaces_colours_in_one_over_depth():
                                   sd.colorize_depth(room, vmin=1.0, vmax=4.0, scale="linear"))
     with pytest.raises(ValueError, match="scale"):
         sd.colorize_depth(depth, scale="log")
+
+
+def test_colour_scale_is_the_one_colorize_depth_uses():
+    """depth_colour_scale: the limits and spacing colorize_depth takes with the same arguments; the colour at a
+    depth is DEPTH_COLORMAP[round(255 (1 - position))]."""
+    from sparsedepth.visualize import depth_colour_scale
+
+    depth = np.array([[2.0, 3.0, 5.0, 10.0, 30.0, 60.0, np.nan, 0.0]])
+    for options in (dict(vmin=2.0, vmax=60.0), dict(vmin=2.0, vmax=60.0, scale="linear"), dict(vmax=8.0), {}):
+        colours = depth_colour_scale(depth, **options)
+        rgb = sd.colorize_depth(depth, **options)
+        valid = depth[0, :6]
+        index = np.rint(255 * (1 - colours.position(valid))).astype(int)
+        np.testing.assert_array_equal(rgb[0, :6], DEPTH_COLORMAP[index])
+    street = depth_colour_scale(depth, vmin=2.0, vmax=60.0)
+    assert (street.vmin, street.vmax, street.scale) == (2.0, 60.0, "inverse")  # 60 >= 8 x 2: auto is inverse
+    assert depth_colour_scale(depth, vmin=2.0, vmax=10.0).scale == "linear"
+    # the default limits: the 2nd and 98th percentiles of the valid pixels
+    low, high = np.percentile(depth[0, :6], [2, 98])
+    default = depth_colour_scale(depth)
+    assert default.vmin == pytest.approx(low) and default.vmax == pytest.approx(high)
+    # inverse spacing, by hand: 1/d between 1/2 (place 0) and 1/60 (place 1)
+    assert street.position(np.array([4.0]))[0] == pytest.approx((1 / 2 - 1 / 4) / (1 / 2 - 1 / 60))
+    with pytest.raises(ValueError, match="no valid pixel"):
+        depth_colour_scale(np.full((2, 2), np.nan))
+    with pytest.raises(ValueError, match="vmin must be below vmax"):
+        depth_colour_scale(depth, vmin=3.0, vmax=2.0)
+
+
+@pytest.mark.parametrize("vmin, vmax, scale, expected", [
+    (1.0, 4.0, "linear", [1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0]),  # step 0.5 >= 3 / 7
+    (0.44, 0.92, "linear", [0.5, 0.6, 0.7, 0.8, 0.9]),
+    (1.3, 7.6, "linear", [2.0, 3.0, 4.0, 5.0, 6.0, 7.0]),
+    (3.0, 80.0, "inverse", [3.0, 4.0, 5.0, 7.0, 10.0, 20.0]),
+])
+def test_colour_bar_ticks_are_round_depths_in_range(vmin, vmax, scale, expected):
+    from sparsedepth.visualize import DepthColourScale
+
+    colours = DepthColourScale(vmin, vmax, scale)
+    ticks = colours.ticks()
+    np.testing.assert_allclose(ticks, expected)
+    places = colours.position(ticks)
+    assert np.all((ticks >= vmin) & (ticks <= vmax)) and np.all(np.diff(places) > 0)
+    if scale == "inverse":  # Notes: kept when at least 0.75 / count beyond the last one kept
+        assert np.all(np.diff(places) >= 0.75 / 6 - 1e-12)
+    assert DepthColourScale(2.0, 2.0, "linear").ticks().tolist() == [2.0]
