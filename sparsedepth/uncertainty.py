@@ -4,6 +4,8 @@
 two halves of the samples into a map of standard-deviation-like errors;
 :func:`error_cues`, :func:`fit_calibration` and :func:`split_samples` are its
 steps.  :func:`sparsedepth.complete_depth` calls it for ``uncertainty=True``.
+:func:`too_uncertain` marks the pixels whose uncertainty exceeds a limit in
+metres or a fraction of their depth.
 
 May import NumPy, SciPy, :mod:`sparsedepth.result` and
 :mod:`sparsedepth._validation`; it never solves (the caller passes the
@@ -17,11 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, spatial
 
-from ._validation import as_float_image, check_nonnegative_real
+from ._validation import as_float_image, check_nonnegative_real, check_positive_finite
 from .result import UncertaintyCalibration
 
 __all__ = ["MIN_OBSERVED", "MIN_SHAPE", "TARGET_COVERAGE", "NOVELTY_WEIGHT", "NOVELTY_NEIGHBOURS", "split_samples",
-           "error_cues", "colour_novelty", "fit_calibration", "estimate_uncertainty", "check_uncertainty_shape"]
+           "error_cues", "colour_novelty", "fit_calibration", "estimate_uncertainty", "check_uncertainty_shape",
+           "too_uncertain"]
 
 #: Fewest observed pixels for which the uncertainty is estimated (each half keeps at least 8).
 MIN_OBSERVED = 16
@@ -550,3 +553,65 @@ def _extrapolation_term(slope, observed, layout, where):
         return np.zeros(np.count_nonzero(where))
     steep = float(np.percentile(slope[interpolated], 90))
     return steep * np.maximum(distance[where] - spacing, 0.0)
+
+
+def too_uncertain(uncertainty, depth, *, max_uncertainty=None, max_relative_uncertainty=None) -> np.ndarray:
+    """The pixels whose uncertainty exceeds an absolute limit or a fraction of their depth.
+
+    Parameters
+    ----------
+    uncertainty : ndarray, (H, W)
+        Per-pixel uncertainty ``sigma`` (:func:`estimate_uncertainty`), in
+        the units of ``depth``.
+    depth : ndarray, (H, W)
+        The completed depth.
+    max_uncertainty : float, optional
+        Absolute limit, in the units of ``depth`` (``>= 0``).
+    max_relative_uncertainty : float, optional
+        Limit as a fraction of each pixel's depth (``> 0``; 0.1 = 10 %).
+
+    Returns
+    -------
+    ndarray of bool, (H, W)
+        True where a limit given is exceeded (none given: no pixel).
+
+    Raises
+    ------
+    TypeError
+        A limit is not a real number.
+    ValueError
+        The shapes differ, ``max_uncertainty`` is negative or not finite,
+        or ``max_relative_uncertainty`` is not a finite number ``> 0``.
+
+    Notes
+    -----
+    A pixel is marked when ``sigma > max_uncertainty`` or
+    ``sigma > max_relative_uncertainty * depth``.  A pixel with a depth
+    that is not finite and positive fails the relative limit, and a pixel
+    with a NaN ``sigma`` fails neither.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> sigma, depth = np.array([[0.05, 0.5, 3.0]]), np.array([[1.0, 2.0, 40.0]])
+    >>> too_uncertain(sigma, depth, max_relative_uncertainty=0.1).tolist()
+    [[False, True, False]]
+    >>> too_uncertain(sigma, depth, max_uncertainty=2.0, max_relative_uncertainty=0.1).tolist()
+    [[False, True, True]]
+    """
+    sigma = np.asarray(uncertainty, dtype=np.float64)
+    values = np.asarray(depth, dtype=np.float64)
+    if sigma.shape != values.shape:
+        raise ValueError(f"uncertainty and depth must have one shape, got {sigma.shape} and {values.shape}")
+    marked = np.zeros(sigma.shape, dtype=bool)
+    if max_uncertainty is not None:
+        limit = check_nonnegative_real(max_uncertainty, name="max_uncertainty")
+        with np.errstate(invalid="ignore"):
+            marked |= sigma > limit
+    if max_relative_uncertainty is not None:
+        fraction = check_positive_finite(max_relative_uncertainty, label="max_relative_uncertainty",
+                                         expected="a fraction of the depth (0.1 = 10 %)")
+        with np.errstate(invalid="ignore"):
+            usable = np.isfinite(values) & (values > 0)
+            marked |= (sigma > fraction * np.where(usable, values, 0.0)) | (~usable & ~np.isnan(sigma))
+    return marked

@@ -60,6 +60,22 @@ def test_help_lists_every_option_and_an_example(capsys):
         assert solver in out
 
 
+def test_help_makes_no_speed_claims_and_says_what_an_uncertainty_limit_is(capsys):
+    """Measured numbers live on the pages the benches write, which the help names; a limit on the uncertainty is
+    an expected error in metres, not a depth."""
+    import re
+
+    for flag in ("--help", "--help-all"):
+        assert main([flag]) == 0
+        text = " ".join(capsys.readouterr().out.split())
+        assert not re.search(r"\d\s*x faster|about \d|\d+(\.\d+)?-\d+(\.\d+)? of a", text), flag
+    assert main(["--help-all"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "expected error of their depth, in metres; not a depth" in text
+    assert "R times their depth" in text and "docs/figures/uncertainty_limits.md" in text
+    assert "docs/fast_mode.md" in text and "docs/expected_error.md" in text
+
+
 def test_every_weight_field_is_an_option(files, capsys):
     # a non-default value of every weight ends up in the solver's Weights (json "weights")
     args = []

@@ -1,4 +1,5 @@
-"""--uncertainty and --max-uncertainty on the command line: files, the removed pixels, reports and bad input."""
+"""--uncertainty, --max-uncertainty and --max-relative-uncertainty on the command line: files, the removed pixels,
+the statistics on stdout and in the JSON report, and bad input."""
 
 import json
 
@@ -40,7 +41,23 @@ def test_uncertainty_file_is_the_library_map(files, capsys):
     expected = _library_result(files, uncertainty=True)
     np.testing.assert_allclose(np.load(files / "u.npy"), expected.uncertainty, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(np.load(files / "d.npy"), expected.depth, rtol=1e-9, atol=1e-12)
-    assert "uncertainty: median" in capsys.readouterr().out
+    assert "uncertainty over the" in capsys.readouterr().out
+
+
+def test_stdout_and_json_report_the_same_statistics_over_the_unobserved_pixels(files, capsys):
+    """median, 90th and 99th percentiles over the pixels not given as samples, computed here from the map."""
+    rc = main([*_base(files), "--uncertainty", str(files / "u.npy"), "--json", str(files / "r.json")])
+    assert rc == 0
+    sigma = np.load(files / "u.npy")
+    _, mask = sd.sample_depth(sd.read_depth(files / "dense.png", scale=1000), fraction=0.08, seed=0)
+    median, p90, p99 = np.percentile(sigma[~mask], [50, 90, 99])
+    assert np.percentile(sigma, 50) != median  # the observed pixels would change it
+    out = capsys.readouterr().out
+    assert (f"uncertainty over the {(~mask).sum()} unobserved pixels: median {median:.3g} m, 90th percentile "
+            f"{p90:.3g} m, 99th percentile {p99:.3g} m") in out
+    report = json.loads((files / "r.json").read_text())["uncertainty"]
+    assert report["pixels"] == "unobserved" and report["count"] == (~mask).sum()
+    np.testing.assert_allclose([report["median"], report["p90"], report["p99"]], [median, p90, p99], rtol=1e-12)
 
 
 def test_max_uncertainty_leaves_the_pixels_above_it_missing(files, capsys):
@@ -54,9 +71,10 @@ def test_max_uncertainty_leaves_the_pixels_above_it_missing(files, capsys):
     assert removed.any()
     np.testing.assert_array_equal(np.isnan(depth), removed)
     out = capsys.readouterr().out
-    assert f"--max-uncertainty: {removed.sum()} pixels" in out
+    assert f"--max-uncertainty {threshold:g}: {removed.sum()} pixels" in out
     report = json.loads((files / "r.json").read_text())
     assert report["uncertainty"]["removed"] == removed.sum()
+    assert report["uncertainty"]["limits"] == {"max_uncertainty": threshold}
     # scored on the kept hidden pixels only, against the dense input as truth
     truth = sd.read_depth(files / "dense.png", scale=1000)
     _, mask = sd.sample_depth(truth, fraction=0.08, seed=0)
@@ -64,6 +82,43 @@ def test_max_uncertainty_leaves_the_pixels_above_it_missing(files, capsys):
     assert report["metrics"]["scored"] == kept.sum()
     assert report["metrics"]["completed"]["rmse"] == pytest.approx(
         sd.depth_metrics(depth, truth, mask=kept).rmse, rel=1e-12)
+
+
+@pytest.mark.parametrize("absolute", [False, True])
+def test_max_relative_uncertainty_leaves_out_sigma_above_r_times_depth(files, capsys, absolute):
+    """Left out: sigma > R x depth, computed here from the library's map and depth (and sigma > M with
+    --max-uncertainty M too); the scores are on the kept hidden pixels only."""
+    reference = _library_result(files, uncertainty=True)
+    sigma, full = reference.uncertainty, reference.depth
+    fraction = float(np.percentile(sigma / full, 85))
+    expected = sigma > fraction * full
+    limits = ["--max-relative-uncertainty", repr(fraction)]
+    if absolute:
+        threshold = float(np.percentile(sigma[~expected], 90))
+        expected |= sigma > threshold
+        limits += ["--max-uncertainty", repr(threshold)]
+    assert expected.any() and not expected.all()
+    rc = main([*_base(files), "--out", str(files / "d.npy"), "--uncertainty", str(files / "u.npy"), *limits,
+               "--json", str(files / "r.json")])
+    assert rc == 0
+    depth = np.load(files / "d.npy")
+    np.testing.assert_array_equal(np.isnan(depth), expected)
+    np.testing.assert_allclose(depth[~expected], full[~expected], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(np.load(files / "u.npy"), sigma, rtol=1e-9, atol=1e-12)  # the whole map is kept
+    out = capsys.readouterr().out
+    assert f": {expected.sum()} pixels ({expected.sum() / expected.size:.1%}) left missing" in out
+    assert f"--max-relative-uncertainty {fraction:g}" in out
+    report = json.loads((files / "r.json").read_text())
+    assert report["uncertainty"]["removed"] == expected.sum()
+    assert report["uncertainty"]["limits"]["max_relative_uncertainty"] == fraction
+    truth = sd.read_depth(files / "dense.png", scale=1000)
+    _, mask = sd.sample_depth(truth, fraction=0.08, seed=0)
+    kept = ~mask & ~expected
+    assert report["metrics"]["scored"] == kept.sum()
+    assert report["metrics"]["completed"]["rmse"] == pytest.approx(
+        sd.depth_metrics(depth, truth, mask=kept).rmse, rel=1e-12)
+    assert report["metrics"]["nearest"]["rmse"] == pytest.approx(
+        sd.depth_metrics(sd.nearest_fill(np.where(mask, truth, np.nan), mask), truth, mask=kept).rmse, rel=1e-12)
 
 
 def test_png_outputs_zero_where_missing_and_at_least_one_unit_of_uncertainty(files):
@@ -96,6 +151,11 @@ def _listing(folder):
 @pytest.mark.parametrize("extra, expect", [
     (["--max-uncertainty", "-1"], "--max-uncertainty"),
     (["--max-uncertainty", "nan"], "--max-uncertainty"),
+    (["--max-relative-uncertainty", "0"], "--max-relative-uncertainty"),
+    (["--max-relative-uncertainty", "-0.1"], "--max-relative-uncertainty"),
+    (["--max-relative-uncertainty", "inf"], "--max-relative-uncertainty"),
+    (["--max-relative-uncertainty", "ten"], "--max-relative-uncertainty"),
+    (["--max-relative-uncertainty", "0.1", "--fill-holes"], "--max-relative-uncertainty"),
     (["--uncertainty", "u.txt"], "--uncertainty"),
     (["--uncertainty", "u.npy", "--fill-holes"], "--uncertainty"),
 ])
@@ -111,9 +171,9 @@ def test_bad_uncertainty_flags_are_one_line_and_exit_2(files, capsys, extra, exp
     assert _listing(files) == before
 
 
-def test_uncertainty_refused_in_a_batch(files, capsys):
-    rc = main(["--batch", str(files), "--csv", str(files / "m.csv"), "--keep-fraction", "0.1",
-               "--max-uncertainty", "1"])
+@pytest.mark.parametrize("flag", ["--max-uncertainty", "--max-relative-uncertainty"])
+def test_uncertainty_refused_in_a_batch(files, capsys, flag):
+    rc = main(["--batch", str(files), "--csv", str(files / "m.csv"), "--keep-fraction", "0.1", flag, "1"])
     err = capsys.readouterr().err
     assert rc == 2 and "not a batch" in err and err.count("\n") == 1
 
@@ -123,3 +183,24 @@ def test_unwritable_uncertainty_writes_nothing(files, capsys):
     assert rc == 2
     assert "--uncertainty" in capsys.readouterr().err
     assert not (files / "d.npy").exists()
+
+
+def test_too_uncertain_by_hand():
+    from sparsedepth.uncertainty import too_uncertain
+
+    sigma = np.array([[0.05, 0.5, 3.0, 0.2], [1.0, np.nan, 0.01, 0.3]])
+    depth = np.array([[1.0, 2.0, 40.0, np.nan], [5.0, 2.0, 0.0, 3.0]])
+    # sigma > 0.1 depth: 0.05 > 0.1 no; 0.5 > 0.2 yes; 3 > 4 no; NaN depth: out; 1 > 0.5 yes; NaN sigma: kept;
+    # depth 0 (no depth): out; 0.3 > 0.3 no
+    relative = [[False, True, False, True], [True, False, True, False]]
+    np.testing.assert_array_equal(too_uncertain(sigma, depth, max_relative_uncertainty=0.1), relative)
+    np.testing.assert_array_equal(too_uncertain(sigma, depth, max_uncertainty=0.4),
+                                  [[False, True, True, False], [True, False, False, False]])
+    np.testing.assert_array_equal(too_uncertain(sigma, depth, max_uncertainty=0.4, max_relative_uncertainty=0.1),
+                                  np.array(relative) | (np.nan_to_num(sigma) > 0.4))
+    assert not too_uncertain(sigma, depth).any()
+    for bad in (0.0, -0.1, np.inf):
+        with pytest.raises(ValueError, match="max_relative_uncertainty"):
+            too_uncertain(sigma, depth, max_relative_uncertainty=bad)
+    with pytest.raises(ValueError, match="one shape"):
+        too_uncertain(sigma, depth[:, :3], max_uncertainty=1.0)

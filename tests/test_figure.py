@@ -10,11 +10,14 @@ from scipy import ndimage
 
 import sparsedepth as sd
 from sparsedepth.batch import evaluate_frame
-from sparsedepth.cli.report import build_figure, dilate_samples, panel_pixels, render_figure, sample_radius
+from sparsedepth.cli.report import (build_figure, dilate_samples, panel_pixels, render_figure, sample_radius,
+                                    uncertainty_statistics)
+from sparsedepth.visualize import MISSING_COLOUR, depth_colour_scale
 
 pytest.importorskip("matplotlib", reason="the figure needs matplotlib (pip install 'sparsedepth[plot]')")
 
-H, W = 96, 640  # a 640-px wide frame, short to keep the solve quick
+H, W = 96, 640  # a 640-px wide frame, short to keep the solve quick: wide, drawn two panels a row
+NARROW = 200  # its first NARROW columns: a frame drawn four panels a row
 HOLE = (slice(20, 60), slice(100, 220))  # pixels without ground truth
 
 
@@ -33,6 +36,15 @@ def frame():
 
 def _without_truth(outcome):
     return dataclasses.replace(outcome, truth=None, scored=None, metrics=None, nearest_metrics=None)
+
+
+def _narrow(image, outcome):
+    """The first NARROW columns of the frame (the scores are the whole frame's: the layout does not read them)."""
+    columns = (slice(None), slice(0, NARROW))
+    arrays = {name: getattr(outcome, name)[columns] for name in ("depth", "observed", "sparse", "nearest", "truth",
+                                                                   "scored", "uncertainty")
+              if getattr(outcome, name) is not None}
+    return image[columns], dataclasses.replace(outcome, **arrays)
 
 
 def _uncertainty(outcome):
@@ -55,11 +67,14 @@ def _pixel(fig, picture, ax, row, col):
     return picture[picture.shape[0] - 1 - int(y), int(x)]
 
 
-@pytest.mark.parametrize("truth, uncertainty, panels, rows", [
-    (False, False, 4, 1), (False, True, 5, 2), (True, False, 7, 2), (True, True, 8, 2),
+@pytest.mark.parametrize("truth, uncertainty, panels, rows, wide_rows", [
+    (False, False, 4, 1, 2), (False, True, 5, 2, 3), (True, False, 7, 2, 4), (True, True, 8, 2, 4),
 ])
-def test_panels_and_rows(frame, truth, uncertainty, panels, rows):
-    image, outcome = frame
+@pytest.mark.parametrize("wide", [False, True])
+def test_panels_and_rows(frame, truth, uncertainty, panels, rows, wide_rows, wide):
+    image, outcome = frame if wide else _narrow(*frame)
+    if wide:
+        rows = wide_rows
     if not truth:
         outcome = _without_truth(outcome)
     if uncertainty:
@@ -84,10 +99,78 @@ def test_errors_share_one_scale_and_titles_carry_the_rmse(frame):
     near, ours = shown["|nearest - truth|"], shown["|output - truth|"]
     assert near.images[0].get_clim() == ours.images[0].get_clim()
     assert near.images[0].get_clim()[0] == 0.0
-    assert f"{outcome.nearest_metrics.rmse:.3f}" in shown["nearest neighbour"].get_title()
-    assert f"{outcome.metrics.rmse:.3f}" in ours.get_title()
-    depth_panels = [shown[name] for name in ("nearest neighbour", "truth", outcome.method.split(" (")[0])]
-    assert len({ax.images[0].get_clim() for ax in depth_panels}) == 1
+    # the RMSE with the digits of the table on stdout
+    assert f"RMSE {outcome.nearest_metrics.rmse:.4f} m" in shown["nearest neighbour"].get_title()
+    assert f"RMSE {outcome.metrics.rmse:.4f} m" in ours.get_title()
+
+
+def test_depth_panels_are_colorize_depth_on_one_scale(frame):
+    """Each depth panel shows sd.colorize_depth of its map, all with the limits of the 1st and 99th percentiles."""
+    image, outcome = frame
+    shown = _panels(build_figure(image, outcome))
+    truth = outcome.truth
+    values = np.concatenate([truth[np.isfinite(truth)], outcome.depth.ravel()])
+    vmin, vmax = np.percentile(values, [1, 99])
+    for name, depth in (("nearest neighbour", outcome.nearest), ("truth", truth),
+                        (outcome.method.split(" (")[0], outcome.depth)):
+        drawn = np.asarray(shown[name].images[0].get_array())
+        expected = sd.colorize_depth(depth, vmin=vmin, vmax=vmax) / 255.0
+        np.testing.assert_allclose(drawn, expected, atol=1e-12)
+
+
+def test_depth_colour_bar_is_labelled_in_metres_at_the_colours_of_its_depths(frame):
+    image, outcome = frame
+    fig = build_figure(image, outcome)
+    bar = next(ax for ax in fig.axes if "depth [m]" in ax.get_ylabel())
+    labels = [float(t.get_text()) for t in bar.get_yticklabels()]
+    positions = bar.get_yticks()
+    assert len(labels) >= 3
+    truth = outcome.truth
+    vmin, vmax = np.percentile(np.concatenate([truth[np.isfinite(truth)], outcome.depth.ravel()]), [1, 99])
+    # a linear scale here (vmax < 8 vmin): a tick's position is its depth's place between vmin and vmax
+    np.testing.assert_allclose(positions, (np.array(labels) - vmin) / (vmax - vmin), atol=1e-9)
+
+
+def test_a_street_scale_is_drawn_in_inverse_depth():
+    """Depths over a factor of 8 (3 to 60 m): the panels are colorize_depth's inverse-depth colours and the bar
+    says so."""
+    h, w = 40, 60
+    jj = np.mgrid[0:h, 0:w][1]
+    depth = 3.0 + 57.0 * jj / (w - 1)
+    image = np.full((h, w, 3), 128, dtype=np.uint8)
+    outcome = evaluate_frame(image, depth, keep_fraction=0.3, seed=0, weights=sd.Weights(gamma=0.0), solver="amg")
+    fig = build_figure(image, _without_truth(outcome))
+    shown = _panels(fig)
+    observed = outcome.sparse[outcome.observed]
+    vmin, vmax = np.percentile(np.concatenate([observed, outcome.depth.ravel()]), [1, 99])
+    assert vmax >= 8 * vmin
+    expected = sd.colorize_depth(outcome.depth, vmin=vmin, vmax=vmax, scale="inverse") / 255.0
+    np.testing.assert_allclose(shown[outcome.method.split(" (")[0]].images[0].get_array(), expected, atol=1e-12)
+    bar = next(ax for ax in fig.axes if "depth [m]" in ax.get_ylabel())
+    assert "1/depth" in bar.get_ylabel()
+    labels = np.array([float(t.get_text()) for t in bar.get_yticklabels()])
+    np.testing.assert_allclose(bar.get_yticks(), (1 / vmin - 1 / labels) / (1 / vmin - 1 / vmax), atol=1e-9)
+
+
+def test_uncertainty_title_reports_the_statistics_of_the_unobserved_pixels(frame):
+    """The title's median and 90th percentile, and the colour scale's top, are those of the unobserved pixels,
+    computed here directly; the observed pixels (given a large sigma here) do not count."""
+    image, outcome = frame
+    sigma = _uncertainty(outcome)
+    sigma[outcome.observed] = 50.0
+    fig = build_figure(image, dataclasses.replace(outcome, uncertainty=sigma))
+    panel = _panels(fig)["uncertainty"]
+    hidden = sigma[~outcome.observed]
+    median, p90, p99 = np.percentile(hidden, [50, 90, 99])
+    title = panel.get_title()
+    assert f"median {median:.3g} m" in title and f"90th percentile {p90:.3g} m" in title
+    assert f"99th percentile, {p99:.3g} m" in title
+    assert np.percentile(sigma, 99) > 10 * p99  # the observed pixels would have moved it
+    assert panel.images[0].norm.vmax == pytest.approx(p99, rel=1e-12)
+    statistics = uncertainty_statistics(sigma, outcome.observed)
+    assert statistics["count"] == hidden.size and statistics["pixels"] == "unobserved"
+    np.testing.assert_allclose([statistics["median"], statistics["p90"], statistics["p99"]], [median, p90, p99],
+                               rtol=1e-12)
 
 
 def test_a_640_px_frame_keeps_its_width(frame):
@@ -98,7 +181,7 @@ def test_a_640_px_frame_keeps_its_width(frame):
         for ax in _panels(fig).values():
             assert ax.get_window_extent().width >= 0.95 * W
         picture = iio.imread(render_figure(image, case, ".png"))
-        assert picture.ndim == 3 and picture.shape[1] >= 4 * W
+        assert picture.ndim == 3 and picture.shape[1] >= 2 * W  # wide: two panels a row
 
 
 def test_panel_width_within_bounds():
@@ -112,7 +195,7 @@ def test_no_truth_is_grey_not_a_colour_of_the_error_scale(frame):
     shown = _panels(fig)
     for name in ("|nearest - truth|", "|output - truth|", "truth"):
         inside = _pixel(fig, picture, shown[name], 40, 160)  # in HOLE: no truth
-        np.testing.assert_allclose(inside, [128, 128, 128], atol=2)
+        np.testing.assert_allclose(inside, MISSING_COLOUR, atol=2)
         known = _pixel(fig, picture, shown[name], 80, 400)  # truth known there
         assert np.abs(known.astype(int) - 128).max() > 10
 
@@ -126,7 +209,7 @@ def test_pixels_removed_from_the_output_are_grey_and_counted(frame):
     picture = _rendered(fig)
     ours = _panels(fig)[outcome.method.split(" (")[0]]
     assert f"{50 * H} px without depth" in ours.get_title()
-    np.testing.assert_allclose(_pixel(fig, picture, ours, 40, 20), [128, 128, 128], atol=2)
+    np.testing.assert_allclose(_pixel(fig, picture, ours, 40, 20), MISSING_COLOUR, atol=2)
     assert np.abs(_pixel(fig, picture, ours, 40, 300).astype(int) - 128).max() > 10
 
 
@@ -180,6 +263,6 @@ def test_render_formats(frame, extension):
     image, outcome = frame
     data = render_figure(image, outcome, extension)
     if extension in (".png", ".jpg"):
-        assert iio.imread(io.BytesIO(data)).shape[1] >= 4 * W
+        assert iio.imread(io.BytesIO(data)).shape[1] >= 2 * W
     else:
         assert data[:5] in (b"%PDF-", b"<?xml")

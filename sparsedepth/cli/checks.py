@@ -71,8 +71,10 @@ def _check_combinations(args) -> str:
     _check_edge_penalty(args)
     _check_prior(args, mode)
     if mode == "batch":
-        if args.colmap is None and (args.uncertainty is not None or args.max_uncertainty is not None):
-            raise UsageError("--uncertainty and --max-uncertainty are for one frame, not a batch")
+        if args.colmap is None and (args.uncertainty is not None or args.max_uncertainty is not None
+                                    or args.max_relative_uncertainty is not None):
+            raise UsageError("--uncertainty, --max-uncertainty and --max-relative-uncertainty are for one frame, "
+                              "not a batch")
         if args.colmap is not None and args.csv is None:
             args.csv = str(Path(args.outdir) / COLMAP_CSV)
         if args.csv is None:
@@ -143,7 +145,8 @@ def _check_colmap(args) -> None:
         ("--fill-holes", args.fill_holes or None), ("--fill-method", args.fill_method),
         ("--downsample", args.downsample), ("--depth-scale", args.depth_scale), ("--byteorder", args.byteorder),
         ("--invalid-value", args.invalid_values), ("--min-depth", args.min_depth), ("--max-depth", args.max_depth),
-        ("--max-uncertainty", args.max_uncertainty), ("--truth-prefix", args.truth_prefix),
+        ("--max-uncertainty", args.max_uncertainty), ("--max-relative-uncertainty", args.max_relative_uncertainty),
+        ("--truth-prefix", args.truth_prefix),
         ("--batch-depths", args.batch_depths), ("--batch-truths", args.batch_truths)) if value is not None]
     not_here += [flag for flag, value, default in (("--image-prefix", args.image_prefix, "rgb_"),
                                                    ("--depth-prefix", args.depth_prefix, "depth_"))
@@ -183,7 +186,9 @@ def _check_argument_rules(args, colorization) -> None:
              "max_iter": ["--max-iter"] if args.max_iter is not None else [],
              "quality": ["--fast"] if args.fast else [],
              "uncertainty": ["--uncertainty"] if args.uncertainty is not None else [],
-             "max_uncertainty": ["--max-uncertainty"] if args.max_uncertainty is not None else [],
+             "max_uncertainty": [flag for flag, value in (("--max-uncertainty", args.max_uncertainty),
+                                                           ("--max-relative-uncertainty",
+                                                            args.max_relative_uncertainty)) if value is not None],
              "prior": ["--prior"] if args.prior is not None else [],
              "expected_error": ["--expected-error"] if args.expected_error else []}
     if not colorization:

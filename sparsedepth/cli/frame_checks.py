@@ -54,8 +54,8 @@ def check_frame(args, mode, image, depth, mask=None, intrinsics=None) -> None:
             check_shift_fits(args.image_shift, shape, name="--image-shift")
         except ValueError as exc:
             raise UsageError(f"{exc} of {where}") from None
-    wanted = [flag for flag, value in (("--uncertainty", args.uncertainty), ("--max-uncertainty",
-                                                                               args.max_uncertainty))
+    wanted = [flag for flag, value in (("--uncertainty", args.uncertainty), ("--max-uncertainty", args.max_uncertainty),
+                                       ("--max-relative-uncertainty", args.max_relative_uncertainty))
               if value is not None]
     if wanted and not (args.fill_holes and args.fill_method == "colorization"):
         try:

@@ -292,6 +292,17 @@ def _nonnegative(text):
     return value
 
 
+def _relative(text):
+    """An argparse type: a fraction of the depth, a finite number > 0 (0.1 = 10 %)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a fraction of the depth > 0 (0.1 = 10 %), got {text!r}")
+    return value
+
+
 def _finite(text):
     try:
         value = float(text)
@@ -522,8 +533,8 @@ def _add_method_options(parser) -> None:
                         help="register the image to the depth: move it DY rows down and DX columns right (negative: "
                              "up, left; border repeated) before completion or hole filling, in pixels of the frame "
                              "completed (after --downsample); e.g. 0,-2.  Some RGB-D sensors (Kinect v1, TUM RGB-D) "
-                             "leave the depth edges 1-3 px off the image edges.  auto estimates the shift from the "
-                             "frame's own depth samples (sparsedepth.estimate_image_shift, 100 image-aware fills: "
+                             "leave the depth edges a few pixels off the image edges.  auto estimates the shift from "
+                             "the frame's own depth samples (sparsedepth.estimate_image_shift, 100 image-aware fills: "
                              "several times the completion's time; no shift when a frame has too few samples); in a "
                              "batch, auto measures one shift on up to 8 of its frames (spread evenly, estimates "
                              "pooled by sparsedepth.pool_image_shifts) and uses it for all.  docs/registration.md "
@@ -533,7 +544,8 @@ def _add_method_options(parser) -> None:
 
 
 def _add_output_options(parser) -> None:
-    """--out, --uncertainty, --max-uncertainty, --json, --expected-error, --figure, --depth-vis, --outdir and -q."""
+    """--out, --uncertainty, --max-uncertainty, --max-relative-uncertainty, --json, --expected-error, --figure,
+    --depth-vis, --outdir and -q."""
     out = parser.add_argument_group("output")
     out.add_argument("--out", metavar="PATH",
                      help=f"dense depth: {_OUT_HELP}; a PNG's scale is the input's or --out-scale.")
@@ -550,16 +562,25 @@ def _add_output_options(parser) -> None:
                           "--colmap: an existing folder other than --outdir, one map per view named like its depth "
                           "map (--out-format, the depth's PNG scale, model units).")
     out.add_argument("--max-uncertainty", type=_nonnegative, metavar="M",
-                     help="leave the pixels whose uncertainty exceeds M metres missing in --out (0 in PNG, NaN in "
-                          "float formats) instead of extrapolating; the count is reported.")
+                     help="leave the pixels whose uncertainty (the expected error of their depth, in metres; not a "
+                          "depth) exceeds M metres missing in --out, --depth-vis, --ply and the figure (0 in PNG, "
+                          "NaN in float formats) instead of extrapolating; the count is reported.  A limit in metres "
+                          "keeps far pixels less often than near ones: --max-relative-uncertainty sets it as a "
+                          "fraction of each pixel's depth.")
+    out.add_argument("--max-relative-uncertainty", type=_relative, metavar="R",
+                     help="leave the pixels whose uncertainty exceeds R times their depth missing, as "
+                          "--max-uncertainty does (0.1: an expected error over 10 %% of the depth).  With "
+                          "--max-uncertainty too, a pixel is left out when it exceeds either limit.  The share of "
+                          "the pixels each limit leaves out on real frames: docs/figures/uncertainty_limits.md "
+                          "(python -m bench.figures).")
     out.add_argument("--json", metavar="PATH", help="metrics, settings and solver history as JSON.")
     out.add_argument("--expected-error", action="store_true",
-                     help="also estimate, from the samples alone (cross-validation with fast completions, about "
-                          "0.15-0.35 of a default completion's time), the RMSE over the unobserved pixels of the "
+                     help="also estimate, from the samples alone (cross-validation with fast completions), "
+                          "the RMSE over the unobserved pixels of the "
                           "output and of nearest fill: one line 'expected RMSE ~ X m (nearest fill ~ Y m)', both in "
                           "--json, and a warning when the output is not expected to beat nearest fill.  One frame (the "
                           "demo or --image/--depth); not with --prior or --fill-method colorization.  "
-                          "docs/expected_error.md measures it.")
+                          "docs/expected_error.md measures its accuracy and its time beside a completion's.")
     out.add_argument("--ply", metavar="PATH",
                      help="coloured 3-D point cloud of the completed depth (binary PLY, metres, camera frame; "
                           "colours of --image); needs --intrinsics, --camera or --calib calib.txt (the demo "

@@ -1,5 +1,10 @@
 """What the command line shows of one frame: the table on stdout, the JSON report and the figure.
 
+The three report the same uncertainty statistics over the same pixels
+(:func:`uncertainty_statistics`), the RMSE with the same digits
+(:func:`rmse_text`), and the figure colours depth as
+:func:`sparsedepth.colorize_depth` does (``--depth-vis``).
+
 Imports NumPy, :mod:`sparsedepth` (its version, the input checks of
 :mod:`sparsedepth._validation`, the colour map of :mod:`sparsedepth.visualize`)
 and, when a figure is drawn, matplotlib; it never writes a file (the caller
@@ -20,11 +25,12 @@ from .. import __version__
 from .._validation import as_float_image
 from ..io.writing import png_saturated
 from ..objective import weights as weights_module
-from ..visualize import DEPTH_COLORMAP
+from ..visualize import DEPTH_COLORMAP, MISSING_COLOUR, colorize_depth, depth_colour_scale
 from .parser import PROG
 
 __all__ = ["matplotlib_classes", "build_report", "print_table", "build_figure", "render_figure", "panel_pixels",
-           "sample_radius", "dilate_samples", "uncertainty_png", "uncertainty_png_line"]
+           "sample_radius", "dilate_samples", "uncertainty_png", "uncertainty_png_line", "UNCERTAINTY_PIXELS",
+           "uncertainty_statistics", "removal_limits", "metres", "rmse_text"]
 
 _UINT16_MAX = 65535
 
@@ -93,7 +99,7 @@ def build_report(args, argv, outcome, description, weights, weights_given, png_s
     if getattr(args, "expected_error", False) and result is not None:
         report.update(expected_rmse=result.expected_rmse, expected_nearest_rmse=result.expected_nearest_rmse)
     if result is not None and result.uncertainty is not None:
-        report["uncertainty"] = _uncertainty_summary(outcome)
+        report["uncertainty"] = _uncertainty_summary(outcome, removal_limits(args))
         png = uncertainty_png(args, outcome, png_scale)
         if png is not None:
             report["uncertainty"]["png"] = png
@@ -138,14 +144,61 @@ def _weights_source(args, weights) -> dict:
             "weights_settings": weights_module.weights_settings(weights)}
 
 
-def _uncertainty_summary(outcome) -> dict:
-    """Calibration, quantiles over the unobserved pixels, pixels removed, and (with truth) the coverage."""
+#: The pixels every uncertainty statistic is taken over (stdout, JSON, figure).
+UNCERTAINTY_PIXELS = "unobserved"
+
+#: The uncertainty percentiles reported, by name (the last one ends the figure's colour scale).
+_UNCERTAINTY_PERCENTILES = (("median", 50), ("p90", 90), ("p99", 99))
+
+
+def uncertainty_statistics(uncertainty, observed) -> dict:
+    """The uncertainty's named statistics, the same on stdout, in the JSON report and in the figure.
+
+    Parameters
+    ----------
+    uncertainty : ndarray, (H, W)
+        Per-pixel uncertainty in metres.
+    observed : ndarray of bool, (H, W)
+        The pixels given as samples.
+
+    Returns
+    -------
+    dict
+        ``pixels`` (:data:`UNCERTAINTY_PIXELS`: every pixel not given as a
+        sample, the ones a limit leaves missing included), ``count`` (how
+        many) and ``median``, ``p90``, ``p99``: the 50th, 90th and 99th
+        percentiles (``numpy.percentile``, linear interpolation) of the
+        uncertainty over them, in metres; None when there is none.
+    """
+    values = np.asarray(uncertainty, dtype=np.float64)[~np.asarray(observed, dtype=bool)]
+    values = values[np.isfinite(values)]
+    statistics = {"pixels": UNCERTAINTY_PIXELS, "count": int(values.size)}
+    quantiles = np.percentile(values, [q for _, q in _UNCERTAINTY_PERCENTILES]) if values.size else None
+    for i, (name, _) in enumerate(_UNCERTAINTY_PERCENTILES):
+        statistics[name] = None if quantiles is None else float(quantiles[i])
+    return statistics
+
+
+def removal_limits(args) -> dict:
+    """{flag: value} of the limits that leave uncertain pixels missing (``--max-uncertainty``,
+    ``--max-relative-uncertainty``), those given only."""
+    return {flag: value for flag, value in (
+        ("--max-uncertainty", getattr(args, "max_uncertainty", None)),
+        ("--max-relative-uncertainty", getattr(args, "max_relative_uncertainty", None))) if value is not None}
+
+
+def metres(value) -> str:
+    """A length as stdout and the figure print it: three significant digits and the unit (``0.0412 m``)."""
+    return f"{value:.3g} m"
+
+
+def _uncertainty_summary(outcome, limits=None) -> dict:
+    """Calibration, :func:`uncertainty_statistics`, the limits and pixels removed, and (with truth) the coverage."""
     result = outcome.result
-    sigma = result.uncertainty[~outcome.observed]
     summary = {
         "calibration": dataclasses.asdict(result.uncertainty_calibration),
-        "median": float(np.median(sigma)) if sigma.size else None,
-        "p90": float(np.percentile(sigma, 90)) if sigma.size else None,
+        **uncertainty_statistics(result.uncertainty, outcome.observed),
+        "limits": {flag.lstrip("-").replace("-", "_"): value for flag, value in (limits or {}).items()},
         "removed": result.removed,
     }
     if outcome.truth is not None:
@@ -157,9 +210,19 @@ def _uncertainty_summary(outcome) -> dict:
     return summary
 
 
-def print_table(outcome, description, stream, image_shift=None) -> None:
-    """The frame, the image shift (when ``image_shift``, the ``--image-shift`` value, is given), the solver's exit
-    and the nearest-neighbour vs method table, on ``stream``."""
+def _uncertainty_line(statistics) -> str:
+    """``uncertainty over the N unobserved pixels: median .., 90th percentile .., 99th percentile ..``."""
+    if statistics["median"] is None:
+        return "uncertainty: every pixel observed"
+    return (f"uncertainty over the {statistics['count']} {statistics['pixels']} pixels: median "
+            f"{metres(statistics['median'])}, 90th percentile {metres(statistics['p90'])}, 99th percentile "
+            f"{metres(statistics['p99'])}")
+
+
+def print_table(outcome, description, stream, image_shift=None, limits=None) -> None:
+    """The frame, the image shift (when ``image_shift``, the ``--image-shift`` value, is given), the solver's exit,
+    the uncertainty's statistics and the pixels ``limits`` (:func:`removal_limits`) left missing, and the
+    nearest-neighbour vs method table, on ``stream``."""
     h, w = outcome.depth.shape
     n_obs = int(outcome.observed.sum())
     print(f"{description}: {h}x{w}, {n_obs} observed pixels ({n_obs / (h * w):.1%})", file=stream)
@@ -170,15 +233,15 @@ def print_table(outcome, description, stream, image_shift=None) -> None:
         print(f"solver {r.solver}: {'converged' if r.converged else 'NOT converged'} after {r.iterations} "
               f"iterations ({r.message})", file=stream)
     if outcome.result is not None and outcome.result.uncertainty is not None:
-        summary = _uncertainty_summary(outcome)
-        line = (f"uncertainty: median {summary['median']:.3g} m, 90th percentile {summary['p90']:.3g} m over the "
-                f"unobserved pixels" if summary["median"] is not None else "uncertainty: every pixel observed")
+        summary = _uncertainty_summary(outcome, limits)
+        line = _uncertainty_line(summary)
         if "coverage_1sigma" in summary:
             line += (f"; |error| <= 1 sigma on {summary['coverage_1sigma']:.0%}, <= 2 sigma on "
                      f"{summary['coverage_2sigma']:.0%} of the scored pixels")
         print(line, file=stream)
-        if summary["removed"]:
-            print(f"--max-uncertainty: {summary['removed']} pixels ({summary['removed'] / h / w:.1%}) left missing",
+        if limits:
+            named = " and ".join(f"{flag} {value:g}" for flag, value in limits.items())
+            print(f"{named}: {summary['removed']} pixels ({summary['removed'] / h / w:.1%}) left missing",
                   file=stream)
     if outcome.metrics is None:
         why = ("no ground truth to score against (give --truth, or a dense --depth with --keep-fraction)"
@@ -208,7 +271,6 @@ def _image_shift_line(outcome, image_shift) -> str:
 _DPI = 100
 _MAX_PANEL_WIDTH = 1000  # pixels: wider frames are drawn at this width
 _MIN_PANEL_WIDTH = 320  # pixels: narrower frames are enlarged to this width (room for the titles)
-_NEUTRAL_GREY = (0.5, 0.5, 0.5)
 
 
 def sample_radius(shape) -> int:
@@ -249,28 +311,32 @@ def _dimmed(image) -> np.ndarray:
 
 def _grey_for_missing(cmap):
     """A copy of a matplotlib colour map with NaN (masked) pixels drawn in neutral grey."""
-    return cmap.with_extremes(bad=_NEUTRAL_GREY)
+    return cmap.with_extremes(bad=np.asarray(MISSING_COLOUR) / 255.0)
 
 
-def _rmse_text(metrics) -> str:
-    return "" if metrics is None else f"RMSE {metrics.rmse:.3f} m"
+def rmse_text(metrics) -> str:
+    """``RMSE 0.1234 m``, with the digits of the table on stdout; empty without metrics."""
+    return "" if metrics is None else f"RMSE {metrics.rmse:.4f} m"
 
 
-def _layout(has_truth: bool, has_uncertainty: bool) -> tuple[int, int, dict]:
-    """(rows, columns, {panel: (row, column)}): one row up to 4 panels, two rows beyond."""
-    names = ["image", "input", "nearest", "ours"]
+#: Frames at least this many times wider than tall (a KITTI frame) are drawn two panels a row.
+_WIDE_FRAME = 2.5
+
+#: The panels in the colours of the depth.
+_DEPTH_PANELS = ("image", "input", "nearest", "ours")
+
+
+def _layout(has_truth: bool, has_uncertainty: bool, wide: bool = False) -> tuple[int, int, dict]:
+    """(rows, columns, {panel: (row, column)}): up to 4 panels a row (2 for a ``wide`` frame), the panels of the
+    truth in rows of their own."""
     if has_truth:
-        cells = {name: (0, i) for i, name in enumerate(names)}
-        cells.update(truth=(1, 0), nearest_error=(1, 2), ours_error=(1, 3))
-        if has_uncertainty:
-            cells["uncertainty"] = (1, 1)
-        return 2, 4, cells
-    if has_uncertainty:
-        names.append("uncertainty")
-    if len(names) <= 4:
-        return 1, len(names), {name: (0, i) for i, name in enumerate(names)}
-    columns = -(-len(names) // 2)
-    return 2, columns, {name: divmod(i, columns) for i, name in enumerate(names)}
+        second = ["truth", "uncertainty" if has_uncertainty else None, "nearest_error", "ours_error"]
+        columns = 2 if wide else 4
+        cells = {name: divmod(i, columns) for i, name in enumerate([*_DEPTH_PANELS, *second]) if name is not None}
+        return 8 // columns, columns, cells
+    names = [*_DEPTH_PANELS, *(["uncertainty"] if has_uncertainty else [])]
+    columns = 2 if wide else len(names) if len(names) <= 4 else -(-len(names) // 2)
+    return -(-len(names) // columns), columns, {name: divmod(i, columns) for i, name in enumerate(names)}
 
 
 def _depth_range(outcome) -> tuple[float, float]:
@@ -282,38 +348,44 @@ def _depth_range(outcome) -> tuple[float, float]:
     return float(vmin), max(float(vmax), float(vmin) + 1e-6)
 
 
-def _depth_panels(axes, image, outcome, style, font):
-    """image | input samples on the dimmed image | nearest | output; returns the samples' image (for the bar)."""
+def _coloured(depth, colours) -> np.ndarray:
+    """``depth`` as :func:`~sparsedepth.visualize.colorize_depth` draws it on the scale ``colours`` (floats in
+    [0, 1])."""
+    return colorize_depth(depth, vmin=colours.vmin, vmax=colours.vmax, scale=colours.scale) / 255.0
+
+
+def _depth_panels(axes, image, outcome, colours, font):
+    """image | input samples on the dimmed image | nearest | output, depth in the colours of ``colours``."""
     h, w = outcome.depth.shape
     axes["image"].imshow(image, cmap="gray" if np.ndim(image) == 2 else None, interpolation="nearest")
     axes["image"].set_title("image", fontsize=font)
 
     radius = sample_radius((h, w))
     dots = dilate_samples(outcome.sparse, outcome.observed, radius)
-    axes["input"].imshow(_dimmed(image), interpolation="nearest")
-    samples = axes["input"].imshow(np.ma.masked_invalid(dots),
-                                   **{**style, "cmap": style["cmap"].with_extremes(bad=(0, 0, 0, 0))})
+    drawn = np.isfinite(dots)
+    picture = _dimmed(image)
+    picture[drawn] = _coloured(dots, colours)[drawn]
+    axes["input"].imshow(picture, interpolation="nearest")
     n_obs = int(outcome.observed.sum())
     axes["input"].set_title(f"input: {n_obs} samples ({n_obs / (h * w):.1%}), drawn {2 * radius + 1} px wide",
                             fontsize=font)
 
-    axes["nearest"].imshow(np.ma.masked_invalid(outcome.nearest), **style)
-    axes["nearest"].set_title("\n".join(filter(None, ("nearest neighbour", _rmse_text(outcome.nearest_metrics)))),
+    axes["nearest"].imshow(_coloured(outcome.nearest, colours), interpolation="nearest")
+    axes["nearest"].set_title("\n".join(filter(None, ("nearest neighbour", rmse_text(outcome.nearest_metrics)))),
                               fontsize=font)
 
-    axes["ours"].imshow(np.ma.masked_invalid(outcome.depth), **style)
+    axes["ours"].imshow(_coloured(outcome.depth, colours), interpolation="nearest")
     removed = int(np.count_nonzero(~np.isfinite(outcome.depth)))
-    details = ", ".join(filter(None, (_rmse_text(outcome.metrics),
+    details = ", ".join(filter(None, (rmse_text(outcome.metrics),
                                       f"{removed} px without depth (grey)" if removed else "")))
     axes["ours"].set_title("\n".join(filter(None, (outcome.method, details))), fontsize=font)
-    return samples
 
 
-def _truth_panels(axes, outcome, depth_style, font):
+def _truth_panels(axes, outcome, colours, font):
     """truth | |nearest - truth| | |output - truth| on one error scale; returns the last error image."""
     truth = outcome.truth
     known = np.isfinite(truth) & (truth > 0)
-    axes["truth"].imshow(np.ma.masked_invalid(np.where(known, truth, np.nan)), **depth_style)
+    axes["truth"].imshow(_coloured(np.where(known, truth, np.nan), colours), interpolation="nearest")
     axes["truth"].set_title(f"truth ({known.mean():.0%} of pixels; grey: none)", fontsize=font)
     errors = [np.where(known, np.abs(data - truth), np.nan) for data in (outcome.nearest, outcome.depth)]
     scored = known if outcome.scored is None else outcome.scored
@@ -324,26 +396,55 @@ def _truth_panels(axes, outcome, depth_style, font):
     for name, error, label, metrics in (("nearest_error", errors[0], "|nearest - truth|", outcome.nearest_metrics),
                                         ("ours_error", errors[1], "|output - truth|", outcome.metrics)):
         shown = axes[name].imshow(np.ma.masked_invalid(error), **style)
-        axes[name].set_title("\n".join(filter(None, (label, _rmse_text(metrics)))), fontsize=font)
+        axes[name].set_title("\n".join(filter(None, (label, rmse_text(metrics)))), fontsize=font)
     return shown
 
 
-def _uncertainty_panel(ax, uncertainty, font):
-    """The uncertainty map from 0 to its 99th percentile, NaN in grey; returns the image (for its bar)."""
+#: Decades of the uncertainty panel's logarithmic colour scale, below its top (the 99th percentile).
+_UNCERTAINTY_DECADES = 3
+
+
+def _uncertainty_panel(ax, uncertainty, observed, font):
+    """The uncertainty map on a logarithmic colour scale from the 99th percentile of :func:`uncertainty_statistics`
+    down :data:`_UNCERTAINTY_DECADES` decades (values beyond in the end colours), NaN in grey, its statistics in the
+    title; returns the image (for its bar)."""
+    from matplotlib.colors import LogNorm
+
+    statistics = uncertainty_statistics(uncertainty, observed)
+    top = statistics["p99"] if statistics["p99"] else 1.0
+    norm = LogNorm(vmin=top * 10.0 ** -_UNCERTAINTY_DECADES, vmax=top, clip=True)
     values = np.asarray(uncertainty, dtype=np.float64)
-    finite = values[np.isfinite(values)]
-    top = float(np.percentile(finite, 99)) if finite.size else 1.0
-    shown = ax.imshow(np.ma.masked_invalid(values), cmap=_grey_for_missing(_colormaps()["YlGnBu_r"]), vmin=0.0,
-                      vmax=max(top, 1e-6), interpolation="nearest")
-    ax.set_title(f"uncertainty (median {float(np.median(finite)):.3f} m)" if finite.size else "uncertainty (none)",
-                 fontsize=font)
+    shown = ax.imshow(np.ma.masked_invalid(np.maximum(values, norm.vmin)),
+                      cmap=_grey_for_missing(_colormaps()["YlGnBu_r"]), norm=norm, interpolation="nearest")
+    if statistics["median"] is None:
+        ax.set_title("uncertainty (every pixel observed)", fontsize=font)
+    else:
+        ax.set_title(f"uncertainty: median {metres(statistics['median'])}, 90th percentile "
+                     f"{metres(statistics['p90'])}\n({statistics['pixels']} pixels; log colours clipped at the "
+                     f"99th percentile, {metres(statistics['p99'])})", fontsize=font)
     return shown
 
 
-def _colour_bar(fig, shown, axes, label, font):
-    bar = fig.colorbar(shown, ax=axes, shrink=0.9, pad=0.01, aspect=15)
+def _colour_bar(fig, shown, axes, label, font, location="right"):
+    """A colour bar of ``shown`` beside ``axes`` (below them with ``location="bottom"``), labelled ``label``."""
+    bar = fig.colorbar(shown, ax=axes, shrink=0.9, pad=0.01, aspect=15 if location == "right" else 30,
+                       location=location)
     bar.set_label(label, fontsize=0.8 * font)
     bar.ax.tick_params(labelsize=0.8 * font)
+    return bar
+
+
+def _depth_colour_bar(fig, axes, colours, font):
+    """The bar of the depth panels: :data:`~sparsedepth.visualize.DEPTH_COLORMAP` along ``t`` in [0, 1] (near at
+    the bottom), ticks at round depths placed where ``colours`` puts them, labelled in metres."""
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import ListedColormap, Normalize
+
+    shown = ScalarMappable(norm=Normalize(0.0, 1.0), cmap=ListedColormap(DEPTH_COLORMAP[::-1] / 255.0))
+    spacing = ", 1/depth scale" if colours.scale == "inverse" else ""
+    bar = _colour_bar(fig, shown, axes, f"depth [m]{spacing}", font)
+    ticks = colours.ticks()
+    bar.set_ticks(colours.position(ticks), labels=[f"{value:g}" for value in ticks])
 
 
 def _colormaps():
@@ -356,23 +457,31 @@ def build_figure(image, outcome):
     """The figure of one frame as a matplotlib Figure (with an Agg canvas); None without matplotlib.
 
     Panels: image | input samples (disks of :func:`sample_radius` pixels on the
-    dimmed image) | nearest neighbour | the method's output, on one depth
-    colour scale (:data:`sparsedepth.visualize.DEPTH_COLORMAP`, near bright);
-    with ground truth, a second row: truth | (uncertainty) |
+    dimmed image) | nearest neighbour | the method's output, in the colours of
+    :func:`sparsedepth.colorize_depth` (near bright; spaced in inverse depth
+    when the range spans a factor of
+    :data:`~sparsedepth.visualize.INVERSE_DEPTH_RATIO`) between the 1st and
+    99th percentiles of the truth (or samples) and the output, with a colour
+    bar in metres; with ground truth, a second row: truth | (uncertainty) |
     |nearest - truth| | |output - truth| on one shared error scale; without
     truth, the uncertainty panel (``outcome.uncertainty``) follows the output.
-    Pixels without a value (no truth, or NaN in the output) are neutral grey.
-    Each panel is drawn at about :func:`panel_pixels` pixels wide (the
-    frame's width, within [320, 1000]) at 100 dpi.
+    A frame at least :data:`_WIDE_FRAME` times wider than tall is drawn two
+    panels a row, in the same order.  The uncertainty is drawn in
+    logarithmic colours up to the 99th percentile of
+    :func:`uncertainty_statistics`, which its title reports as stdout and the
+    JSON report do.  Pixels without a value (no truth, or NaN in the output)
+    are neutral grey (:data:`~sparsedepth.visualize.MISSING_COLOUR`).  Each
+    panel is drawn at about :func:`panel_pixels` pixels wide (the frame's
+    width, within [320, 1000]) at 100 dpi.
     """
     classes = matplotlib_classes()
     if classes is None:
         return None
     Figure, FigureCanvasAgg = classes
-    from matplotlib.colors import ListedColormap
 
     h, w = outcome.depth.shape
-    rows, columns, cells = _layout(outcome.truth is not None, outcome.uncertainty is not None)
+    rows, columns, cells = _layout(outcome.truth is not None, outcome.uncertainty is not None,
+                                   wide=w >= _WIDE_FRAME * h)
     panel_width = panel_pixels(w) / _DPI
     font = max(10.0, 2.0 * panel_width)
     fig = Figure(figsize=(columns * panel_width + 2.2, rows * (panel_width * h / w + 0.9) + 0.2), dpi=_DPI,
@@ -384,17 +493,21 @@ def build_figure(image, outcome):
         ax.set_axis_off()
 
     vmin, vmax = _depth_range(outcome)
-    depth_style = dict(cmap=_grey_for_missing(ListedColormap(DEPTH_COLORMAP[::-1] / 255.0)), vmin=vmin, vmax=vmax,
-                       interpolation="nearest")
-    samples = _depth_panels(axes, image, outcome, depth_style, font)
-    first_row = [axes[name] for name in ("image", "input", "nearest", "ours") if cells[name][0] == 0]
-    _colour_bar(fig, samples, first_row, "depth [m]", font)
+    colours = depth_colour_scale(np.array([[vmin, vmax]]), vmin=vmin, vmax=vmax)
+    _depth_panels(axes, image, outcome, colours, font)
+    other_rows = {row for name, (row, _) in cells.items() if name not in _DEPTH_PANELS}
+    _depth_colour_bar(fig, [axes[name] for name in _DEPTH_PANELS if cells[name][0] not in other_rows], colours, font)
     if outcome.truth is not None:
-        errors = _truth_panels(axes, outcome, depth_style, font)
-        _colour_bar(fig, errors, [axes["nearest_error"], axes["ours_error"]], "absolute error [m] (same scale)", font)
+        errors = _truth_panels(axes, outcome, colours, font)
+        _colour_bar(fig, errors, [axes["nearest_error"], axes["ours_error"]], "|error| [m], both panels", font)
     if outcome.uncertainty is not None:
-        shown = _uncertainty_panel(axes["uncertainty"], outcome.uncertainty, font)
-        _colour_bar(fig, shown, axes["uncertainty"], "uncertainty [m]", font)
+        from matplotlib.ticker import FuncFormatter
+
+        shown = _uncertainty_panel(axes["uncertainty"], outcome.uncertainty, outcome.observed, font)
+        bar = _colour_bar(fig, shown, axes["uncertainty"], "uncertainty [m]", font,
+                          location="bottom" if cells["uncertainty"][1] < columns - 1 else "right")
+        bar.formatter = FuncFormatter(lambda value, _: f"{value:g}")
+        bar.update_ticks()
     return fig
 
 
