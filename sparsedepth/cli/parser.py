@@ -586,17 +586,19 @@ def _add_output_options(parser) -> None:
                           "colours of --image); needs --intrinsics, --camera or --calib calib.txt (the demo "
                           "knows its own).  Pixels without depth are skipped.")
     out.add_argument("--figure", metavar="PATH",
-                     help="image | input samples | nearest neighbour | completed, and with ground truth: truth | "
-                          "both absolute errors on one scale; the uncertainty when computed; each panel at about "
-                          "the frame's width (.png, .pdf, .svg, .jpg; needs matplotlib: pip install "
-                          "'sparsedepth[plot]').")
+                     help="image | input samples | nearest neighbour | completed, in --depth-vis's colours with a "
+                          "colour bar in metres, and with ground truth: truth | both absolute errors on one scale; "
+                          "the uncertainty when computed (log colours clipped at its 99th percentile; its title "
+                          "gives the statistics stdout and --json give); each panel at about the frame's width, "
+                          "two a row for a frame 2.5 times wider than tall (.png, .pdf, .svg, .jpg; needs "
+                          "matplotlib: pip install 'sparsedepth[plot]').")
     out.add_argument("--depth-vis", metavar="PATH",
                      help="the output depth as a colour picture (.png, 8-bit RGB: near bright yellow, far dark "
                           "blue, missing grey) for any image viewer; no matplotlib needed.")
     out.add_argument("--outdir", metavar="DIR",
                      help=f"write depth.npy, depth.png, depth_vis.png, metrics.json, figure.png (if matplotlib is "
-                          "installed), points.ply (if the intrinsics are known) and, with --uncertainty or "
-                          "--max-uncertainty, uncertainty.npy "
+                          "installed), points.ply (if the intrinsics are known) and, with --uncertainty, "
+                          "--max-uncertainty or --max-relative-uncertainty, uncertainty.npy "
                           f"here (an existing folder; the demo creates its default ./{DEMO_DIR}/); batch: one depth file "
                           "per frame; --colmap: one depth map per view named after its image (00.png for 00.jpg, "
                           "sub-folders kept), scene.json and, by default, the --csv views.csv.")
