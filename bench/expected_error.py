@@ -139,6 +139,33 @@ def frame_table(records) -> str:
     return "\n".join(lines)
 
 
+def reading(sets) -> str:
+    """The section "Reading the tables": the target met or missed and the warning's record, from ``sets``, a list of
+    ``(title, records)`` whose first entry is scored against the target."""
+    title, records = sets[0]
+    share, median, _ = _scores([r["expected"] / r["true"] for r in records])
+    n_share, n_median, _ = _scores([r["expected_nearest"] / r["true_nearest"] for r in records])
+    shares = {label: _scores([r["expected"] / r["true"] for r in records if r["pattern"] == label])[0]
+              for label, _ in PATTERNS if any(r["pattern"] == label for r in records)}
+    meeting = [f"{label} ({value:.0%})" for label, value in shares.items() if value >= TARGET_SHARE]
+    missing = [f"{label} ({value:.0%})" for label, value in shares.items() if value < TARGET_SHARE]
+    verdict = "met" if share >= TARGET_SHARE else "missed"
+    lines = ["## Reading the tables", "",
+             f"* **Target {verdict}** ({title.lower()}): {share:.0%} of the completion's estimates and {n_share:.0%} "
+             f"of nearest fill's are within {TOLERANCE:.0%} of the true RMSE (target {TARGET_SHARE:.0%}); the median "
+             f"ratio is {median:.2f} and {n_median:.2f}.  Patterns at the target: {', '.join(meeting) or 'none'}; "
+             f"below it: {', '.join(missing) or 'none'}."]
+    for set_title, rows in sets:
+        right, false, missed, worse = _warning_counts(rows)
+        lines.append(f"* **The warning, {set_title.lower()}.** The default completion is worse than nearest fill on "
+                     f"{worse} of {len(rows)} inputs; the warning fired on {right} of them, missed {missed}, and "
+                     f"fired falsely on {false}.")
+    costs = [np.median([r["cost"] for r in records if r["pattern"] == label]) for label in shares]
+    lines.append(f"* **Cost.** {min(costs):.2f}-{max(costs):.2f} of a default completion's time (the median per "
+                 "pattern of the cost column).")
+    return "\n".join(lines)
+
+
 INTRODUCTION = """# Expected error: a completion that knows its own error
 
 `complete_depth(..., expected_error=True)` (command line: `--expected-error`) estimates, from the samples alone,
@@ -199,10 +226,14 @@ def main(argv=None) -> int:
         print("no shared frames: set SPARSEDEPTH_DATA", file=sys.stderr)
         return 1
     parts = [INTRODUCTION, f"Written by `{command}`; seeds {args.seeds}."]
+    measured = []
     for title, names in sets:
         records = [record for name in names for record in measure(name, seeds, args.step)]
         if records:
             parts += [f"## {title}", table(records), frame_table(records)]
+            measured.append((title, records))
+    if measured:
+        parts.append(reading(measured))
     text = "\n\n".join(parts) + "\n"
     if args.out:
         Path(args.out).write_text(text)
