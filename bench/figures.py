@@ -16,9 +16,13 @@ truth kept at random (seed 0) and the default weights:
 * ``overview.png``: image | sparse input | completed depth | the completed depth's coloured point cloud
   (:func:`sparsedepth.io.depth_to_points`) seen from a viewpoint turned :data:`VIEW_TURN` degrees, of the
   KITTI run.
-* ``uncertainty_limits.md``: the share of the pixels that ``--max-uncertainty M`` and
+* ``uncertainty_limits.csv``: the percentage of the pixels that ``--max-uncertainty M`` and
   ``--max-relative-uncertainty R`` leave missing (:func:`sparsedepth.uncertainty.too_uncertain`, the rule of the
-  command line) on those runs and on the whole KITTI frame 0000000005 with its LiDAR ground truth as the input.
+  command line) on those runs and on the whole KITTI frame 0000000005 with its LiDAR ground truth as the input:
+  of the frame, of the measured region (the unobserved pixels with ground truth; on the LiDAR run, the pixels
+  between its points) and of that region's nearest quarter by completed depth (near objects; on KITTI the road in
+  front of the car).  On the whole KITTI frame the LiDAR sees nothing above the street: the sky is most of what
+  the limits leave missing there.
 * ``<frame>_all_vis.png``, ``<frame>_trusted_vis.png`` and ``<frame>_trusted.jpg`` (:data:`CASES`, the figures of
   ``docs/uncertainty.md``): ``--depth-vis`` of the plain run, and ``--depth-vis`` and ``--figure`` (copied by
   :func:`for_docs` as a JPEG) of the run with ``--max-uncertainty``.
@@ -29,6 +33,7 @@ May import :mod:`sparsedepth`, :mod:`bench.harness`, matplotlib and Pillow (matp
 from __future__ import annotations
 
 import argparse
+import csv
 import io
 import json
 import sys
@@ -98,7 +103,7 @@ FRONT = (
 KITTI_LIDAR = Frame("kitti_lidar", "KITTI 0000000005, whole frame, LiDAR as input", "kitti_metric3d/rgb_0000000005.png",
                     "kitti_metric3d/depth_0000000005.png", ("--depth-scale", "kitti"))
 
-#: The limits of the table of uncertainty_limits.md.
+#: The limits of uncertainty_limits.csv.
 ABSOLUTE_LIMITS = (0.1, 0.5, 2.0)
 RELATIVE_LIMITS = (0.05, 0.1, 0.2)
 
@@ -193,9 +198,14 @@ def run_frame(frame: Frame, root: Path, folder: Path, *, keep_fraction="0.05") -
             "sigma": np.load(out["sigma"]), "figure": out["figure"].read_bytes(), "report": report}
 
 
-def limits_rows(name: str, run: dict) -> list[str]:
-    """The rows of uncertainty_limits.md of one run: the share of the frame, of the measured region and of its
-    nearest quarter that each limit leaves missing.
+#: The columns of uncertainty_limits.csv.
+LIMITS_HEADER = ("frame", "option", "limit", "% of the frame", "% of the measured region",
+                 "% of its nearest quarter")
+
+
+def limits_rows(name: str, run: dict) -> list[list]:
+    """The rows of uncertainty_limits.csv of one run (:data:`LIMITS_HEADER`): the percentage of the frame, of the
+    measured region and of its nearest quarter that each limit leaves missing, to one decimal.
 
     The measured region: the unobserved pixels with ground truth, or, when every measurement was an input (the
     LiDAR run), the unobserved pixels between them (:func:`scipy.ndimage.binary_closing`, 3 iterations).  Its
@@ -212,31 +222,17 @@ def limits_rows(name: str, run: dict) -> list[str]:
                               ("--max-relative-uncertainty", RELATIVE_LIMITS, "max_relative_uncertainty")):
         for limit in limits:
             left_out = too_uncertain(sigma, depth, **{key: limit})
-            rows.append(f"| {name} | `{flag} {limit:g}` | {left_out.mean():.1%} | {left_out[region].mean():.1%} "
-                        f"| {left_out[near].mean():.1%} |")
+            rows.append([name, flag, f"{limit:g}", *(f"{100 * left_out[where].mean():.1f}"
+                                                     for where in (Ellipsis, region, near))])
     return rows
 
 
-def write_limits_page(path: Path, rows: list[str]) -> None:
-    """docs/figures/uncertainty_limits.md: the table of :func:`limits_rows`."""
-    text = "\n".join([
-        "# How many pixels the uncertainty limits leave missing",
-        "",
-        "Written by `python -m bench.figures` (do not edit).  Each row: one run of `python -m sparsedepth.complete "
-        "... --uncertainty`, and the pixels a limit would leave missing in its output "
-        "(`sparsedepth.uncertainty.too_uncertain`, the rule of `--max-uncertainty` and "
-        "`--max-relative-uncertainty`): as a share of the frame, of the measured region (the unobserved pixels "
-        "with ground truth; on the whole KITTI frame, whose LiDAR points are all inputs, the pixels between them) "
-        "and of the nearest quarter of that region by completed depth (near objects; on KITTI the road in front "
-        "of the car).  On the whole KITTI frame the LiDAR sees nothing above the street: the sky is most of what "
-        "the limits leave missing there.",
-        "",
-        "| frame | limit | of the frame | of the measured pixels | of the nearest quarter |",
-        "|---|---|---:|---:|---:|",
-        *rows,
-        "",
-    ])
-    path.write_text(text)
+def write_limits_table(path: Path, rows: list[list]) -> None:
+    """docs/figures/uncertainty_limits.csv: :data:`LIMITS_HEADER` and the rows of :func:`limits_rows`."""
+    with open(path, "w", newline="") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(LIMITS_HEADER)
+        writer.writerows(rows)
     print(f"wrote {path}", flush=True)
 
 
@@ -338,7 +334,7 @@ def main(argv=None) -> int:
                 write_overview(args.out / "overview.png", frame, run)
         lidar = run_frame(KITTI_LIDAR, root, folder, keep_fraction=None)
         limit_rows += limits_rows(KITTI_LIDAR.title, lidar)
-        write_limits_page(args.out / "uncertainty_limits.md", limit_rows)
+        write_limits_table(args.out / "uncertainty_limits.csv", limit_rows)
 
         for name, image, depth, scale, limit in CASES:
             common = ["--image", root / image, "--depth", root / depth, "--depth-scale", scale, "--keep-fraction",

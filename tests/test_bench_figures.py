@@ -46,8 +46,10 @@ def test_limits_rows_are_the_shares_left_out():
     for row, (key, limit) in zip(rows, [("abs", m) for m in figures.ABSOLUTE_LIMITS]
                                  + [("rel", r) for r in figures.RELATIVE_LIMITS]):
         out = sigma > (limit if key == "abs" else limit * depth)
-        cells = [cell.strip() for cell in row.strip("|").split("|")]
-        assert cells[2:] == [f"{out.mean():.1%}", f"{out[region].mean():.1%}", f"{out[near].mean():.1%}"]
+        assert row[1] == ("--max-uncertainty" if key == "abs" else "--max-relative-uncertainty")
+        assert row[2:] == [f"{limit:g}", *(f"{100 * share:.1f}" for share in (out.mean(), out[region].mean(),
+                                                                             out[near].mean()))]
+    assert len(rows[0]) == len(figures.LIMITS_HEADER)
 
 
 def test_turned_view_draws_the_median_point_at_the_centre():

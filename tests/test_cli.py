@@ -72,7 +72,7 @@ def test_help_makes_no_speed_claims_and_says_what_an_uncertainty_limit_is(capsys
     assert main(["--help-all"]) == 0
     text = " ".join(capsys.readouterr().out.split())
     assert "expected error of their depth, in metres; not a depth" in text
-    assert "R times their depth" in text and "docs/figures/uncertainty_limits.md" in text
+    assert "R times their depth" in text and "docs/figures/uncertainty_limits.csv" in text
     assert "docs/fast_mode.md" in text and "docs/expected_error.md" in text
 
 

@@ -571,7 +571,7 @@ def _add_output_options(parser) -> None:
                      help="leave the pixels whose uncertainty exceeds R times their depth missing, as "
                           "--max-uncertainty does (0.1: an expected error over 10 %% of the depth).  With "
                           "--max-uncertainty too, a pixel is left out when it exceeds either limit.  The share of "
-                          "the pixels each limit leaves out on real frames: docs/figures/uncertainty_limits.md "
+                          "the pixels each limit leaves out on real frames: docs/figures/uncertainty_limits.csv "
                           "(python -m bench.figures).")
     out.add_argument("--json", metavar="PATH", help="metrics, settings and solver history as JSON.")
     out.add_argument("--expected-error", action="store_true",
