@@ -1,10 +1,11 @@
 """The public entry point: :func:`complete_depth`, which checks which arguments go together and calls a mode.
 
-The work is done by :class:`~sparsedepth.problem.CompletionProblem` (set up once, solved) and the modes of
-:mod:`sparsedepth.modes` (fast, prior, uncertainty); this module decides which of them a call asks for
-(:func:`check_modes`).
+The work is done by :class:`~sparsedepth.problem.CompletionProblem` (set up once, solved), the modes of
+:mod:`sparsedepth.modes` (fast, prior, uncertainty) and :mod:`sparsedepth.selection` (best); this module decides
+which of them a call asks for (:func:`check_modes`).
 
-May import :mod:`sparsedepth.problem`, :mod:`sparsedepth.modes` and what they import.
+May import :mod:`sparsedepth.problem`, :mod:`sparsedepth.modes`, :mod:`sparsedepth.selection` and what they
+import.
 """
 
 from __future__ import annotations
@@ -23,13 +24,14 @@ from .objective.weights import DensitySchedule, Weights
 from .problem import CLAMP_WARNING_SHARE, CompletionProblem, choose_solver, depth_jump_factor, range_outliers
 from .expected_error import expected_error as estimate_expected_error
 from .result import CompletionResult, NoGainWarning
+from .selection import complete_best
 
 __all__ = ["complete_depth", "check_modes", "argument_conflict", "ARGUMENT_RULES", "choose_solver", "depth_jump_factor",
            "range_outliers", "QUALITIES", "fast_factor", "FAST_WEIGHTS", "FAST_COARSE_RTOL", "CLAMP_WARNING_SHARE",
-           "with_expected_error"]
+           "with_expected_error", "warn_if_no_gain"]
 
 #: The values of ``complete_depth``'s ``quality``.
-QUALITIES = ("default", "fast")
+QUALITIES = ("default", "fast", "best")
 
 
 # the numpydoc docstring (the objective, scaling and clamp in Notes) is long; the code is short
@@ -129,7 +131,19 @@ def complete_depth(
         Least-squares fit of ``s · prior + t`` to the samples
         (:func:`sparsedepth.priors.align_prior`): both (relative depth, the
         default), ``s`` only, or neither (a metric prior used as it is).
-    quality : {"default", "fast"}
+    quality : {"default", "fast", "best"}
+        ``"best"``: per input, the completion chosen among a few fixed
+        candidates (the defaults, the image trusted a quarter as much, the
+        image ignored, half the defaults and half nearest fill, nearest
+        fill) by cross-validation on the samples
+        (:func:`sparsedepth.selection.complete_best`); the defaults unless
+        another candidate is expected clearly more accurate.  The choice and
+        every candidate's score are ``result.selection``.  It takes
+        ``weights`` (the candidates transform them), ``clip_to_observed``,
+        ``x0``, ``l1_smoothing`` and ``expected_error`` (from the same
+        folds); the solver settings, ``prior`` and the uncertainty are not
+        available (an error).  Needs at least 16 observed pixels.  Its
+        accuracy and time: ``python -m bench.best_quality``.
         ``"fast"``: the real-time mode (see Notes): a solve on a grid 2, 3
         or 4 times coarser per side, interpolated back and refined by a few
         edge-aware sweeps.  Without ``weights`` it solves with
@@ -148,7 +162,7 @@ def complete_depth(
         Also estimate, from the samples alone, the RMSE over the unobserved
         pixels of the result and of nearest fill
         (:func:`sparsedepth.expected_error.expected_error`: cross-validation
-        on the samples with fast completions, 0.15-0.35 of a default
+        on the samples with fast completions, 0.13-0.31 of a default
         completion's time); stored in ``result.expected_rmse`` and
         ``result.expected_nearest_rmse``, with a
         :class:`~sparsedepth.result.NoGainWarning` when the first is not
@@ -161,6 +175,9 @@ def complete_depth(
     -------
     CompletionResult
         ``clamped`` pixels were moved into ``depth_range`` by the clamp.
+        With ``quality="best"`` a
+        :class:`~sparsedepth.selection.BestCompletionResult` (its
+        ``selection`` holds the choice and the scores).
 
     Raises
     ------
@@ -169,9 +186,11 @@ def complete_depth(
         depth (observed, or anywhere without a mask), wrong number of
         dimensions, a negative weight, an unknown solver or option key, or a
         quadratic-only solver with γ > 0.
-        Fewer than 16 observed pixels with ``uncertainty``; a negative or
+        Fewer than 16 observed pixels with ``uncertainty`` or
+        ``quality="best"``; a negative or
         non-finite ``max_uncertainty``; an unknown ``quality``, or
         ``"fast"`` with γ > 0, ``x0``, ``callback`` or uncertainty;
+        ``"best"`` with a solver setting, ``prior`` or uncertainty;
         ``expected_error`` with ``prior`` or fewer than 16 observed pixels.
     TypeError
         ``weights`` not a :class:`Weights`, :class:`DensitySchedule` or
@@ -260,6 +279,12 @@ def complete_depth(
     mode = check_modes(quality=quality, solver=solver, tol=tol, max_iter=max_iter, callback=callback,
                        options=options, uncertainty=uncertainty, max_uncertainty=max_uncertainty, prior=prior,
                        expected_error=expected_error)
+    if mode == "best":
+        result = complete_best(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
+                               clip_to_observed=clip_to_observed, x0=x0, expected_error=expected_error)
+        if expected_error and result.selection.chosen != "nearest":
+            warn_if_no_gain(result.expected_rmse, result.expected_nearest_rmse, stacklevel=3)
+        return result
     if mode == "fast":
         result = complete_fast(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
                                clip_to_observed=clip_to_observed, x0=x0)
@@ -283,23 +308,31 @@ def with_expected_error(result, image, sparse_depth, mask, quality, weights) -> 
     estimate = estimate_expected_error(image, sparse_depth, mask, quality=quality,
                                        weights=weights if quality == "fast" else None,
                                        completed=result.depth if quality == "default" else None)
-    if not estimate.beats_nearest:
-        warnings.warn(f"the completion is not expected to beat nearest fill: expected RMSE {estimate.rmse:.4g} vs "
-                      f"{estimate.nearest_rmse:.4g} for nearest fill (estimated from the samples; "
-                      "sparsedepth.nearest_fill gives it)", NoGainWarning, stacklevel=3)
+    warn_if_no_gain(estimate.rmse, estimate.nearest_rmse, stacklevel=4)
     return replace(result, expected_rmse=estimate.rmse, expected_nearest_rmse=estimate.nearest_rmse)
+
+
+def warn_if_no_gain(expected_rmse, expected_nearest_rmse, *, stacklevel=3) -> None:
+    """Warn :class:`~sparsedepth.result.NoGainWarning` when ``expected_rmse >= expected_nearest_rmse``."""
+    if not expected_rmse < expected_nearest_rmse:
+        warnings.warn(f"the completion is not expected to beat nearest fill: expected RMSE {expected_rmse:.4g} vs "
+                      f"{expected_nearest_rmse:.4g} for nearest fill (estimated from the samples; "
+                      "sparsedepth.nearest_fill gives it)", NoGainWarning, stacklevel=stacklevel)
 
 
 #: Which arguments go together, the one table every front end reads: ``(argument, why, the arguments it
 #: excludes)``, the first rule that a call breaks deciding the message.  ``"quality"`` stands for
-#: ``quality="fast"``, ``"colorization"`` for the colorization hole fill (:func:`sparsedepth.fill_holes`), and an
-#: argument counts as given when it is not at its default.
+#: ``quality="fast"``, ``"best"`` for ``quality="best"``, ``"colorization"`` for the colorization hole fill
+#: (:func:`sparsedepth.fill_holes`), and an argument counts as given when it is not at its default.
 ARGUMENT_RULES = (
     ("colorization", "is not the completion solver and takes no",
-     ("weights", "solver", "tol", "max_iter", "options", "quality", "uncertainty", "max_uncertainty", "prior")),
+     ("weights", "solver", "tol", "max_iter", "options", "quality", "best", "uncertainty", "max_uncertainty",
+      "prior")),
     ("prior", "cannot be combined with", ("quality", "uncertainty", "max_uncertainty")),
     ("quality", "picks its own solve and takes no",
      ("solver", "tol", "max_iter", "callback", "options", "uncertainty", "max_uncertainty")),
+    ("best", "chooses its completion by cross-validation and takes no",
+     ("solver", "tol", "max_iter", "callback", "options", "uncertainty", "max_uncertainty", "prior")),
     ("expected_error", "estimates the completion's error from fast completions and cannot be combined with",
      ("colorization", "prior")),
 )
@@ -322,7 +355,8 @@ def argument_conflict(given) -> tuple[str, str, list[str]] | None:
 
 def check_modes(*, quality="default", solver="auto", tol=None, max_iter=None, callback=None, options=None,
                 uncertainty=False, max_uncertainty=None, prior=None, expected_error=False) -> str:
-    """Which mode a call of :func:`complete_depth` asks for: ``"fast"``, ``"prior"``, ``"uncertainty"`` or ``"default"``.
+    """Which mode a call of :func:`complete_depth` asks for: ``"fast"``, ``"best"``, ``"prior"``, ``"uncertainty"`` or
+    ``"default"``.
 
     Which arguments go together is :data:`ARGUMENT_RULES` (:func:`argument_conflict`); ``max_uncertainty``
     implies the uncertainty.
@@ -342,7 +376,8 @@ def check_modes(*, quality="default", solver="auto", tol=None, max_iter=None, ca
             raise TypeError(f"{name} must be True or False; got {type(value).__name__}")
     if max_uncertainty is not None:
         check_nonnegative_real(max_uncertainty, name="max_uncertainty")
-    given = [name for name, value in (("quality", quality == "fast"), ("solver", solver != "auto"),
+    given = [name for name, value in (("quality", quality == "fast"), ("best", quality == "best"),
+                                      ("solver", solver != "auto"),
                                       ("tol", tol is not None), ("max_iter", max_iter is not None),
                                       ("callback", callback is not None), ("options", options is not None),
                                       ("uncertainty", bool(uncertainty)),
@@ -354,9 +389,9 @@ def check_modes(*, quality="default", solver="auto", tol=None, max_iter=None, ca
         argument, why, excluded = conflict
         label, names = _named(argument), [_named(name) for name in excluded]
         raise ValueError(f"{label} {why} {', '.join(names)}: leave {'it' if len(names) == 1 else 'them'} at the "
-                         "default" + (" or use quality='default'" if argument == "quality" else ""))
-    if quality == "fast":
-        return "fast"
+                         "default" + (" or use quality='default'" if argument in ("quality", "best") else ""))
+    if quality in ("fast", "best"):
+        return quality
     if prior is not None:
         return "prior"
     return "uncertainty" if bool(uncertainty) or max_uncertainty is not None else "default"
@@ -364,4 +399,4 @@ def check_modes(*, quality="default", solver="auto", tol=None, max_iter=None, ca
 
 def _named(argument) -> str:
     """An argument of :data:`ARGUMENT_RULES` as :func:`complete_depth` spells it."""
-    return "quality='fast'" if argument == "quality" else argument
+    return {"quality": "quality='fast'", "best": "quality='best'"}.get(argument, argument)
