@@ -19,7 +19,7 @@ import numpy as np
 
 from ._validation import check_rgb_colour, is_real
 
-__all__ = ["DEPTH_COLORMAP", "DEPTH_COLORMAP_ANCHORS", "MISSING_COLOUR", "INVERSE_DEPTH_RATIO", "DepthColourScale",
+__all__ = ["DEPTH_COLORMAP", "DEPTH_COLORMAP_ANCHORS", "MISSING_COLOUR", "DEPTH_RANGE_PERCENTILES", "INVERSE_DEPTH_RATIO", "DepthColourScale",
            "depth_colour_scale", "colorize_depth"]
 
 #: sRGB anchors of the depth colour map, far (first) to near (last).  Each is
@@ -50,7 +50,8 @@ DEPTH_COLORMAP.setflags(write=False)
 #: colour of the map at that lightness.
 MISSING_COLOUR = (128, 128, 128)
 
-_LOW_PERCENTILE, _HIGH_PERCENTILE = 2.0, 98.0
+#: Percentiles of the valid depths that bound the colours when ``vmin``/``vmax`` are not given.
+DEPTH_RANGE_PERCENTILES = (2.0, 98.0)
 #: ``scale="auto"`` colours by inverse depth when ``vmax / vmin`` is at least this: a street scene (KITTI: 3-80 m)
 #: rather than a room (NYU, TUM, RealSense: a factor of 2-6), where a linear scale would give the near tenth of
 #: the range, where most of the structure is, a few colours only.
@@ -251,7 +252,7 @@ class DepthColourScale:
 def _resolve_scale(valid_values, low, high, scale) -> DepthColourScale:
     """The :class:`DepthColourScale` of the valid depths with the limits given (None: percentiles) and ``scale``."""
     if low is None or high is None:
-        p_low, p_high = np.percentile(valid_values, [_LOW_PERCENTILE, _HIGH_PERCENTILE])
+        p_low, p_high = np.percentile(valid_values, DEPTH_RANGE_PERCENTILES)
         if low is None and high is None:
             low, high = float(p_low), float(p_high)
         elif low is None:

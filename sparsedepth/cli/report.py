@@ -25,7 +25,7 @@ from .. import __version__
 from .._validation import as_float_image
 from ..io.writing import png_saturated
 from ..objective import weights as weights_module
-from ..visualize import DEPTH_COLORMAP, MISSING_COLOUR, colorize_depth, depth_colour_scale
+from ..visualize import DEPTH_COLORMAP, DEPTH_RANGE_PERCENTILES, MISSING_COLOUR, colorize_depth, depth_colour_scale
 from .parser import PROG
 
 __all__ = ["matplotlib_classes", "build_report", "print_table", "build_figure", "render_figure", "panel_pixels",
@@ -340,11 +340,13 @@ def _layout(has_truth: bool, has_uncertainty: bool, wide: bool = False) -> tuple
 
 
 def _depth_range(outcome) -> tuple[float, float]:
-    """(vmin, vmax) of the depth panels: 1st and 99th percentiles of the truth (or samples) and the output."""
+    """(vmin, vmax) of the depth panels: the percentiles :func:`~sparsedepth.visualize.colorize_depth` uses
+    (:data:`~sparsedepth.visualize.DEPTH_RANGE_PERCENTILES`) of the measured depths, the truth (or, without one, the
+    samples); completed depths outside that range take the colour of its ends, so extrapolated corners do not
+    flatten the colours of the measured scene."""
     truth = outcome.truth
-    reference = outcome.sparse[outcome.observed] if truth is None else truth[np.isfinite(truth) & (truth > 0)]
-    values = np.concatenate([reference, outcome.depth[np.isfinite(outcome.depth)]])
-    vmin, vmax = np.percentile(values, [1, 99])
+    values = outcome.sparse[outcome.observed] if truth is None else truth[np.isfinite(truth) & (truth > 0)]
+    vmin, vmax = np.percentile(values, DEPTH_RANGE_PERCENTILES)
     return float(vmin), max(float(vmax), float(vmin) + 1e-6)
 
 
