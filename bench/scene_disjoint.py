@@ -360,7 +360,7 @@ def _summary(rows, method, metric):
 
 
 def _input_name(row) -> str:
-    return f"`{row['frame']}` {row['pattern']} s{row['seed']}"
+    return "-" if row is None else f"`{row['frame']}` {row['pattern']} s{row['seed']}"
 
 
 def _table(header, body) -> list[str]:
@@ -395,6 +395,8 @@ def targets(rows, nogain) -> list[tuple[str, float, float, bool]]:
     out = []
     for method, group, where in ((DEFAULT, rows, "every scene"), (DEFAULT, untuned(rows), "scenes without a tuning frame"),
                                  (TUNED, rows, "every scene")):
+        if not group:
+            continue
         uniform = [r for r in group if r["pattern"].startswith("uniform")]
         mu, _, _ = _summary(uniform, method, "rmse")
         ma, _, _ = _summary(group, method, "rmse")
@@ -420,17 +422,16 @@ def readme_block(rows, patterns, page="docs/scene_disjoint.md") -> list[str]:
     cells = ["{:.2f} / {:.2f}".format(*_summary(group, DEFAULT, "rmse")[:2]) for _, group in groups]
     held_cells = ["{:.2f} / {:.2f}".format(*_summary(group, DEFAULT, "rmse")[:2]) for _, group in _groups(held, patterns)]
     scenes, held_scenes = len({r["scene"] for r in rows}), len({r["scene"] for r in held})
-    return [f"Accuracy per input pattern ({len(rows)} inputs of {scenes} scenes at half resolution): RMSE of "
+    return ([f"Accuracy per input pattern ({len(rows)} inputs of {scenes} scenes at half resolution): RMSE of "
             "`complete_depth` with its defaults as a ratio to nearest fill's (nearest = 1.0, lower is better), "
             f"mean / worst input, over every scene and over the {held_scenes} scenes that hold no tuning frame:",
             "",
             "| scenes | " + " | ".join(label for label, _ in groups) + " |",
             "|---|" + "---|" * len(groups),
-            "| every scene | " + " | ".join(cells) + " |",
-            f"| {held_scenes} never tuned on | " + " | ".join(held_cells) + " |",
-            "",
-            f"MAE, per scene, the baselines and the worst inputs: [{page}]({page}) "
-            "(`python -m bench.scene_disjoint --out docs/scene_disjoint.md --readme README.md`)."]
+            "| every scene | " + " | ".join(cells) + " |"]
+            + ([f"| {held_scenes} never tuned on | " + " | ".join(held_cells) + " |"] if held else [])
+            + ["", f"MAE, per scene, the baselines and the worst inputs: [{page}]({page}) "
+               "(`python -m bench.scene_disjoint --out docs/scene_disjoint.md --readme README.md`)."])
 
 
 def replace_block(text: str, block_lines) -> str:
@@ -498,6 +499,8 @@ def report(rows, choices, patterns, frames, seeds, step, *, command, seconds, no
               f"`{TUNED}` choice among the configurations never sees the scene it is scored on.", ""]
     for method, group, where in ((DEFAULT, rows, "every scene"), (DEFAULT, untuned(rows), "scenes without a tuning frame"),
                                  (TUNED, rows, "every scene")):
+        if not group:
+            continue
         uniform = [r for r in group if r["pattern"].startswith("uniform")]
         lines.append(f"- `{method}`, {where}: mean RMSE / nearest's {_summary(uniform, method, 'rmse')[0]:.3f} on "
                      f"uniform inputs, {_summary(group, method, 'rmse')[0]:.3f} over every pattern (worst input "
@@ -513,6 +516,8 @@ def report(rows, choices, patterns, frames, seeds, step, *, command, seconds, no
     for metric, title, subset, where in (("rmse", "RMSE", rows, "every scene"),
                                          ("rmse", "RMSE", untuned(rows), "scenes without a tuning frame"),
                                          ("mae", "MAE", rows, "every scene")):
+        if not subset:
+            continue
         lines += [f"## {title} / nearest's, mean / worst input, per pattern, {where}", ""]
         body = []
         for label, group in _groups(subset, patterns):
