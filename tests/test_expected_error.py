@@ -7,10 +7,12 @@ import warnings
 
 import numpy as np
 import pytest
+from scipy.ndimage import distance_transform_edt
 
 import sparsedepth as sd
 from sparsedepth.complete import main
-from sparsedepth.expected_error import DEFAULT_FACTOR, ExpectedError, distance_model, expected_error
+from sparsedepth.expected_error import (DEFAULT_FACTOR, MIN_TILE, ExpectedError, distance_model, expected_error,
+                                        tile_folds)
 
 
 @pytest.fixture
@@ -208,3 +210,17 @@ def test_the_command_line_refuses_it_for_a_batch(source, tmp_path, capsys, monke
     assert main([*source, "--outdir", "out", "--csv", "out/rows.csv", "--expected-error"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--expected-error is for one frame" in err[0]
+
+
+def test_the_samples_of_one_tile_share_a_fold():
+    """tile_folds (the folds of expected_error and of quality='best'): a tile's samples are held out together, the
+    tile side follows the target pixels' distances, and the folds come from the seed alone."""
+    mask = np.random.default_rng(3).random((90, 120)) < 0.02
+    split = tile_folds(mask, ~mask, 3, 0)
+    rows, cols = np.nonzero(mask)
+    assert split.tile >= MIN_TILE and split.fold_of.shape == rows.shape and set(split.fold_of) == {0, 1, 2}
+    tiles = (rows // split.tile) * 1000 + cols // split.tile
+    for tile in np.unique(tiles):
+        assert np.unique(split.fold_of[tiles == tile]).size == 1
+    assert np.array_equal(split.fold_of, tile_folds(mask, ~mask, 3, 0).fold_of)
+    np.testing.assert_array_equal(split.target_distance, distance_transform_edt(~mask)[~mask])
