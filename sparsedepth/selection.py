@@ -21,10 +21,10 @@ import numpy as np
 
 from ._validation import as_depth_and_mask
 from .baselines import nearest_fill
-from .expected_error import (MIN_SAMPLES, departure_factor, expected_mse, held_out_errors, tile_folds)
+from .expected_error import MIN_SAMPLES, departure_factor, expected_mse, held_out_errors, tile_folds
 from .modes.fast import FAST_WEIGHTS, complete_fast
 from .objective.objective import DEFAULT_L1_SMOOTHING
-from .objective.weights import DEFAULT_SCHEDULE, DensitySchedule, Weights, check_weights
+from .objective.weights import DEFAULT_SCHEDULE, DensitySchedule, check_weights
 from .problem import CompletionProblem
 from .result import ClampWarning, CompletionResult
 
