@@ -172,7 +172,8 @@ class Weights:
     :data:`DEFAULT_SCHEDULE`'s weights for the observed fraction of the
     pixels (:func:`default_weights`): this class's values for every field
     but :data:`DENSITY_FIELDS`, which the schedule sets per density
-    (``python -m bench.density``, ``docs/density.md``).
+    (``python -m bench.density``, ``docs/density.md``; the anchor at 50 % observed
+    ``python -m bench.scene_disjoint``, ``docs/scene_disjoint.md``).
     """
 
     # Defaults: the weight set chosen by ``python -m bench.tune`` (docs/tuning.md) on bench/frames.py
@@ -419,10 +420,13 @@ def _between(a: float, b: float, t: float) -> float:
     return (1 - t) * a + t * b
 
 
-#: The schedule the library uses when no weights are given (:func:`default_weights`): the anchors chosen on the
-#: tuning frames by ``python -m bench.density --local-linear-windows`` (docs/density.md has the search and its
-#: scores).  The local-linear term sums its fit over cross-shaped and 2x2 windows (a 13-point normal stencil),
-#: not 3x3 windows; the other fields are :data:`DEFAULT_WEIGHTS`'.
+#: The schedule the library uses when no weights are given (:func:`default_weights`): the anchors up to 10 %
+#: observed chosen on the tuning frames by ``python -m bench.density --local-linear-windows`` (docs/density.md has
+#: the search and its scores).  The 50 % anchor, for dense input with holes (a depth sensor's), is the 10 % one
+#: with ten times its ``beta_second`` (more thin-plate smoothness across large holes): the configuration that the
+#: leave-one-scene-out choice of ``python -m bench.scene_disjoint`` picks for every held-out scene
+#: (docs/scene_disjoint.md).  The local-linear term sums its fit over cross-shaped and 2x2 windows (a 13-point
+#: normal stencil), not 3x3 windows; the other fields are :data:`DEFAULT_WEIGHTS`'.
 DEFAULT_SCHEDULE = DensitySchedule((
     (0.003, dict(delta=1.6375e-05, kappa=25.0, beta_image=0.000252375, beta_second=3.575e-05, beta_second_image=0.0936,
                  beta_local_linear=0.0, local_linear_eps=1.25e-06, beta_local_linear_cross=0.0025,
@@ -434,6 +438,9 @@ DEFAULT_SCHEDULE = DensitySchedule((
                 beta_local_linear=0.0, local_linear_eps=1.25e-06, beta_local_linear_cross=0.00125,
                 beta_local_linear_2x2=0.08)),
     (0.10, dict(delta=6.55e-05, kappa=100.0, beta_image=0.004038, beta_second=3.575e-05, beta_second_image=0.0936,
+                beta_local_linear=0.0, local_linear_eps=5e-06, beta_local_linear_cross=0.00125,
+                beta_local_linear_2x2=0.02)),
+    (0.50, dict(delta=6.55e-05, kappa=100.0, beta_image=0.004038, beta_second=3.575e-04, beta_second_image=0.0936,
                 beta_local_linear=0.0, local_linear_eps=5e-06, beta_local_linear_cross=0.00125,
                 beta_local_linear_2x2=0.02)),
 ))
