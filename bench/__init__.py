@@ -3,6 +3,7 @@
 Run each one as a module from the repository root (``python -m bench.<name>``; ``--help`` lists its options,
 and most have ``--quick`` for a seconds-long smoke test on tiny frames):
 
+* :mod:`bench.scene_disjoint` - the headline accuracy: leave-one-scene-out over every shared frame and seven input patterns (``docs/scene_disjoint.md``, and the README's accuracy block with ``--readme README.md``);
 * :mod:`bench.run_all` - every table of ``docs/results.md`` (and the solver figures), from the five below;
 * :mod:`bench.sparsity` - nearest-neighbour fill vs completion at 1 %, 5 %, 10 % observed (paper Table 3.1);
 * :mod:`bench.baselines` - every baseline (nearest, linear, biharmonic, colorization) side by side with ours;
@@ -14,7 +15,7 @@ and most have ``--quick`` for a seconds-long smoke test on tiny frames):
 * :mod:`bench.holefill` - hole filling against the NYU-provided filled depth (``docs/holefill.md``);
 * :mod:`bench.batch_scale` - batch throughput, process pool vs Dask LocalCluster (``docs/batch_scale.md``);
 * :mod:`bench.admm_scale` - ADMM's time per pixel on L1 problems at 0.3, 1.2 and 4.9 megapixels (``docs/admm_scale.md``);
-* :mod:`bench.solver_gaps` - every L1 solver on issue 20's problem, three frames: gaps and times relative to ADMM;
+* :mod:`bench.solver_gaps` - every L1 solver on the reference objective's four terms (alpha 1, beta 0.5, gamma 0.2), three whole frames: gaps and times relative to ADMM;
 * :mod:`bench.accuracy` - modelling variants (blurred edges, image-aware prior fill, depth-aware re-solve, ``prior=``) with a leave-one-dataset-out table (``docs/accuracy.md``);
 * :mod:`bench.speed` - the depth-based stop of the default solve and, through :mod:`bench.fast_peers`, FGS and IP-Basic beside ours (``docs/speed.md``, ``docs/figures/speed_accuracy.png``);
 * :mod:`bench.fast_mode` - ``quality="fast"`` against the default solve and OpenCV's fast global smoother (``docs/fast_mode.md``);
@@ -25,9 +26,14 @@ and most have ``--quick`` for a seconds-long smoke test on tiny frames):
 * :mod:`bench.registration` - shifting the image onto the samples' depth edges, per input and calibrated per frame (``docs/registration.md``);
 * :mod:`bench.default_runtime` - the default completion's time against the baseline objective's, same process (``docs/default_runtime.md``);
 * :mod:`bench.interpolation` - bilinear against operator-dependent multigrid interpolation on the radius-2 completion systems (``docs/interpolation.md``);
-* :mod:`bench.uncertainty` and :mod:`bench.figures` - how ``result.uncertainty`` ranks and covers the errors, and its figures (``docs/uncertainty.md``).
+* :mod:`bench.uncertainty` - how ``result.uncertainty`` ranks and covers the errors (``docs/uncertainty.md``);
+* :mod:`bench.figures` - the front-page figures of four sensors, ``docs/figures/overview.png`` and the uncertainty pictures;
+* :mod:`bench.expected_error` - the expected error against the true RMSE, scene by scene (``docs/expected_error.md``);
+* :mod:`bench.best_quality` - ``quality="best"``'s choice, accuracy and cost (``docs/best_quality.md``);
+* :mod:`bench.blowups` - what :func:`sparsedepth.blowups.flag_blowups` catches (``docs/blowups.md``);
+* :mod:`bench.colmap_scene` and :mod:`bench.outliers` - dense depth from a COLMAP model, and wrong samples (``docs/colmap_scene.md``, ``docs/outliers.md``).
 
-Shared pieces: :mod:`bench.frames` (the reported and the tuning frames, disjoint), :mod:`bench.harness`
+Shared pieces: :mod:`bench.frames` (the reported and the tuning frames, scene-disjoint; each frame's scene and leave-one-scene-out folds), :mod:`bench.harness`
 (inputs, methods, one evaluation, aggregation, timing, markdown tables, machine description, report header,
 command line), :mod:`bench.blas` (one BLAS thread, before numpy is imported), :mod:`bench.naive_colorization`
 (the slow per-pixel reference port of the NYU toolbox fill) and ``bench/templates/`` (the prose of the reports,
