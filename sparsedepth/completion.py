@@ -162,7 +162,7 @@ def complete_depth(
         Also estimate, from the samples alone, the RMSE over the unobserved
         pixels of the result and of nearest fill
         (:func:`sparsedepth.expected_error.expected_error`: cross-validation
-        on the samples with fast completions, 0.13-0.31 of a default
+        on the samples with fast completions, 0.14-0.28 of a default
         completion's time); stored in ``result.expected_rmse`` and
         ``result.expected_nearest_rmse``, with a
         :class:`~sparsedepth.result.NoGainWarning` when the first is not

@@ -350,7 +350,7 @@ def expected_error(image, sparse_depth, mask=None, *, folds=3, seed=0, weights=N
     (sky, the zero border of a registered frame) count as far-away pixels.
 
     Cost: ``folds`` fast completions (one more with ``completed``) and ``folds + 1`` distance transforms (the
-    nearest fills are read from those), 0.13-0.31 of a default completion's time at 640x480
+    nearest fills are read from those), 0.14-0.28 of a default completion's time at 640x480
     (``docs/expected_error.md``).
     """
     depth, observed = as_depth_and_mask(sparse_depth, mask)
