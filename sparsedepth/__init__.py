@@ -8,11 +8,13 @@ The user's API
 Complete
     :func:`complete_depth` ``(image, sparse_depth, mask=None, ...)``: the dense depth of one frame; its samples are
     the pixels of ``mask``, or the finite pixels of ``sparse_depth``.  Options: ``uncertainty=True``,
-    ``max_uncertainty=``, ``quality="fast"``, ``prior=`` (a dense map to align and complete around),
-    ``expected_error=True``.  :class:`CompletionProblem` sets up once and solves many times.
+    ``max_uncertainty=``, ``quality="fast"`` or ``"best"`` (chosen per input by cross-validation), ``prior=`` (a
+    dense map to align and complete around), ``expected_error=True``, ``blowups="flag"`` or ``"remove"`` (local
+    blow-ups: :func:`sparsedepth.blowups.flag_blowups`).  :class:`CompletionProblem` sets up once and solves many times.
 The result
     :class:`CompletionResult`: ``depth`` (metres, clamped to the observed range), ``uncertainty``, ``converged`` and
-    ``message``, ``objective`` and ``terms``, the duality ``gap``, ``clamped``, ``history``.  Warnings:
+    ``message``, ``objective`` and ``terms``, the duality ``gap``, ``clamped``, ``history``, ``expected_rmse``,
+    ``blowups``; with ``quality="best"`` a :class:`sparsedepth.selection.BestCompletionResult` (its ``selection``).  Warnings:
     :class:`ClampWarning`, :class:`NoGainWarning`.
 Fill holes
     :func:`fill_holes` ``(image, raw_depth)``: the NYU Depth V2 toolbox's colorization fill of a raw RGB-D frame, or
@@ -70,7 +72,7 @@ from .registration import ImageShift, estimate_image_shift, pool_image_shifts, s
 from .metrics import DepthMetrics, depth_metrics
 from .objective.objective import AbsTerm, Objective, QuadraticTerm, RobustTerm, build_objective, edge_weights
 from .objective.robust import PENALTIES, RobustPenalty, robust_penalty
-from . import expected_error
+from . import blowups, expected_error, selection
 from .result import ClampWarning, CompletionResult, IterationRecord, NoGainWarning, SolverState, UncertaintyCalibration
 from .sampling import sample_depth, sample_mask, valid_depth_mask
 from .solvers import SOLVER_OPTIONS, SOLVERS

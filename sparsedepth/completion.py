@@ -24,6 +24,7 @@ from .objective.weights import DensitySchedule, Weights
 from .problem import CLAMP_WARNING_SHARE, CompletionProblem, choose_solver, depth_jump_factor, range_outliers
 from .expected_error import expected_error as estimate_expected_error
 from .result import CompletionResult, NoGainWarning
+from .blowups import flag_blowups, remove_blowups
 from .selection import complete_best
 
 __all__ = ["complete_depth", "check_modes", "argument_conflict", "ARGUMENT_RULES", "choose_solver", "depth_jump_factor",
@@ -55,6 +56,7 @@ def complete_depth(
     prior_alignment: str = "scale_shift",
     quality: str = "default",
     expected_error: bool = False,
+    blowups: str | None = None,
 ) -> CompletionResult:
     """Complete a sparse depth map into a dense one, guided by an image.
 
@@ -170,6 +172,14 @@ def complete_depth(
         modes (with ``max_uncertainty`` it is about every unobserved pixel,
         the removed ones included); not with ``prior``, whose completion
         the fast completions do not model (an error).
+    blowups : {None, "flag", "remove"}
+        Check the completed depth for local blow-ups
+        (:func:`sparsedepth.blowups.flag_blowups`: pixels that no nearby
+        sample supports, typically a value in the middle of a depth jump):
+        ``"flag"`` marks them in ``result.blowups``; ``"remove"`` also sets
+        them to NaN in ``result.depth`` and counts them in
+        ``result.removed``.  Works in every mode; what it catches and what
+        it flags wrongly: ``python -m bench.blowups``.
 
     Returns
     -------
@@ -191,12 +201,13 @@ def complete_depth(
         non-finite ``max_uncertainty``; an unknown ``quality``, or
         ``"fast"`` with γ > 0, ``x0``, ``callback`` or uncertainty;
         ``"best"`` with a solver setting, ``prior`` or uncertainty;
-        ``expected_error`` with ``prior`` or fewer than 16 observed pixels.
+        ``expected_error`` with ``prior`` or fewer than 16 observed pixels;
+        a ``blowups`` other than None, ``"flag"`` and ``"remove"``.
     TypeError
         ``weights`` not a :class:`Weights`, :class:`DensitySchedule` or
         ``None``, ``max_iter`` not an int, ``tol``
         not a number, ``options`` not a dict, an option of the wrong type, or
-        ``uncertainty`` not a bool.
+        ``uncertainty`` not a bool, ``blowups`` not a string or None.
 
     Warns
     -----
@@ -279,27 +290,55 @@ def complete_depth(
     mode = check_modes(quality=quality, solver=solver, tol=tol, max_iter=max_iter, callback=callback,
                        options=options, uncertainty=uncertainty, max_uncertainty=max_uncertainty, prior=prior,
                        expected_error=expected_error)
+    check_blowups(blowups)
     if mode == "best":
         result = complete_best(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
                                clip_to_observed=clip_to_observed, x0=x0, expected_error=expected_error)
         if expected_error and result.selection.chosen != "nearest":
             warn_if_no_gain(result.expected_rmse, result.expected_nearest_rmse, stacklevel=3)
-        return result
-    if mode == "fast":
-        result = complete_fast(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
-                               clip_to_observed=clip_to_observed, x0=x0)
+    elif mode == "prior":
+        result = complete_with_prior(image, sparse_depth, mask, prior, alignment=prior_alignment, weights=weights,
+                                     l1_smoothing=l1_smoothing, clip_to_observed=clip_to_observed, solver=solver,
+                                     tol=tol, max_iter=max_iter, options=options, callback=callback, x0=x0)
     else:
-        settings = dict(solver=solver, tol=tol, max_iter=max_iter, options=options, callback=callback, x0=x0)
-        if mode == "prior":
-            return complete_with_prior(image, sparse_depth, mask, prior, alignment=prior_alignment, weights=weights,
-                                       l1_smoothing=l1_smoothing, clip_to_observed=clip_to_observed, **settings)
-        problem = CompletionProblem(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
-                                    clip_to_observed=clip_to_observed)
-        if mode == "uncertainty":
-            result = complete_with_uncertainty(problem, max_uncertainty=max_uncertainty, **settings)
+        if mode == "fast":
+            result = complete_fast(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
+                                   clip_to_observed=clip_to_observed, x0=x0)
         else:
-            result = problem.solve(**settings)
-    return with_expected_error(result, image, sparse_depth, mask, quality, weights) if expected_error else result
+            settings = dict(solver=solver, tol=tol, max_iter=max_iter, options=options, callback=callback, x0=x0)
+            problem = CompletionProblem(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
+                                        clip_to_observed=clip_to_observed)
+            if mode == "uncertainty":
+                result = complete_with_uncertainty(problem, max_uncertainty=max_uncertainty, **settings)
+            else:
+                result = problem.solve(**settings)
+        if expected_error:
+            result = with_expected_error(result, image, sparse_depth, mask, quality, weights)
+    return result if blowups is None else with_blowups(result, sparse_depth, mask, blowups)
+
+
+#: The values of ``complete_depth``'s ``blowups`` besides None.
+BLOWUP_ACTIONS = ("flag", "remove")
+
+
+def check_blowups(blowups) -> None:
+    """Refuse a ``blowups`` that is not None, ``"flag"`` or ``"remove"`` (TypeError for a non-string)."""
+    if blowups is None:
+        return
+    if not isinstance(blowups, str):
+        raise TypeError(f"blowups must be None or one of {list(BLOWUP_ACTIONS)}; got {type(blowups).__name__}")
+    if blowups not in BLOWUP_ACTIONS:
+        raise ValueError(f"blowups must be None or one of {list(BLOWUP_ACTIONS)}; got {blowups!r}")
+
+
+def with_blowups(result, sparse_depth, mask, blowups) -> CompletionResult:
+    """``result`` with the pixels :func:`~sparsedepth.blowups.flag_blowups` judges blown up in ``result.blowups``;
+    with ``blowups="remove"`` they are also NaN in the depth and counted in ``result.removed``."""
+    flagged = flag_blowups(result.depth, sparse_depth, mask)
+    if blowups == "flag":
+        return replace(result, blowups=flagged)
+    return replace(result, depth=remove_blowups(result.depth, flagged), blowups=flagged,
+                   removed=result.removed + int(np.count_nonzero(flagged)))
 
 
 def with_expected_error(result, image, sparse_depth, mask, quality, weights) -> CompletionResult:

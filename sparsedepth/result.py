@@ -177,12 +177,18 @@ class CompletionResult:
         How :attr:`uncertainty` was calibrated on held-out observations.
     removed : int
         Pixels set to NaN in :attr:`depth` because their uncertainty exceeds
-        ``max_uncertainty`` (0 without it).
+        ``max_uncertainty``, or because ``blowups="remove"`` judged them blown
+        up (0 without either).
     expected_rmse, expected_nearest_rmse : float
         With ``expected_error=True``: the RMSE over the unobserved pixels
         expected of :attr:`depth` and of nearest fill, estimated from the
         samples alone (:func:`sparsedepth.expected_error.expected_error`),
         in the units of :attr:`depth`; NaN without it.
+    blowups : ndarray of bool, (H, W), or None
+        With ``blowups="flag"`` or ``"remove"``: the completed pixels that
+        :func:`sparsedepth.blowups.flag_blowups` judges blown up (no nearby
+        sample supports their depth); with ``"remove"`` they are NaN in
+        :attr:`depth` and counted in :attr:`removed`.  None without it.
     """
 
     depth: np.ndarray
@@ -205,6 +211,7 @@ class CompletionResult:
     removed: int = 0
     expected_rmse: float = float("nan")
     expected_nearest_rmse: float = float("nan")
+    blowups: Optional[np.ndarray] = field(default=None, repr=False)
 
     def history_array(self, name: str) -> np.ndarray:
         """One field of :attr:`history` as an array (``None`` becomes NaN)."""
