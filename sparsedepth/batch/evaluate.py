@@ -170,7 +170,9 @@ def _run_method(image, sparse, observed, task, fill_method, solve_options):
             solve_options = {**solve_options, "weights": hole_fill_weights(solve_options.get("weights"))}
         result = complete_depth(image, sparse, observed, **solve_options)
         dense = result.depth
-        mode = ", fast" if solve_options.get("quality") == "fast" else ""
+        quality = solve_options.get("quality")
+        mode = (", fast" if quality == "fast" else f", best: {result.selection.chosen}" if quality == "best"
+                else "")
         method = f"{'fill complete' if task == 'fill' else 'complete'} ({result.solver}{mode})"
     return dense, method, result, time.perf_counter() - start
 
@@ -210,6 +212,8 @@ def evaluate_frame(
     prior=None,
     prior_alignment: str = "scale_shift",
     image_shift=None,
+    blowups: str | None = None,
+    expected_error: bool = False,
 ) -> FrameOutcome:
     """Complete (or hole-fill) one frame and score it and the nearest-neighbour baseline.
 
@@ -237,8 +241,8 @@ def evaluate_frame(
         ``"fill"`` only.
     weights, solver, tol, max_iter, callback, clip_to_observed, uncertainty, max_uncertainty, quality
         Passed to :func:`~sparsedepth.complete_depth` (not used by the
-        colorization fill, which refuses ``uncertainty`` and
-        ``max_uncertainty``).  ``weights=None`` is the library's default:
+        colorization fill, which refuses ``uncertainty``,
+        ``max_uncertainty`` and ``quality``).  ``weights=None`` is the library's default:
         the density schedule for ``"complete"``, ``DEFAULT_WEIGHTS`` for the
         ``"fill"`` task's default solve (as :func:`~sparsedepth.fill_holes`).
     prior, prior_alignment
@@ -255,6 +259,10 @@ def evaluate_frame(
         shift, silently, when there are too few of them to estimate from
         (``FrameOutcome.image_shift_fallback`` says why).  ``None``: the image
         as it is.  The nearest-neighbour baseline does not use the image.
+    blowups, expected_error
+        Passed to :func:`~sparsedepth.complete_depth` (the colorization fill
+        refuses ``blowups``); the completion's pixels ``blowups="remove"``
+        leaves missing are not scored.
 
     Returns
     -------
@@ -276,7 +284,9 @@ def evaluate_frame(
     if task == "fill" and fill_method == "colorization":
         given = ["colorization"] + [name for name, value in (
             ("uncertainty", bool(uncertainty)), ("max_uncertainty", max_uncertainty is not None),
-            ("prior", prior is not None), ("quality", quality == "fast")) if value]
+            ("prior", prior is not None), ("quality", quality == "fast"), ("best", quality == "best")) if value]
+        if blowups is not None:
+            raise ValueError("the colorization fill takes no blowups: use fill_method='complete'")
         conflict = argument_conflict(given)
         if conflict is not None:
             raise ValueError(f"the colorization fill {conflict[1]} {', '.join(conflict[2])}: use "
@@ -294,7 +304,8 @@ def evaluate_frame(
         image, sparse, observed, task, fill_method,
         dict(weights=weights, solver=solver, tol=tol, max_iter=max_iter, callback=callback,
              clip_to_observed=clip_to_observed, uncertainty=uncertainty, max_uncertainty=max_uncertainty,
-             quality=quality, prior=prior, prior_alignment=prior_alignment),
+             quality=quality, prior=prior, prior_alignment=prior_alignment, blowups=blowups,
+             expected_error=expected_error),
     )
     start = time.perf_counter()
     nearest = nearest_fill(sparse, observed)

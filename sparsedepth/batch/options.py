@@ -91,10 +91,11 @@ class BatchOptions:
         Passed to :func:`~sparsedepth.complete_depth`: keep each completed
         map within the range of its observed depths (the CSV's ``clamped``
         column counts the pixels this moved).
-    quality : {"default", "fast"}
+    quality : {"default", "fast", "best"}
         Passed to :func:`~sparsedepth.complete_depth`: ``"fast"`` is the
-        real-time mode (with ``solver="auto"``, no ``tol`` or ``max_iter``;
-        not with the colorization fill).
+        real-time mode, ``"best"`` the per-input choice by cross-validation
+        on the samples (both with ``solver="auto"``, no ``tol`` or
+        ``max_iter``; not with the colorization fill).
     image_shift : None, "auto" or pair of int
         Passed to :func:`~sparsedepth.batch.evaluate.evaluate_frame`: move
         each frame's image ``(dy, dx)`` pixels (after ``downsample``) to
@@ -259,6 +260,7 @@ class BatchOptions:
             raise _option_error("quality", f"quality must be one of {list(QUALITIES)}, got {self.quality!r}")
         colorization = self.task == "fill" and self.fill_method == "colorization"
         given = [name for name, value in (("colorization", colorization), ("quality", self.quality == "fast"),
+                                          ("best", self.quality == "best"),
                                           ("weights", self.weights is not None), ("solver", self.solver != "auto"),
                                           ("tol", self.tol is not None), ("max_iter", self.max_iter is not None),
                                           ("uncertainty", self.uncertainty_dir is not None))
@@ -267,8 +269,10 @@ class BatchOptions:
         if conflict is not None:
             argument, why, excluded = conflict
             named = {"colorization": "the colorization fill (task='fill', fill_method='colorization')",
-                     "quality": "quality='fast'", "uncertainty": "uncertainty (uncertainty_dir)"}
+                     "quality": "quality='fast'", "best": "quality='best'",
+                     "uncertainty": "uncertainty (uncertainty_dir)"}
             option = excluded[0] if argument == "colorization" else argument
+            option = "quality" if option == "best" else option
             raise _option_error("uncertainty_dir" if option == "uncertainty" else option,
                                 f"{named.get(argument, argument)} {why} "
                                 f"{', '.join(named.get(name, name) for name in excluded)}")

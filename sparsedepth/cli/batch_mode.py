@@ -54,7 +54,7 @@ _OPTION_FLAGS = {
     "max_iter": "--max-iter", "depth_scale": "--depth-scale", "downsample": "--downsample", "out_dir": "--outdir",
     "out_format": "--out-format", "out_scale": "--out-scale", "clip_to_observed": "--no-clip",
     "byteorder": "--byteorder", "invalid_values": "--invalid-value", "min_depth": "--min-depth",
-    "max_depth": "--max-depth", "max_pixels": "--max-pixels", "quality": "--fast", "image_shift": "--image-shift",
+    "max_depth": "--max-depth", "max_pixels": "--max-pixels", "quality": "--fast or --best", "image_shift": "--image-shift",
     "uncertainty_dir": "--uncertainty", "colmap_max_error": "--colmap-max-error",
     "colmap_min_track": "--colmap-min-track",
 }
@@ -124,7 +124,7 @@ def _batch_options(args, weights, scene: _ColmapScene | None = None) -> BatchOpt
             out_scale=_out_scale(args, scene),
             byteorder=args.byteorder, invalid_values=tuple(args.invalid_values or ()), min_depth=args.min_depth,
             max_depth=args.max_depth, max_pixels=args.max_pixels, clip_to_observed=args.clip_to_observed,
-            quality="fast" if args.fast else "default", image_shift=args.image_shift,
+            quality="fast" if args.fast else "best" if args.best else "default", image_shift=args.image_shift,
             uncertainty_dir=args.uncertainty if colmap else None,
             colmap_max_error=args.colmap_max_error, colmap_min_track=args.colmap_min_track,
         )

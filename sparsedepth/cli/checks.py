@@ -70,11 +70,18 @@ def _check_combinations(args) -> str:
     _check_image_shift(args)
     _check_edge_penalty(args)
     _check_prior(args, mode)
+    if args.fast and args.best:
+        raise UsageError("--best and --fast are two ways to complete a frame: give one")
+    if colorization and args.blowups is not None:
+        raise UsageError("--blowups checks a completion; the colorization fill is not one: add --fill-method "
+                          "complete or drop --blowups")
     if mode == "batch":
         if args.colmap is None and (args.uncertainty is not None or args.max_uncertainty is not None
                                     or args.max_relative_uncertainty is not None):
             raise UsageError("--uncertainty, --max-uncertainty and --max-relative-uncertainty are for one frame, "
                               "not a batch")
+        if args.blowups is not None:
+            raise UsageError("--blowups is for one frame, not a batch")
         if args.colmap is not None and args.csv is None:
             args.csv = str(Path(args.outdir) / COLMAP_CSV)
         if args.csv is None:
@@ -185,6 +192,7 @@ def _check_argument_rules(args, colorization) -> None:
              "tol": ["--tol"] if args.tol is not None else [],
              "max_iter": ["--max-iter"] if args.max_iter is not None else [],
              "quality": ["--fast"] if args.fast else [],
+             "best": ["--best"] if args.best else [],
              "uncertainty": ["--uncertainty"] if args.uncertainty is not None else [],
              "max_uncertainty": [flag for flag, value in (("--max-uncertainty", args.max_uncertainty),
                                                            ("--max-relative-uncertainty",

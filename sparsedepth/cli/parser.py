@@ -123,6 +123,9 @@ COMMON_OPTIONS = (
         ("--truth", "ground-truth depth to score against."),
         ("--solver", "solver (default auto)."),
         ("--fast", "real-time mode: a solve on a coarser grid, less accurate (docs/fast_mode.md)."),
+        ("--best", "choose per input among fixed candidates by cross-validation on the samples "
+                   "(docs/best_quality.md)."),
+        ("--blowups", "flag or remove completed pixels that no nearby sample supports (docs/blowups.md)."),
     )),
     ("fill holes", (
         ("--fill-holes", "fill the holes of raw depth (every valid pixel observed)."),
@@ -519,6 +522,13 @@ def _add_method_options(parser) -> None:
                         help="real-time mode: solve on a 2-4x coarser grid, upsample, refine by a few edge-aware "
                              "sweeps (its speed and accuracy beside the default's: docs/fast_mode.md, "
                              "python -m bench.fast_mode).")
+    method.add_argument("--best", action="store_true",
+                        help="choose the completion per input among a few fixed candidates (the defaults, the "
+                             "image trusted less or not at all, a blend with nearest fill, nearest fill) by "
+                             "cross-validation on the samples; the defaults unless another is expected clearly "
+                             "more accurate.  The choice is printed in the method's name.  Not with --fast, "
+                             "--solver, --tol, --max-iter, the uncertainty options or --prior; its accuracy and "
+                             "time: docs/best_quality.md (python -m bench.best_quality).")
     method.add_argument("--tol", type=_nonnegative, metavar="TOL", help="solver tolerance (meaning per solver).")
     method.add_argument("--max-iter", type=_positive_int, metavar="N", help="maximum solver iterations.")
     method.add_argument("--no-clip", dest="clip_to_observed", action="store_false",
@@ -573,6 +583,13 @@ def _add_output_options(parser) -> None:
                           "--max-uncertainty too, a pixel is left out when it exceeds either limit.  The share of "
                           "the pixels each limit leaves out on real frames: docs/figures/uncertainty_limits.csv "
                           "(python -m bench.figures).")
+    out.add_argument("--blowups", choices=("flag", "remove"),
+                     help="check the completed depth for local blow-ups: pixels whose depth no nearby sample "
+                          "supports (none of their 8 nearest samples within 10 %% of it, and no plane through those "
+                          "samples predicting it), typically a value in the middle of a depth jump.  flag: count "
+                          "them (stdout, --json); remove: also leave them missing in every output, as "
+                          "--max-uncertainty does.  One frame.  What it catches and what it flags wrongly: "
+                          "docs/blowups.md (python -m bench.blowups).")
     out.add_argument("--json", metavar="PATH", help="metrics, settings and solver history as JSON.")
     out.add_argument("--expected-error", action="store_true",
                      help="also estimate, from the samples alone (cross-validation with fast completions), "

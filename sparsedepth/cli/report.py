@@ -30,7 +30,7 @@ from .parser import PROG
 
 __all__ = ["matplotlib_classes", "build_report", "print_table", "build_figure", "render_figure", "panel_pixels",
            "sample_radius", "dilate_samples", "uncertainty_png", "uncertainty_png_line", "UNCERTAINTY_PIXELS",
-           "uncertainty_statistics", "removal_limits", "metres", "rmse_text"]
+           "uncertainty_statistics", "removal_limits", "metres", "rmse_text", "blowups_removed", "blowups_line"]
 
 _UINT16_MAX = 65535
 
@@ -98,6 +98,11 @@ def build_report(args, argv, outcome, description, weights, weights_given, png_s
         )
     if getattr(args, "expected_error", False) and result is not None:
         report.update(expected_rmse=result.expected_rmse, expected_nearest_rmse=result.expected_nearest_rmse)
+    if result is not None and result.blowups is not None:
+        report["blowups"] = {"action": args.blowups, "flagged": int(np.count_nonzero(result.blowups)),
+                             "removed": blowups_removed(result)}
+    if result is not None and getattr(result, "selection", None) is not None:
+        report["selection"] = {"chosen": result.selection.chosen, "scores": dict(result.selection.scores)}
     if result is not None and result.uncertainty is not None:
         report["uncertainty"] = _uncertainty_summary(outcome, removal_limits(args))
         png = uncertainty_png(args, outcome, png_scale)
@@ -199,7 +204,7 @@ def _uncertainty_summary(outcome, limits=None) -> dict:
         "calibration": dataclasses.asdict(result.uncertainty_calibration),
         **uncertainty_statistics(result.uncertainty, outcome.observed),
         "limits": {flag.lstrip("-").replace("-", "_"): value for flag, value in (limits or {}).items()},
-        "removed": result.removed,
+        "removed": result.removed - blowups_removed(result),
     }
     if outcome.truth is not None:
         hidden = np.isfinite(outcome.truth) & ~outcome.observed & ~np.isnan(outcome.depth)
@@ -208,6 +213,22 @@ def _uncertainty_summary(outcome, limits=None) -> dict:
             summary["coverage_1sigma"] = float(np.mean(error <= result.uncertainty[hidden]))
             summary["coverage_2sigma"] = float(np.mean(error <= 2 * result.uncertainty[hidden]))
     return summary
+
+
+def blowups_removed(result) -> int:
+    """The pixels of ``result.removed`` that ``blowups="remove"`` left missing (flagged and NaN; the uncertainty
+    limits remove others)."""
+    if result.blowups is None:
+        return 0
+    return int(np.count_nonzero(result.blowups & np.isnan(result.depth)))
+
+
+def blowups_line(action, result) -> str:
+    """The line of ``--blowups``: how many pixels the check flagged, and whether they were left missing."""
+    flagged = int(np.count_nonzero(result.blowups))
+    share = flagged / result.blowups.size
+    done = "left missing" if action == "remove" else "flagged (--blowups remove leaves them missing)"
+    return (f"--blowups {action}: {flagged} pixels ({share:.1%}) whose depth no nearby sample supports, {done}")
 
 
 def _uncertainty_line(statistics) -> str:

@@ -37,7 +37,7 @@ from .frame_checks import check_frame
 from .messages import UsageError, one_line, warnings_as_lines
 from .outputs import Named, commit
 from .parser import DEMO_DIR, DEMO_DOWNSAMPLE, DEMO_KEEP_FRACTION, weights_of
-from .report import (build_report, matplotlib_classes, print_table, removal_limits, render_figure,
+from .report import (blowups_line, build_report, matplotlib_classes, print_table, removal_limits, render_figure,
                      uncertainty_png_line)
 
 __all__ = ["READER_FLAGS", "plan_outputs", "wants_uncertainty", "input_files", "run_one", "expected_error_line",
@@ -270,10 +270,11 @@ def _evaluate(args, image, depth, mask, truth, prior, keep_fraction, weights, st
             keep_fraction=keep_fraction, keep_count=args.keep_count, seed=args.seed,
             fill_method=args.fill_method, weights=weights if use_solver else None,
             solver=args.solver or "auto", tol=args.tol, max_iter=args.max_iter,
-            callback=_Progress(stream, not args.quiet) if use_solver and not args.fast else None,
+            callback=_Progress(stream, not args.quiet) if use_solver and not (args.fast or args.best) else None,
             clip_to_observed=args.clip_to_observed,
             uncertainty=wants_uncertainty(args), max_uncertainty=args.max_uncertainty,
-            quality="fast" if args.fast else "default",
+            quality="fast" if args.fast else "best" if args.best else "default",
+            blowups=args.blowups, expected_error=bool(args.best and args.expected_error),
             prior=prior, prior_alignment=args.prior_alignment or "scale_shift", image_shift=args.image_shift,
         )
     if outcome.image_shift_fallback is not None:
@@ -442,7 +443,7 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
     outcome = leave_out_relative(outcome, args.max_relative_uncertainty)
     if outcome.image_shift != (0, 0):
         image = shift_image(image, outcome.image_shift)  # the figure and the point cloud show the registered image
-    if args.expected_error and outcome.result is not None:
+    if args.expected_error and outcome.result is not None and not args.best:  # --best estimates it as it chooses
         outcome = _estimate_error(args, image, outcome, weights, stderr)
 
     # every output is encoded and checked before any file is touched; commit writes all or none
@@ -455,6 +456,8 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
         print("note: matplotlib is not installed, no figure.png (pip install 'sparsedepth[plot]')", file=stderr)
 
     print_table(outcome, description, stdout, image_shift=args.image_shift, limits=removal_limits(args))
+    if args.blowups is not None and outcome.result is not None:
+        print(blowups_line(args.blowups, outcome.result), file=stdout)
     if args.expected_error and outcome.result is not None:
         print(expected_error_line(outcome.result), file=stdout)
     saturated = uncertainty_png_line(args, outcome, png_scale)
