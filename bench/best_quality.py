@@ -24,7 +24,6 @@ import sys
 import time
 import warnings
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
 
@@ -33,6 +32,7 @@ from sparsedepth import selection as sel
 from bench import frames as frame_list
 from bench.expected_error import CALIBRATION_FRAMES, PATTERNS
 from bench.harness import load_frame
+from bench.harness.report import publish
 from sparsedepth.expected_error import MIN_SAMPLES
 
 #: The margins the calibration table scores (:func:`sparsedepth.selection.choose`).
@@ -289,12 +289,7 @@ def main(argv=None) -> int:
                   "Per pattern: `quality=\"best\"` and the defaults' RMSE over nearest fill's, best's over the "
                   "defaults', best's time over the default's, and how often each candidate was chosen.",
                   report_table(records), frame_table(records), verdict(records)]
-    text = "\n\n".join(parts) + "\n"
-    if args.out:
-        Path(args.out).write_text(text)
-    else:
-        print(text)
-    return 0
+    return publish(["\n\n".join(parts) + "\n"], args.out)
 
 
 if __name__ == "__main__":

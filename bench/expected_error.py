@@ -27,7 +27,6 @@ import argparse
 import sys
 import time
 import warnings
-from pathlib import Path
 
 import numpy as np
 
@@ -35,6 +34,7 @@ import sparsedepth as sd
 from sparsedepth import expected_error as ee
 from bench import frames as frame_list
 from bench.harness import load_frame
+from bench.harness.report import publish
 
 #: The scenes every constant of :mod:`sparsedepth.expected_error` was fitted on.
 CALIBRATION_FRAMES = ("middlebury2001/tsukuba", "nyu_mmseg_pseudo/bookstore_0001d_00001",
@@ -234,12 +234,7 @@ def main(argv=None) -> int:
             measured.append((title, records))
     if measured:
         parts.append(reading(measured))
-    text = "\n\n".join(parts) + "\n"
-    if args.out:
-        Path(args.out).write_text(text)
-    else:
-        print(text)
-    return 0
+    return publish(["\n\n".join(parts) + "\n"], args.out)
 
 
 if __name__ == "__main__":
