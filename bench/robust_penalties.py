@@ -92,10 +92,26 @@ def run(argv=None):
     return text, rows
 
 
+#: The page's title and introduction, before the section :func:`run` writes.
+PAGE_INTRO = """# Robust edge penalties
+
+What each robust edge penalty is, how to use it and what the solvers guarantee:
+[The objective and the solvers](guides/objective.md#robust-edge-penalties). Compare the times within the table
+only: the machine is shared.
+
+"""
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv  # the report's command line shows the options of the run
     args = H.parser(__doc__.splitlines()[0], default_step=DEFAULT_STEP).parse_args(argv)
-    return H.script_main(run, args, argv)
+    return H.script_main(_page, args, argv)
+
+
+def _page(argv):
+    """:func:`run` with the page's title and introduction before its section."""
+    text, rows = run(argv)
+    return PAGE_INTRO + text, rows
 
 
 if __name__ == "__main__":
