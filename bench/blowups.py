@@ -197,7 +197,7 @@ def summary(cal_recs, rep_recs, tum_recs, key, chosen, seeds, step) -> list[str]
     by_frame = {f: [r for r in rep_recs if r["frame"] == f] for f in frames}
     false = sorted(frames, key=lambda f: -_mean(by_frame[f], key, "false"))
     lines.append(
-        f"* Report frames ({len(frames)} frames at step {step} x {len(PATTERNS)} inputs x {len(seeds)} seeds): "
+        f"* The other frames ({len(frames)} frames at step {step} x {len(PATTERNS)} inputs x {len(seeds)} seeds): "
         f"{pct(rep_recs, 'flagged'):.2f} % of the pixels flagged, holding {pct(rep_recs, 'error_share'):.0f} % of "
         f"the squared error, {pct(rep_recs, 'false'):.0f} % false flags; the RMSE of the rest is "
         f"{_mean(rep_recs, key, 'kept'):.2f} of the RMSE. Most false flags: "
@@ -215,7 +215,7 @@ def summary(cal_recs, rep_recs, tum_recs, key, chosen, seeds, step) -> list[str]
         f"setting them to NaN lowers the RMSE of the pixels that remain on {lower} of the {len(with_flags)} inputs "
         "where the flagged pixels hold some error, so `remove_blowups` sets NaN by default.")
     lines.append(
-        f"* What it does not catch: {100 - pct(rep_recs, 'error_share'):.0f} % of the squared error on the report "
+        f"* What it does not catch: {100 - pct(rep_recs, 'error_share'):.0f} % of the squared error on the other "
         "frames stays in pixels it does not flag: errors within τ of some nearby sample's value (a surface "
         "continued a little wrong, a value near one side of an edge), values between two rows of scan lines on "
         "the straight line between them, and pixels whose nearest samples all lie on one scan line. It also flags "
@@ -286,10 +286,10 @@ def run(argv=()) -> tuple[str, dict]:
         notes=definitions + " Calibration frames: the two synthetic scenes of `bench.blowups.synthetic_frames` "
         "(a box whose depth edge the image shows; the same depth under an image of the background's colour and "
         "noise) and "
-        + ", ".join(f"`{n}`" for n in CALIBRATION_FRAMES) + " (scenes with no report frame).",
+        + ", ".join(f"`{n}`" for n in CALIBRATION_FRAMES) + " (scenes with no report frame of `bench/frames.py`).",
         elapsed=cal_elapsed)
     rep_section = H.section(
-        "Report frames (never used for a choice)", command=command, frames_=report_frames, seeds=seeds,
+        "The other frames (not used to choose the thresholds)", command=command, frames_=report_frames, seeds=seeds,
         body=tables(rep_recs, key), notes=definitions, elapsed=rep_elapsed)
     parts = [cal_section, rep_section]
     if tum_recs:

@@ -186,7 +186,7 @@ def test_the_bench_chooses_the_largest_error_share_beyond_the_pixel_share_among_
 
 def test_the_bench_quick_run_writes_its_sections():
     page, results = importlib.import_module("bench.blowups").run(["--quick"])
-    for title in ("## Calibration", "## Report frames", "Summary"):
+    for title in ("## Calibration", "## The other frames", "Summary"):
         assert title in page
     assert results["chosen"] in [(g, m) for g in importlib.import_module("bench.blowups").GAPS
                                  for m in importlib.import_module("bench.blowups").MISFITS]
