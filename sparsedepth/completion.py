@@ -24,6 +24,7 @@ from .objective.weights import DensitySchedule, Weights
 from .problem import CLAMP_WARNING_SHARE, CompletionProblem, choose_solver, depth_jump_factor, range_outliers
 from .expected_error import expected_error as estimate_expected_error
 from .result import CompletionResult, NoGainWarning
+from .uncertainty import check_relative_limit
 from .blowups import flag_blowups, remove_blowups
 from .selection import complete_best
 
@@ -52,6 +53,7 @@ def complete_depth(
     clip_to_observed: bool = True,
     uncertainty: bool = False,
     max_uncertainty: float | None = None,
+    max_relative_uncertainty: float | None = None,
     prior=None,
     prior_alignment: str = "scale_shift",
     quality: str = "default",
@@ -123,6 +125,12 @@ def complete_depth(
         Leave the pixels whose uncertainty exceeds this (units of
         ``sparse_depth``) missing: NaN in ``result.depth``, counted in
         ``result.removed``.  Implies ``uncertainty=True``.
+    max_relative_uncertainty : float, optional
+        The same for the pixels whose uncertainty exceeds this fraction of
+        their depth (0.1: 10 %); with ``max_uncertainty`` too, a pixel goes
+        when it breaks either limit
+        (:func:`sparsedepth.uncertainty.too_uncertain`).  Implies
+        ``uncertainty=True``.
     prior : ndarray, (H, W), optional
         A dense, finite depth map the caller brings (e.g. a monocular
         network's prediction; metric or relative).  It is aligned to the
@@ -198,7 +206,8 @@ def complete_depth(
         quadratic-only solver with γ > 0.
         Fewer than 16 observed pixels with ``uncertainty`` or
         ``quality="best"``; a negative or
-        non-finite ``max_uncertainty``; an unknown ``quality``, or
+        non-finite ``max_uncertainty``; a ``max_relative_uncertainty`` that is
+        not a finite number > 0; an unknown ``quality``, or
         ``"fast"`` with γ > 0, ``x0``, ``callback`` or uncertainty;
         ``"best"`` with a solver setting, ``prior`` or uncertainty;
         ``expected_error`` with ``prior`` or fewer than 16 observed pixels;
@@ -288,8 +297,8 @@ def complete_depth(
     (40, 50)
     """
     mode = check_modes(quality=quality, solver=solver, tol=tol, max_iter=max_iter, callback=callback,
-                       options=options, uncertainty=uncertainty, max_uncertainty=max_uncertainty, prior=prior,
-                       expected_error=expected_error)
+                       options=options, uncertainty=uncertainty, max_uncertainty=max_uncertainty,
+                       max_relative_uncertainty=max_relative_uncertainty, prior=prior, expected_error=expected_error)
     check_blowups(blowups)
     if mode == "best":
         result = complete_best(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
@@ -309,7 +318,8 @@ def complete_depth(
             problem = CompletionProblem(image, sparse_depth, mask, weights=weights, l1_smoothing=l1_smoothing,
                                         clip_to_observed=clip_to_observed)
             if mode == "uncertainty":
-                result = complete_with_uncertainty(problem, max_uncertainty=max_uncertainty, **settings)
+                result = complete_with_uncertainty(problem, max_uncertainty=max_uncertainty,
+                                                   max_relative_uncertainty=max_relative_uncertainty, **settings)
             else:
                 result = problem.solve(**settings)
         if expected_error:
@@ -366,7 +376,7 @@ def warn_if_no_gain(expected_rmse, expected_nearest_rmse, *, stacklevel=3) -> No
 ARGUMENT_RULES = (
     ("colorization", "is not the completion solver and takes no",
      ("weights", "solver", "tol", "max_iter", "options", "quality", "best", "uncertainty", "max_uncertainty",
-      "prior")),
+      "prior", "blowups")),
     ("prior", "cannot be combined with", ("quality", "uncertainty", "max_uncertainty")),
     ("quality", "picks its own solve and takes no",
      ("solver", "tol", "max_iter", "callback", "options", "uncertainty", "max_uncertainty")),
@@ -393,18 +403,20 @@ def argument_conflict(given) -> tuple[str, str, list[str]] | None:
 
 
 def check_modes(*, quality="default", solver="auto", tol=None, max_iter=None, callback=None, options=None,
-                uncertainty=False, max_uncertainty=None, prior=None, expected_error=False) -> str:
+                uncertainty=False, max_uncertainty=None, max_relative_uncertainty=None, prior=None,
+                expected_error=False) -> str:
     """Which mode a call of :func:`complete_depth` asks for: ``"fast"``, ``"best"``, ``"prior"``, ``"uncertainty"`` or
     ``"default"``.
 
-    Which arguments go together is :data:`ARGUMENT_RULES` (:func:`argument_conflict`); ``max_uncertainty``
+    Which arguments go together is :data:`ARGUMENT_RULES` (:func:`argument_conflict`: ``max_relative_uncertainty``
+    counts as ``max_uncertainty`` there); either limit
     implies the uncertainty.
 
     Raises
     ------
     ValueError
-        An unknown ``quality``, arguments :data:`ARGUMENT_RULES` refuses together, or a negative or non-finite
-        ``max_uncertainty``.
+        An unknown ``quality``, arguments :data:`ARGUMENT_RULES` refuses together, a negative or non-finite
+        ``max_uncertainty``, or a ``max_relative_uncertainty`` that is not a finite number > 0.
     TypeError
         ``uncertainty`` or ``expected_error`` not a bool.
     """
@@ -415,12 +427,15 @@ def check_modes(*, quality="default", solver="auto", tol=None, max_iter=None, ca
             raise TypeError(f"{name} must be True or False; got {type(value).__name__}")
     if max_uncertainty is not None:
         check_nonnegative_real(max_uncertainty, name="max_uncertainty")
+    if max_relative_uncertainty is not None:
+        check_relative_limit(max_relative_uncertainty)
+    limited = max_uncertainty is not None or max_relative_uncertainty is not None
     given = [name for name, value in (("quality", quality == "fast"), ("best", quality == "best"),
                                       ("solver", solver != "auto"),
                                       ("tol", tol is not None), ("max_iter", max_iter is not None),
                                       ("callback", callback is not None), ("options", options is not None),
                                       ("uncertainty", bool(uncertainty)),
-                                      ("max_uncertainty", max_uncertainty is not None),
+                                      ("max_uncertainty", limited),
                                       ("prior", prior is not None),
                                       ("expected_error", bool(expected_error))) if value]
     conflict = argument_conflict(given)
@@ -433,7 +448,7 @@ def check_modes(*, quality="default", solver="auto", tol=None, max_iter=None, ca
         return quality
     if prior is not None:
         return "prior"
-    return "uncertainty" if bool(uncertainty) or max_uncertainty is not None else "default"
+    return "uncertainty" if bool(uncertainty) or limited else "default"
 
 
 def _named(argument) -> str:

@@ -24,7 +24,7 @@ from .result import UncertaintyCalibration
 
 __all__ = ["MIN_OBSERVED", "MIN_SHAPE", "TARGET_COVERAGE", "NOVELTY_WEIGHT", "NOVELTY_NEIGHBOURS", "split_samples",
            "error_cues", "colour_novelty", "fit_calibration", "estimate_uncertainty", "check_uncertainty_shape",
-           "too_uncertain"]
+           "check_relative_limit", "too_uncertain"]
 
 #: Fewest observed pixels for which the uncertainty is estimated (each half keeps at least 8).
 MIN_OBSERVED = 16
@@ -555,6 +555,12 @@ def _extrapolation_term(slope, observed, layout, where):
     return steep * np.maximum(distance[where] - spacing, 0.0)
 
 
+def check_relative_limit(max_relative_uncertainty) -> float:
+    """``max_relative_uncertainty`` as a float, refused unless a finite number ``> 0`` (a fraction of the depth)."""
+    return check_positive_finite(max_relative_uncertainty, label="max_relative_uncertainty",
+                                 expected="a fraction of the depth (0.1 = 10 %)")
+
+
 def too_uncertain(uncertainty, depth, *, max_uncertainty=None, max_relative_uncertainty=None) -> np.ndarray:
     """The pixels whose uncertainty exceeds an absolute limit or a fraction of their depth.
 
@@ -609,8 +615,7 @@ def too_uncertain(uncertainty, depth, *, max_uncertainty=None, max_relative_unce
         with np.errstate(invalid="ignore"):
             marked |= sigma > limit
     if max_relative_uncertainty is not None:
-        fraction = check_positive_finite(max_relative_uncertainty, label="max_relative_uncertainty",
-                                         expected="a fraction of the depth (0.1 = 10 %)")
+        fraction = check_relative_limit(max_relative_uncertainty)
         with np.errstate(invalid="ignore"):
             usable = np.isfinite(values) & (values > 0)
             marked |= (sigma > fraction * np.where(usable, values, 0.0)) | (~usable & ~np.isnan(sigma))

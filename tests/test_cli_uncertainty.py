@@ -204,3 +204,26 @@ def test_too_uncertain_by_hand():
             too_uncertain(sigma, depth, max_relative_uncertainty=bad)
     with pytest.raises(ValueError, match="one shape"):
         too_uncertain(sigma, depth[:, :3], max_uncertainty=1.0)
+
+
+@pytest.mark.filterwarnings("ignore::sparsedepth.ClampWarning")
+def test_complete_depth_leaves_out_what_either_limit_refuses():
+    """complete_depth(max_relative_uncertainty=R) is the plain uncertainty run with the pixels whose sigma exceeds
+    R times their depth set to NaN; with max_uncertainty too, the pixels either limit refuses."""
+    image, depth = make_scene(shape=(40, 60))
+    sparse, mask = sd.sample_depth(depth, fraction=0.1, seed=3)
+    plain = sd.complete_depth(image, sparse, mask, uncertainty=True)
+    sigma, dense = plain.uncertainty, plain.depth
+    for limits, refused in (({"max_relative_uncertainty": 0.01}, sigma > 0.01 * dense),
+                            ({"max_relative_uncertainty": 0.01, "max_uncertainty": 0.005},
+                             (sigma > 0.01 * dense) | (sigma > 0.005))):
+        limited = sd.complete_depth(image, sparse, mask, **limits)
+        assert 0 < refused.sum() < refused.size
+        np.testing.assert_array_equal(np.isnan(limited.depth), refused)
+        np.testing.assert_array_equal(limited.depth[~refused], dense[~refused])
+        assert limited.removed == int(refused.sum())
+    for bad in (0.0, -1.0, np.nan):
+        with pytest.raises(ValueError, match="max_relative_uncertainty"):
+            sd.complete_depth(image, sparse, mask, max_relative_uncertainty=bad)
+    with pytest.raises(ValueError, match="prior"):
+        sd.complete_depth(image, sparse, mask, max_relative_uncertainty=0.1, prior=np.ones(depth.shape))

@@ -54,7 +54,7 @@ class FrameOutcome:
         Ground truth used for scoring, NaN where unknown.
     scored : ndarray of bool or None, (H, W)
         Pixels scored: valid ``truth``, not ``observed``, and not left
-        missing in ``depth`` by ``max_uncertainty``.
+        missing in ``depth`` (by a limit of the uncertainty or ``blowups="remove"``).
     metrics, nearest_metrics : DepthMetrics or None
         Scores of ``depth`` and ``nearest`` on ``scored`` (None without
         ground truth or without a pixel to score).
@@ -208,6 +208,7 @@ def evaluate_frame(
     clip_to_observed: bool = True,
     uncertainty: bool = False,
     max_uncertainty: float | None = None,
+    max_relative_uncertainty: float | None = None,
     quality: str = "default",
     prior=None,
     prior_alignment: str = "scale_shift",
@@ -259,9 +260,9 @@ def evaluate_frame(
         shift, silently, when there are too few of them to estimate from
         (``FrameOutcome.image_shift_fallback`` says why).  ``None``: the image
         as it is.  The nearest-neighbour baseline does not use the image.
-    blowups, expected_error
+    max_relative_uncertainty, blowups, expected_error
         Passed to :func:`~sparsedepth.complete_depth` (the colorization fill
-        refuses ``blowups``); the completion's pixels ``blowups="remove"``
+        refuses the first two); the pixels a limit or ``blowups="remove"``
         leaves missing are not scored.
 
     Returns
@@ -283,10 +284,10 @@ def evaluate_frame(
     image_shift = check_image_shift(image_shift)
     if task == "fill" and fill_method == "colorization":
         given = ["colorization"] + [name for name, value in (
-            ("uncertainty", bool(uncertainty)), ("max_uncertainty", max_uncertainty is not None),
-            ("prior", prior is not None), ("quality", quality == "fast"), ("best", quality == "best")) if value]
-        if blowups is not None:
-            raise ValueError("the colorization fill takes no blowups: use fill_method='complete'")
+            ("uncertainty", bool(uncertainty)),
+            ("max_uncertainty", max_uncertainty is not None or max_relative_uncertainty is not None),
+            ("prior", prior is not None), ("quality", quality == "fast"), ("best", quality == "best"),
+            ("blowups", blowups is not None)) if value]
         conflict = argument_conflict(given)
         if conflict is not None:
             raise ValueError(f"the colorization fill {conflict[1]} {', '.join(conflict[2])}: use "
@@ -304,6 +305,7 @@ def evaluate_frame(
         image, sparse, observed, task, fill_method,
         dict(weights=weights, solver=solver, tol=tol, max_iter=max_iter, callback=callback,
              clip_to_observed=clip_to_observed, uncertainty=uncertainty, max_uncertainty=max_uncertainty,
+             max_relative_uncertainty=max_relative_uncertainty,
              quality=quality, prior=prior, prior_alignment=prior_alignment, blowups=blowups,
              expected_error=expected_error),
     )

@@ -72,9 +72,6 @@ def _check_combinations(args) -> str:
     _check_prior(args, mode)
     if args.fast and args.best:
         raise UsageError("--best and --fast are two ways to complete a frame: give one")
-    if colorization and args.blowups is not None:
-        raise UsageError("--blowups checks a completion; the colorization fill is not one: add --fill-method "
-                          "complete or drop --blowups")
     if mode == "batch":
         if args.colmap is None and (args.uncertainty is not None or args.max_uncertainty is not None
                                     or args.max_relative_uncertainty is not None):
@@ -198,7 +195,8 @@ def _check_argument_rules(args, colorization) -> None:
                                                            ("--max-relative-uncertainty",
                                                             args.max_relative_uncertainty)) if value is not None],
              "prior": ["--prior"] if args.prior is not None else [],
-             "expected_error": ["--expected-error"] if args.expected_error else []}
+             "expected_error": ["--expected-error"] if args.expected_error else [],
+             "blowups": [f"--blowups {args.blowups}"] if args.blowups is not None else []}
     if not colorization:
         flags["colorization"] = []
     conflict = argument_conflict(name for name, given in flags.items() if given)

@@ -26,11 +26,9 @@ from ..io import KINECT_NYU, KinectDisparity, read_calib, read_depth, read_image
 from ..io import depth_to_points, depth_writer, ply_writer, resolve_scale
 from ..io.writing import uncertainty_writer
 from ..io.depth import read_stored
-from ..metrics import depth_metrics
 from ..priors import as_prior
 from ..registration import shift_image
 from ..sampling import valid_depth_mask
-from ..uncertainty import too_uncertain
 from ..visualize import colorize_depth
 from .camera import KINECT_CALIB, camera_assumption, frame_intrinsics, intrinsics_source
 from .frame_checks import check_frame
@@ -40,8 +38,7 @@ from .parser import DEMO_DIR, DEMO_DOWNSAMPLE, DEMO_KEEP_FRACTION, weights_of
 from .report import (blowups_line, build_report, matplotlib_classes, print_table, removal_limits, render_figure,
                      uncertainty_png_line)
 
-__all__ = ["READER_FLAGS", "plan_outputs", "wants_uncertainty", "input_files", "run_one", "expected_error_line",
-           "leave_out_relative"]
+__all__ = ["READER_FLAGS", "plan_outputs", "wants_uncertainty", "input_files", "run_one", "expected_error_line"]
 
 _ABSURD_LOW, _ABSURD_HIGH = 1e-3, 1e3  # metres: a median outside this means a wrong scale
 
@@ -273,6 +270,7 @@ def _evaluate(args, image, depth, mask, truth, prior, keep_fraction, weights, st
             callback=_Progress(stream, not args.quiet) if use_solver and not (args.fast or args.best) else None,
             clip_to_observed=args.clip_to_observed,
             uncertainty=wants_uncertainty(args), max_uncertainty=args.max_uncertainty,
+            max_relative_uncertainty=args.max_relative_uncertainty,
             quality="fast" if args.fast else "best" if args.best else "default",
             blowups=args.blowups, expected_error=bool(args.best and args.expected_error),
             prior=prior, prior_alignment=args.prior_alignment or "scale_shift", image_shift=args.image_shift,
@@ -280,34 +278,6 @@ def _evaluate(args, image, depth, mask, truth, prior, keep_fraction, weights, st
     if outcome.image_shift_fallback is not None:
         print(f"warning: --image-shift auto: {outcome.image_shift_fallback}; the image is not moved", file=stream)
     return outcome
-
-
-def leave_out_relative(outcome, max_relative_uncertainty):
-    """``outcome`` with the pixels whose uncertainty exceeds ``max_relative_uncertainty`` times their depth left
-    missing (``--max-relative-uncertainty``).
-
-    The pixels :func:`~sparsedepth.uncertainty.too_uncertain` marks become NaN
-    in the depth (also in ``result.depth``), are added to ``result.removed``
-    (the pixels ``--max-uncertainty`` left missing already count there), and
-    the output and nearest fill are scored again on the pixels still scored:
-    valid truth, not observed, depth not missing, as
-    :func:`~sparsedepth.batch.evaluate_frame` scores.  ``None`` or an outcome
-    without uncertainty: ``outcome`` itself.
-    """
-    if max_relative_uncertainty is None or outcome.result is None or outcome.uncertainty is None:
-        return outcome
-    marked = too_uncertain(outcome.uncertainty, outcome.depth, max_relative_uncertainty=max_relative_uncertainty)
-    marked &= ~np.isnan(outcome.depth)
-    depth = np.where(marked, np.nan, outcome.depth)
-    result = dataclasses.replace(outcome.result, depth=depth,
-                                 removed=outcome.result.removed + int(np.count_nonzero(marked)))
-    scored, metrics, nearest_metrics = outcome.scored, outcome.metrics, outcome.nearest_metrics
-    if scored is not None:
-        scored = scored & ~marked
-        metrics = depth_metrics(depth, outcome.truth, mask=scored) if scored.any() else None
-        nearest_metrics = depth_metrics(outcome.nearest, outcome.truth, mask=scored) if scored.any() else None
-    return dataclasses.replace(outcome, depth=depth, result=result, scored=scored, metrics=metrics,
-                               nearest_metrics=nearest_metrics)
 
 
 def _array_writer(target, values, png_scale):
@@ -440,7 +410,6 @@ def run_one(args, argv, mode, stdout, stderr) -> int:
                      f"the depth of {'the demo' if mode == 'demo' else '--depth'}")
 
     outcome = _evaluate(args, image, depth, mask, truth, prior, keep_fraction, weights, stderr)
-    outcome = leave_out_relative(outcome, args.max_relative_uncertainty)
     if outcome.image_shift != (0, 0):
         image = shift_image(image, outcome.image_shift)  # the figure and the point cloud show the registered image
     if args.expected_error and outcome.result is not None and not args.best:  # --best estimates it as it chooses

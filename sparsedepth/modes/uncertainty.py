@@ -16,14 +16,15 @@ from .._validation import check_nonnegative_real
 from ..problem import CompletionProblem, solver_settings
 from ..profiling import phase
 from ..result import ClampWarning, CompletionResult
-from ..uncertainty import MIN_OBSERVED, check_uncertainty_shape, estimate_uncertainty, split_samples
+from ..uncertainty import MIN_OBSERVED, check_relative_limit, check_uncertainty_shape, estimate_uncertainty, split_samples, too_uncertain
 
 __all__ = ["complete_with_uncertainty"]
 
 
 def complete_with_uncertainty(problem: CompletionProblem, *, solver="auto", tol=None, max_iter=None, options=None,
-                              callback=None, x0=None, max_uncertainty=None) -> CompletionResult:
-    """Solve ``problem`` and estimate each pixel's error; past ``max_uncertainty`` the depth is left missing.
+                              callback=None, x0=None, max_uncertainty=None,
+                              max_relative_uncertainty=None) -> CompletionResult:
+    """Solve ``problem`` and estimate each pixel's error; past a limit the depth is left missing.
 
     Parameters
     ----------
@@ -36,6 +37,9 @@ def complete_with_uncertainty(problem: CompletionProblem, *, solver="auto", tol=
     max_uncertainty : float, optional
         Pixels whose uncertainty exceeds it (depth units) are NaN in ``result.depth`` and counted in
         ``result.removed``.
+    max_relative_uncertainty : float, optional
+        The same for an uncertainty above this fraction of the pixel's depth; with both limits a pixel goes when
+        it breaks either (:func:`sparsedepth.uncertainty.too_uncertain`).
 
     Returns
     -------
@@ -49,9 +53,12 @@ def complete_with_uncertainty(problem: CompletionProblem, *, solver="auto", tol=
     halves are not certified (their gap is not computed).  No unobserved pixel's uncertainty is below the precision
     of the solve (:meth:`~sparsedepth.problem.CompletionProblem.precision`).
     """
-    check_uncertainty_shape(problem.shape, name="uncertainty" if max_uncertainty is None else "max_uncertainty")
+    limited = max_uncertainty is not None or max_relative_uncertainty is not None
+    check_uncertainty_shape(problem.shape, name="max_uncertainty" if limited else "uncertainty")
     if max_uncertainty is not None:
         check_nonnegative_real(max_uncertainty, name="max_uncertainty")
+    if max_relative_uncertainty is not None:
+        check_relative_limit(max_relative_uncertainty)
     observed = problem.observed
     if np.count_nonzero(observed) < MIN_OBSERVED:
         raise ValueError(f"uncertainty needs at least {MIN_OBSERVED} observed pixels (two halves of at least "
@@ -68,11 +75,10 @@ def complete_with_uncertainty(problem: CompletionProblem, *, solver="auto", tol=
     with phase("uncertainty map"):
         sigma, calibration = estimate_uncertainty(result.depth, *halves, depth, half_a, half_b, image=problem.image,
                                                   precision=problem.precision(checked_options))
-    dense, removed = result.depth, 0
-    if max_uncertainty is not None:
-        too_uncertain = sigma > max_uncertainty
-        removed = int(np.count_nonzero(too_uncertain))
-        dense = np.where(too_uncertain, np.nan, dense)
+    left_out = too_uncertain(sigma, result.depth, max_uncertainty=max_uncertainty,
+                             max_relative_uncertainty=max_relative_uncertainty)
+    dense = np.where(left_out, np.nan, result.depth) if limited else result.depth
+    removed = int(np.count_nonzero(left_out))
     return dataclasses.replace(result, depth=dense, uncertainty=sigma, uncertainty_calibration=calibration,
                                removed=removed)
 
