@@ -12,7 +12,7 @@ import sparsedepth as sd
 from sparsedepth.batch import evaluate_frame
 from sparsedepth.cli.report import (build_figure, dilate_samples, panel_pixels, render_figure, sample_radius,
                                     uncertainty_statistics)
-from sparsedepth.visualize import MISSING_COLOUR, depth_colour_scale
+from sparsedepth.visualize import MISSING_COLOUR
 
 pytest.importorskip("matplotlib", reason="the figure needs matplotlib (pip install 'sparsedepth[plot]')")
 

@@ -263,7 +263,6 @@ class LocalLinearOperator(StencilOperator):
         gives the same numbers as the whole grid.
         """
         C, W = self.channels, self.grid_shape[1]
-        n = float(self.size)
         length = self._run_length(k0, k1)
         mean = self._run_sum(self._flat, k0, length)
         _divide(mean, self.size)
@@ -312,7 +311,6 @@ class LocalLinearOperator(StencilOperator):
         """
         mean, inverse = planes
         C = self.channels
-        n = float(self.size)
         length = mean.shape[1]
         zbar = self._run_sum(z, k0, length)
         _divide(zbar, self.size)
